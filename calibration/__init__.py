@@ -1,0 +1,1 @@
+"""flagtrack calibration: blinking-checkerboard pixel-to-plane mapping."""

@@ -1,0 +1,80 @@
+"""The ``flagtrack`` command.
+
+Each subcommand lives in its own module of :mod:`flagtrack.daemon.commands`, which defines
+``COMMAND`` (its name), ``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> int``.
+Command modules import only the standard library at module level so that ``--help`` is fast;
+heavy imports happen inside ``run``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import pkgutil
+import sys
+from collections.abc import Sequence
+from types import ModuleType
+
+from flagtrack.daemon import __version__, commands
+from flagtrack.daemon.errors import FlagtrackError
+
+log = logging.getLogger(__name__)
+
+
+def discover(package: ModuleType) -> list[ModuleType]:
+    """Import every command module of ``package`` (those that define ``COMMAND``), sorted by name."""
+    found = []
+    for info in pkgutil.iter_modules(package.__path__):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"{package.__name__}.{info.name}")
+        if hasattr(module, "COMMAND"):
+            found.append(module)
+    return sorted(found, key=lambda m: m.COMMAND)
+
+
+def add_subcommands(parser: argparse.ArgumentParser, package: ModuleType, dest: str) -> None:
+    """Add one subparser per command module of ``package``; each sets ``args.run``."""
+    subparsers = parser.add_subparsers(dest=dest, metavar="COMMAND", required=True)
+    for module in discover(package):
+        sub = subparsers.add_parser(
+            module.COMMAND,
+            help=module.HELP,
+            description=getattr(module, "DESCRIPTION", module.HELP),
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+        module.add_arguments(sub)
+        if not sub.get_default("run"):
+            sub.set_defaults(run=module.run)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the top-level ``flagtrack`` argument parser."""
+    parser = argparse.ArgumentParser(
+        prog="flagtrack",
+        description="Event-camera centreline tracking of flapping flags in a wind tunnel.",
+    )
+    parser.add_argument("--version", action="version", version=f"flagtrack {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv: debug)")
+    add_subcommands(parser, commands, "command")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``flagtrack`` command; return its exit status."""
+    args = build_parser().parse_args(argv)
+    level = logging.WARNING - 10 * min(args.verbose, 2)
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return int(args.run(args) or 0)
+    except FlagtrackError as exc:
+        print(f"flagtrack {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"flagtrack {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of ``flagtrack``: one module each, discovered by :mod:`flagtrack.daemon.cli`."""

@@ -1,0 +1,175 @@
+"""Typed configuration from YAML.
+
+Every section of a config file is a frozen dataclass; :func:`from_mapping` builds one from a
+mapping, checking each value against the field's type hint, and raises :class:`ConfigError`
+naming the dotted key and the file on any unknown key, missing value or wrong type.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import types
+import typing
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+
+from flagtrack.daemon.errors import ConfigError
+
+T = TypeVar("T")
+
+
+def load_yaml(path: str | Path) -> dict[str, Any]:
+    """Read a YAML file whose top level is a mapping; errors name the file (and line)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError(f"cannot read config: {exc.strerror}", path=str(path)) from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise ConfigError(f"invalid YAML{where}: {getattr(exc, 'problem', exc)}", path=str(path)) from exc
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError("the top level must be a mapping of sections", path=str(path))
+    return data
+
+
+def from_mapping(cls: type[T], data: Any, *, path: str | None = None, key: str = "") -> T:
+    """Build dataclass ``cls`` from ``data``, recursively, with checked types.
+
+    Args:
+        cls: a dataclass type; fields without defaults are required.
+        data: the mapping read from YAML (``None`` means all defaults).
+        path: the file the mapping came from, for error messages.
+        key: dotted prefix of this section in the file, for error messages.
+
+    Raises:
+        ConfigError: unknown key, missing required key, or a value of the wrong type; the message
+            names the dotted key and the file.
+    """
+    if data is None:
+        data = {}
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"expected a mapping, got {type(data).__name__}", key=key or None, path=path)
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    unknown = sorted(set(map(str, data)) - set(fields))
+    if unknown:
+        name = _join(key, unknown[0])
+        raise ConfigError(f"unknown key (known: {', '.join(sorted(fields))})", key=name, path=path)
+    values = {}
+    for name, field in fields.items():
+        sub = _join(key, name)
+        if name in data:
+            values[name] = _convert(hints[name], data[name], path=path, key=sub)
+        elif field.default is dataclasses.MISSING and field.default_factory is dataclasses.MISSING:
+            raise ConfigError("required key is missing", key=sub, path=path)
+    try:
+        return cls(**values)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(str(exc), key=key or None, path=path) from exc
+
+
+def to_mapping(obj: Any) -> Any:
+    """Turn a (nested) config dataclass into plain YAML/JSON-friendly values."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: to_mapping(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, enum.Enum):
+        return obj.value
+    if isinstance(obj, Path):
+        return str(obj)
+    if isinstance(obj, tuple | list):
+        return [to_mapping(v) for v in obj]
+    if isinstance(obj, dict):
+        return {str(k): to_mapping(v) for k, v in obj.items()}
+    return obj
+
+
+def _join(prefix: str, name: str) -> str:
+    return f"{prefix}.{name}" if prefix else name
+
+
+def _convert(hint: Any, value: Any, *, path: str | None, key: str) -> Any:
+    """Check/convert one value against a type hint; raise ConfigError naming ``key``."""
+    origin = typing.get_origin(hint)
+    args = typing.get_args(hint)
+    if hint is Any:
+        return value
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for arg in (a for a in args if a is not type(None)):
+            try:
+                return _convert(arg, value, path=path, key=key)
+            except ConfigError as exc:
+                errors.append(str(exc))
+        raise ConfigError(f"value {value!r} does not fit {_name(hint)}", key=key, path=path)
+    if origin is typing.Literal:
+        if value in args:
+            return value
+        raise ConfigError(f"must be one of {', '.join(map(repr, args))}, got {value!r}", key=key, path=path)
+    if dataclasses.is_dataclass(hint):
+        return from_mapping(hint, value, path=path, key=key)
+    if isinstance(hint, type) and issubclass(hint, enum.Enum):
+        try:
+            return hint(value)
+        except ValueError:
+            options = ", ".join(repr(m.value) for m in hint)
+            raise ConfigError(f"must be one of {options}, got {value!r}", key=key, path=path) from None
+    if origin in (tuple, list):
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"expected a list, got {value!r}", key=key, path=path)
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            if len(value) != len(args):
+                raise ConfigError(f"expected {len(args)} values, got {len(value)}", key=key, path=path)
+            items = [_convert(a, v, path=path, key=f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value))]
+        else:
+            item_hint = args[0] if args else Any
+            items = [_convert(item_hint, v, path=path, key=f"{key}[{i}]") for i, v in enumerate(value)]
+        return tuple(items) if origin is tuple else items
+    if origin is dict:
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"expected a mapping, got {value!r}", key=key, path=path)
+        key_hint, value_hint = args or (Any, Any)
+        return {
+            _convert(key_hint, k, path=path, key=key): _convert(value_hint, v, path=path, key=_join(key, str(k)))
+            for k, v in value.items()
+        }
+    return _convert_scalar(hint, value, path=path, key=key)
+
+
+def _convert_scalar(hint: Any, value: Any, *, path: str | None, key: str) -> Any:
+    if hint is bool:
+        if isinstance(value, bool):
+            return value
+    elif hint is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+    elif hint is float:
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            return float(value)
+    elif hint is str:
+        if isinstance(value, str):
+            return value
+    elif hint is Path:
+        if isinstance(value, str):
+            return Path(value).expanduser()
+    elif hint is type(None):
+        if value is None:
+            return None
+    else:
+        raise ConfigError(f"unsupported config type {_name(hint)}", key=key, path=path)
+    raise ConfigError(f"expected {_name(hint)}, got {value!r}", key=key, path=path)
+
+
+def _name(hint: Any) -> str:
+    return getattr(hint, "__name__", None) or str(hint).replace("typing.", "")
