@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import types
 import typing
 from collections.abc import Mapping
@@ -59,8 +60,7 @@ def from_mapping(cls: type[T], data: Any, *, path: str | None = None, key: str =
         data = {}
     if not isinstance(data, Mapping):
         raise ConfigError(f"expected a mapping, got {type(data).__name__}", key=key or None, path=path)
-    hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    hints, fields = _describe(cls)
     unknown = sorted(set(map(str, data)) - set(fields))
     if unknown:
         name = _join(key, unknown[0])
@@ -76,6 +76,12 @@ def from_mapping(cls: type[T], data: Any, *, path: str | None = None, key: str =
         return cls(**values)
     except (ValueError, TypeError) as exc:
         raise ConfigError(str(exc), key=key or None, path=path) from exc
+
+
+@functools.cache
+def _describe(cls: type) -> tuple[dict[str, Any], dict[str, dataclasses.Field]]:
+    """Type hints and init fields of a dataclass (cached: resolving hints is slow)."""
+    return typing.get_type_hints(cls), {f.name: f for f in dataclasses.fields(cls) if f.init}
 
 
 def to_mapping(obj: Any) -> Any:

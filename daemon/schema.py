@@ -1,0 +1,451 @@
+"""The wire schema: every key expression and message type on the bus, with a versioned encoding.
+
+Wire format of every message (little-endian)::
+
+    b"FT" | version u8 | type u8 | meta_len u32 | meta (UTF-8 JSON object) | payload
+
+The JSON meta holds the scalar fields; array fields (numpy) and byte fields travel in the payload,
+described in the meta under ``"_blobs"`` as ``[name, dtype, shape]`` (``dtype`` ``"bytes"`` for raw
+bytes), in order. :func:`decode` rejects a wrong magic, an unknown version or type, bad JSON,
+missing or mistyped fields and a payload whose size does not match, with a :class:`SchemaError`.
+This module imports no transport: see :mod:`flagtrack.daemon.transport` for Zenoh.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import json
+import struct
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+
+from flagtrack.daemon.config import from_mapping
+from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.errors import ConfigError, SchemaError
+
+MAGIC = b"FT"
+VERSION = 1
+_HEADER = struct.Struct("<2sBBI")
+M = TypeVar("M")
+
+
+class MessageType(enum.IntEnum):
+    """Type byte of each message on the wire."""
+
+    EVENT_PACKET = 1
+    CAMERA_STATUS = 2
+    EVENT_RATE = 3
+    CENTRELINES = 4
+    TRACKER_STATUS = 5
+    TUNNEL_STATE = 6
+    TUNNEL_COMMAND = 7
+    SUPERVISOR_STATE = 8
+    RECORDER_COMMAND = 9
+    RECORDER_STATUS = 10
+    SENSOR_SAMPLES = 11
+
+
+@dataclass(frozen=True)
+class Keys:
+    """Key expressions under one namespace (lowercase slash-separated words, default ``flagtrack/<rig>``)."""
+
+    namespace: str = "flagtrack/default"
+
+    def camera_events(self, camera_id: str) -> str:
+        """Native event packets of one camera (:class:`EventPacket`)."""
+        return f"{self.namespace}/camera/{camera_id}/events"
+
+    def camera_status(self, camera_id: str) -> str:
+        """Camera state and settings read back (:class:`CameraStatus`)."""
+        return f"{self.namespace}/camera/{camera_id}/status"
+
+    def event_rate(self, camera_id: str) -> str:
+        """Event-rate statistics of one camera (:class:`EventRate`)."""
+        return f"{self.namespace}/camera/{camera_id}/rate"
+
+    def centrelines(self) -> str:
+        """Batched tracker output (:class:`CentrelineMessage`)."""
+        return f"{self.namespace}/tracker/centreline"
+
+    def tracker_status(self) -> str:
+        """Tracker health (:class:`TrackerStatus`)."""
+        return f"{self.namespace}/tracker/status"
+
+    def tunnel_state(self) -> str:
+        """Wind-tunnel speed and state (:class:`TunnelState`)."""
+        return f"{self.namespace}/tunnel/state"
+
+    def tunnel_command(self) -> str:
+        """Commands to the tunnel owner (:class:`TunnelCommand`)."""
+        return f"{self.namespace}/tunnel/command"
+
+    def supervisor_state(self) -> str:
+        """Flag state, sweep progress (:class:`SupervisorState`)."""
+        return f"{self.namespace}/supervisor/state"
+
+    def recorder_command(self) -> str:
+        """Start/stop/rotate recordings (:class:`RecorderCommand`)."""
+        return f"{self.namespace}/recorder/command"
+
+    def recorder_status(self) -> str:
+        """What the recorder is writing (:class:`RecorderStatus`)."""
+        return f"{self.namespace}/recorder/status"
+
+    def sensor_samples(self, sensor_id: str) -> str:
+        """Point-sensor samples (:class:`SensorSamples`)."""
+        return f"{self.namespace}/sensor/{sensor_id}/samples"
+
+    def alive(self, service: str) -> str:
+        """Liveliness token of one service instance."""
+        return f"{self.namespace}/alive/{service}"
+
+    def alive_all(self) -> str:
+        """Liveliness of every service in the namespace."""
+        return f"{self.namespace}/alive/**"
+
+
+@dataclass(frozen=True)
+class EventPacket:
+    """About 1 ms of one camera's events in its native encoding (EVT 3.0 / 2.0 bytes).
+
+    ``sent_ns`` is the wall-clock time (ns) at which the adapter received the data, for latency.
+    """
+
+    TYPE: ClassVar[MessageType] = MessageType.EVENT_PACKET
+    camera_id: str
+    seq: int
+    t_first_us: int
+    t_last_us: int
+    n_events: int
+    width: int
+    height: int
+    encoding: str
+    sent_ns: int
+    data: bytes = b""
+
+
+@dataclass(frozen=True)
+class CameraStatus:
+    """State of a camera adapter and its settings as read back from the device."""
+
+    TYPE: ClassVar[MessageType] = MessageType.CAMERA_STATUS
+    camera_id: str
+    state: str  # starting | streaming | stopped | eof | error
+    adapter: str
+    width: int
+    height: int
+    encoding: str
+    settings: dict[str, Any] = field(default_factory=dict)
+    message: str = ""
+    packets: int = 0
+    events: int = 0
+
+
+@dataclass(frozen=True)
+class EventRate:
+    """Event-rate statistics over one interval of camera time."""
+
+    TYPE: ClassVar[MessageType] = MessageType.EVENT_RATE
+    camera_id: str
+    t_us: int
+    interval_s: float
+    events: int
+    rate_hz: float
+    on_fraction: float
+    bytes: int = 0
+
+
+@dataclass(frozen=True)
+class CentrelineMessage:
+    """A batch of tracker updates: t, joints, smoothed centreline, tip, Δ_RMS, events used.
+
+    ``source_ns`` (n_t,) is the ``sent_ns`` of the newest packet each update used (for latency).
+    """
+
+    TYPE: ClassVar[MessageType] = MessageType.CENTRELINES
+    source: str
+    seq: int
+    units: str
+    t_s: np.ndarray
+    s: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    joints_x: np.ndarray
+    joints_y: np.ndarray
+    tip_x: np.ndarray
+    tip_y: np.ndarray
+    delta_rms: np.ndarray
+    n_events: np.ndarray
+    source_ns: np.ndarray
+
+    @classmethod
+    def from_batch(
+        cls, batch: CentrelineBatch, *, source: str, seq: int, units: str, source_ns: np.ndarray
+    ) -> CentrelineMessage:
+        """Wrap a tracker batch for the wire."""
+        return cls(
+            source=source, seq=seq, units=units, t_s=batch.t_s, s=batch.s, x=batch.x, y=batch.y,
+            joints_x=batch.joints_x, joints_y=batch.joints_y, tip_x=batch.tip_x, tip_y=batch.tip_y,
+            delta_rms=batch.delta_rms, n_events=batch.n_events, source_ns=np.asarray(source_ns, np.int64),
+        )
+
+    def batch(self) -> CentrelineBatch:
+        """The updates as a :class:`CentrelineBatch`."""
+        return CentrelineBatch(
+            t_s=self.t_s, s=self.s, x=self.x, y=self.y, joints_x=self.joints_x, joints_y=self.joints_y,
+            delta_rms=self.delta_rms, n_events=self.n_events,
+        )
+
+
+@dataclass(frozen=True)
+class TrackerStatus:
+    """Tracker health, published about once a second."""
+
+    TYPE: ClassVar[MessageType] = MessageType.TRACKER_STATUS
+    source: str
+    state: str  # waiting | tracking | stopped
+    events_per_s: float
+    updates_per_s: float
+    lag_s: float
+    packets: int
+    missing_packets: int
+    malformed_packets: int
+    t_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class TunnelState:
+    """Wind-tunnel speed as read back, its set-point and state."""
+
+    TYPE: ClassVar[MessageType] = MessageType.TUNNEL_STATE
+    speed_mps: float
+    setpoint_mps: float
+    state: str  # idle | ramping | steady | stopping | fault
+    fault: str = ""
+    t_wall_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class TunnelCommand:
+    """A request to the tunnel owner: ``set`` a speed or ``stop`` (ramp to zero)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.TUNNEL_COMMAND
+    action: str
+    speed_mps: float = 0.0
+
+
+@dataclass(frozen=True)
+class SupervisorState:
+    """Flag state from event rates, and sweep progress."""
+
+    TYPE: ClassVar[MessageType] = MessageType.SUPERVISOR_STATE
+    flag_state: str  # still | flapping | unknown
+    rate_hz: float
+    mode: str = "idle"  # idle | sweep | feedback | safe
+    point: str = ""
+    branch: str = ""
+    speed_mps: float = 0.0
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class RecorderCommand:
+    """Start, stop or rotate a recording of one camera (``path`` without extension)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.RECORDER_COMMAND
+    action: str  # start | stop | rotate
+    path: str = ""
+    camera_id: str = ""
+    centrelines: bool = False
+    request_id: str = ""
+
+
+@dataclass(frozen=True)
+class RecorderStatus:
+    """What the recorder is writing."""
+
+    TYPE: ClassVar[MessageType] = MessageType.RECORDER_STATUS
+    state: str  # idle | recording | error
+    path: str = ""
+    bytes: int = 0
+    packets: int = 0
+    missing_packets: int = 0
+    request_id: str = ""
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class SensorSamples:
+    """Point-sensor samples: times on the sensor clock (µs), values (sensor units), NaN = missing."""
+
+    TYPE: ClassVar[MessageType] = MessageType.SENSOR_SAMPLES
+    sensor_id: str
+    seq: int
+    units: str
+    t_us: np.ndarray
+    value: np.ndarray
+
+
+MESSAGE_TYPES: dict[MessageType, type] = {
+    cls.TYPE: cls
+    for cls in (
+        EventPacket, CameraStatus, EventRate, CentrelineMessage, TrackerStatus, TunnelState,
+        TunnelCommand, SupervisorState, RecorderCommand, RecorderStatus, SensorSamples,
+    )
+}
+
+
+def encode(message: Any) -> bytes:
+    """Serialise one message of this module to bytes (see the module docstring for the layout)."""
+    meta: dict[str, Any] = {}
+    blobs: list[list[Any]] = []
+    chunks: list[bytes] = []
+    for f in dataclasses.fields(message):
+        value = getattr(message, f.name)
+        if isinstance(value, np.ndarray):
+            array = np.ascontiguousarray(value)
+            blobs.append([f.name, array.dtype.str, list(array.shape)])
+            chunks.append(array.tobytes())
+        elif isinstance(value, bytes | bytearray | memoryview):
+            data = bytes(value)
+            blobs.append([f.name, "bytes", [len(data)]])
+            chunks.append(data)
+        else:
+            meta[f.name] = value
+    meta["_blobs"] = blobs
+    meta_bytes = json.dumps(meta, separators=(",", ":")).encode()
+    return b"".join([_HEADER.pack(MAGIC, VERSION, message.TYPE, len(meta_bytes)), meta_bytes, *chunks])
+
+
+def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None, *, key: str | None = None) -> M:
+    """Parse bytes made by :func:`encode`.
+
+    Args:
+        data: the message bytes.
+        expected: the message class wanted; another type raises SchemaError.
+        key: the key expression it arrived on, for error messages.
+
+    Raises:
+        SchemaError: malformed bytes, unknown version or type, or not of ``expected`` type.
+    """
+    view = memoryview(data)
+    if len(view) < _HEADER.size:
+        raise SchemaError(f"{len(view)} bytes is shorter than the {_HEADER.size}-byte header", key=key)
+    magic, version, type_id, meta_len = _HEADER.unpack_from(view)
+    if magic != MAGIC:
+        raise SchemaError(f"bad magic {bytes(magic)!r}, not a flagtrack message", key=key)
+    if version != VERSION:
+        raise SchemaError(f"unsupported schema version {version} (this build reads {VERSION})", key=key)
+    try:
+        cls = MESSAGE_TYPES[MessageType(type_id)]
+    except ValueError:
+        raise SchemaError(f"unknown message type {type_id}", key=key) from None
+    if expected is not None and cls is not expected:
+        raise SchemaError(f"expected {expected.__name__}, got {cls.__name__}", key=key)
+    end = _HEADER.size + meta_len
+    if end > len(view):
+        raise SchemaError(f"meta length {meta_len} runs past the end ({len(view)} bytes)", key=key)
+    try:
+        meta = json.loads(bytes(view[_HEADER.size:end]))
+    except ValueError as exc:
+        raise SchemaError(f"{cls.__name__}: meta is not valid JSON ({exc})", key=key) from None
+    if not isinstance(meta, dict):
+        raise SchemaError(f"{cls.__name__}: meta is not a JSON object", key=key)
+    blob_values = _read_blobs(cls, meta.pop("_blobs", None), view[end:], key)
+    if _fast_scalars_ok(cls, meta):
+        return cls(**meta, **blob_values)
+    try:
+        scalars = from_mapping(_scalar_view(cls), meta)
+    except ConfigError as exc:
+        raise SchemaError(f"{cls.__name__}: {exc}", key=key) from None
+    missing = [f.name for f in dataclasses.fields(cls) if _is_blob(f) and f.name not in blob_values and _required(f)]
+    if missing:
+        raise SchemaError(f"{cls.__name__}: missing payload field '{missing[0]}'", key=key)
+    return cls(**{f.name: getattr(scalars, f.name) for f in dataclasses.fields(scalars)}, **blob_values)
+
+
+def _read_blobs(cls: type, blobs: Any, payload: memoryview, key: str | None) -> dict[str, Any]:
+    if not isinstance(blobs, list):
+        raise SchemaError(f"{cls.__name__}: meta has no '_blobs' list", key=key)
+    blob_fields = {f.name for f in dataclasses.fields(cls) if _is_blob(f)}
+    values: dict[str, Any] = {}
+    offset = 0
+    for item in blobs:
+        try:
+            name, dtype, shape = item
+            shape = tuple(int(n) for n in shape)
+            if name not in blob_fields or any(n < 0 for n in shape):
+                raise ValueError(name)
+            if dtype == "bytes":
+                size = shape[0]
+                value: Any = bytes(payload[offset:offset + size])
+            else:
+                np_dtype = np.dtype(dtype)
+                size = int(np.prod(shape)) * np_dtype.itemsize
+                value = np.frombuffer(payload[offset:offset + size], dtype=np_dtype).reshape(shape)
+        except (ValueError, TypeError) as exc:
+            raise SchemaError(f"{cls.__name__}: bad payload descriptor {item!r} ({exc})", key=key) from None
+        if offset + size > len(payload):
+            raise SchemaError(f"{cls.__name__}: payload '{name}' truncated", key=key)
+        values[name] = value
+        offset += size
+    if offset != len(payload):
+        raise SchemaError(f"{cls.__name__}: {len(payload) - offset} unexpected trailing payload bytes", key=key)
+    return values
+
+
+def _is_blob(f: dataclasses.Field) -> bool:
+    return f.type in ("np.ndarray", "bytes", np.ndarray, bytes)
+
+
+def _required(f: dataclasses.Field) -> bool:
+    return f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+
+
+_SCALAR_VIEWS: dict[type, type] = {}
+
+
+def _scalar_view(cls: type) -> type:
+    """A dataclass with only the JSON (non-blob) fields of ``cls``, for checked decoding."""
+    if cls not in _SCALAR_VIEWS:
+        specs: list[tuple] = []
+        for f in dataclasses.fields(cls):
+            if _is_blob(f):
+                continue
+            if f.default is not dataclasses.MISSING:
+                specs.append((f.name, f.type, field(default=f.default)))
+            elif f.default_factory is not dataclasses.MISSING:
+                specs.append((f.name, f.type, field(default_factory=f.default_factory)))
+            else:
+                specs.append((f.name, f.type))
+        view = dataclasses.make_dataclass(f"{cls.__name__}Meta", specs, frozen=True)
+        view.__module__ = __name__  # so string annotations resolve against this module
+        _SCALAR_VIEWS[cls] = view
+    return _SCALAR_VIEWS[cls]
+
+
+_SIMPLE = {"str": str, "int": int, "float": float, "bool": bool}
+_FAST_TYPES: dict[type, dict[str, type] | None] = {}
+
+
+def _fast_scalars_ok(cls: type, meta: dict[str, Any]) -> bool:
+    """True when ``meta`` holds exactly the scalar fields of ``cls`` with exact simple types.
+
+    The hot path (event packets at kHz): skips the general checked conversion, which still runs
+    (and explains the problem) whenever this quick test fails.
+    """
+    if cls not in _FAST_TYPES:
+        scalar = [f for f in dataclasses.fields(cls) if not _is_blob(f)]
+        simple = {f.name: _SIMPLE.get(f.type) for f in scalar}
+        _FAST_TYPES[cls] = simple if all(simple.values()) else None
+    types_ = _FAST_TYPES[cls]
+    if types_ is None or len(meta) != len(types_):
+        return False
+    for name, value in meta.items():
+        expected = types_.get(name)
+        if expected is None or type(value) is not expected:
+            return False
+    return True

@@ -1,0 +1,244 @@
+"""Zenoh transport: one session per process, publishers and subscribers of schema messages.
+
+The only module that imports zenoh. Subscribers never do work in Zenoh's callback: samples go
+into a channel (a bounded FIFO for commands and lossless data, a ring that keeps the newest for live
+views) that the service reads from its own loop with a timeout.
+"""
+
+from __future__ import annotations
+
+import collections
+import json
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import zenoh
+
+from flagtrack.daemon.errors import ConfigError, SchemaError
+from flagtrack.daemon.schema import Keys, decode, encode
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """How this process joins the bus.
+
+    Attributes:
+        namespace: key prefix, ``flagtrack/<rig>``.
+        mode: Zenoh mode: ``peer`` (embedded default), ``client`` (through a router) or ``router``.
+        listen: endpoints to listen on, e.g. ``tcp/127.0.0.1:7447``.
+        connect: endpoints to connect to (a router, or another peer).
+        multicast_scouting: discover peers by UDP multicast (off by default: loopback only).
+    """
+
+    namespace: str = "flagtrack/default"
+    mode: Literal["peer", "client", "router"] = "peer"
+    listen: tuple[str, ...] = ()
+    connect: tuple[str, ...] = ()
+    multicast_scouting: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.namespace or self.namespace != self.namespace.strip("/") or " " in self.namespace:
+            raise ValueError(f"namespace {self.namespace!r} must be slash-separated words like 'flagtrack/rig1'")
+
+
+def zenoh_config(cfg: BusConfig) -> zenoh.Config:
+    """Translate a :class:`BusConfig` into a Zenoh configuration."""
+    zcfg = zenoh.Config()
+    zcfg.insert_json5("mode", json.dumps(cfg.mode))
+    zcfg.insert_json5("scouting/multicast/enabled", json.dumps(cfg.multicast_scouting))
+    zcfg.insert_json5("listen/endpoints", json.dumps(list(cfg.listen)))
+    zcfg.insert_json5("connect/endpoints", json.dumps(list(cfg.connect)))
+    return zcfg
+
+
+class Channel:
+    """A thread-safe queue filled by a Zenoh callback and read by a service loop.
+
+    Args:
+        capacity: maximum samples held.
+        ring: when full, drop the oldest (live views); otherwise drop the newest and count it.
+    """
+
+    def __init__(self, capacity: int, ring: bool) -> None:
+        self._items: collections.deque[tuple[str, bytes]] = collections.deque()
+        self._capacity = capacity
+        self._ring = ring
+        self._ready = threading.Condition()
+        self.dropped = 0
+
+    def push(self, key: str, payload: bytes) -> None:
+        """Called from Zenoh's thread: never blocks beyond a short lock."""
+        with self._ready:
+            if len(self._items) >= self._capacity:
+                self.dropped += 1
+                if not self._ring:
+                    return
+                self._items.popleft()
+            self._items.append((key, payload))
+            self._ready.notify()
+
+    def get(self, timeout_s: float | None = None) -> tuple[str, bytes] | None:
+        """Return the oldest ``(key, payload)``, waiting up to ``timeout_s``; None on timeout."""
+        with self._ready:
+            if not self._items and not self._ready.wait_for(lambda: bool(self._items), timeout_s):
+                return None
+            return self._items.popleft()
+
+    def drain(self) -> list[tuple[str, bytes]]:
+        """Return and remove everything queued."""
+        with self._ready:
+            items = list(self._items)
+            self._items.clear()
+            return items
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+
+class Subscription:
+    """Messages of one key expression, decoded on :meth:`recv`; malformed ones are counted and skipped."""
+
+    def __init__(self, subscriber: Any, channel: Channel, expected: type | None) -> None:
+        self._subscriber = subscriber
+        self.channel = channel
+        self._expected = expected
+        self.malformed = 0
+        self._last_error_log = 0.0
+
+    def recv(self, timeout_s: float | None = None) -> Any | None:
+        """The next well-formed message (or None on timeout); malformed ones are counted and skipped."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while True:
+            remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
+            item = self.channel.get(remaining)
+            if item is None:
+                return None
+            key, payload = item
+            try:
+                return decode(payload, self._expected, key=key)
+            except SchemaError as exc:
+                self.malformed += 1
+                now = time.monotonic()
+                if now - self._last_error_log > 5.0:  # count repeated problems, log them rarely
+                    log.warning("%s (%d malformed so far)", exc, self.malformed)
+                    self._last_error_log = now
+
+    def recv_raw(self, timeout_s: float | None = None) -> tuple[str, bytes] | None:
+        """The next ``(key, payload)`` undecoded (for recorders that store bytes as they came)."""
+        return self.channel.get(timeout_s)
+
+    def close(self) -> None:
+        """Stop receiving."""
+        self._subscriber.undeclare()
+
+
+class Publisher:
+    """Publishes schema messages on one key expression."""
+
+    def __init__(self, publisher: Any, key: str) -> None:
+        self._publisher = publisher
+        self.key = key
+
+    def put(self, message: Any) -> None:
+        """Encode and publish ``message``."""
+        self._publisher.put(encode(message))
+
+    def put_bytes(self, payload: bytes) -> None:
+        """Publish bytes already encoded (or deliberately malformed, in tests)."""
+        self._publisher.put(payload)
+
+    def close(self) -> None:
+        """Stop publishing."""
+        self._publisher.undeclare()
+
+
+@dataclass
+class Liveliness:
+    """Which services are alive, from liveliness tokens (PUT = appeared, DELETE = gone)."""
+
+    alive: set[str] = field(default_factory=set)
+    gone: list[str] = field(default_factory=list)
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def on_sample(self, sample: Any) -> None:
+        key = str(sample.key_expr)
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.DELETE:
+                self.alive.discard(key)
+                self.gone.append(key)
+            else:
+                self.alive.add(key)
+
+    def is_alive(self, key: str) -> bool:
+        with self._lock:
+            return key in self.alive
+
+
+class Bus:
+    """One Zenoh session; a context manager that closes everything it declared.
+
+    Args:
+        cfg: how to join the bus.
+    """
+
+    def __init__(self, cfg: BusConfig) -> None:
+        self.cfg = cfg
+        self.keys = Keys(cfg.namespace)
+        try:
+            self.session = zenoh.open(zenoh_config(cfg))
+        except zenoh.ZError as exc:
+            raise ConfigError(f"cannot open Zenoh session ({exc})", key="bus") from exc
+        self._declared: list[Any] = []
+
+    def publisher(self, key: str, *, block: bool = True, express: bool = False) -> Publisher:
+        """Declare a publisher; ``block`` makes it wait for slow subscribers rather than drop."""
+        congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
+        pub = self.session.declare_publisher(key, congestion_control=congestion, express=express)
+        self._declared.append(pub)
+        return Publisher(pub, key)
+
+    def subscribe(self, key: str, expected: type | None = None, *, capacity: int = 10_000, ring: bool = False) -> Subscription:
+        """Subscribe to ``key`` into a channel (FIFO by default, ring for live views)."""
+        channel = Channel(capacity, ring)
+
+        def on_sample(sample: Any) -> None:
+            channel.push(str(sample.key_expr), sample.payload.to_bytes())
+
+        sub = self.session.declare_subscriber(key, on_sample)
+        self._declared.append(sub)
+        return Subscription(sub, channel, expected)
+
+    def declare_alive(self, service: str) -> Any:
+        """Declare this service alive until the session closes (or the token is undeclared)."""
+        token = self.session.liveliness().declare_token(self.keys.alive(service))
+        self._declared.append(token)
+        return token
+
+    def watch_liveliness(self) -> Liveliness:
+        """Track the liveliness tokens of every service of the namespace (current ones included)."""
+        state = Liveliness()
+        sub = self.session.liveliness().declare_subscriber(self.keys.alive_all(), state.on_sample, history=True)
+        self._declared.append(sub)
+        return state
+
+    def close(self) -> None:
+        """Undeclare everything and close the session (idempotent)."""
+        for entity in reversed(self._declared):
+            try:
+                entity.undeclare()
+            except Exception:  # noqa: BLE001 - already gone with the session; nothing to do
+                pass
+        self._declared.clear()
+        if not self.session.is_closed():
+            self.session.close()
+
+    def __enter__(self) -> Bus:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

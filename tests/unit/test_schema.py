@@ -1,0 +1,106 @@
+"""Wire schema: exact round trips, and clear errors for malformed or wrong-version bytes."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import struct
+
+import numpy as np
+import pytest
+
+from flagtrack.daemon import schema
+from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.errors import SchemaError
+from flagtrack.daemon.schema import (
+    CameraStatus, CentrelineMessage, EventPacket, Keys, SensorSamples, TunnelCommand, decode, encode,
+)
+
+
+def centreline_message() -> CentrelineMessage:
+    rng = np.random.default_rng(0)
+    n_t, n_s = 4, 51
+    batch = CentrelineBatch(
+        t_s=np.arange(n_t) * 1e-3, s=np.linspace(0, 1, n_s), x=rng.normal(size=(n_t, n_s)),
+        y=rng.normal(size=(n_t, n_s)), joints_x=rng.normal(size=(n_t, 11)), joints_y=rng.normal(size=(n_t, 11)),
+        delta_rms=rng.random(n_t), n_events=np.arange(n_t, dtype=np.int64),
+    )
+    return CentrelineMessage.from_batch(batch, source="tracker", seq=7, units="px", source_ns=np.arange(n_t) + 10**18)
+
+
+def packet() -> EventPacket:
+    return EventPacket("cam0", 3, 1000, 1999, 42, 640, 480, "evt3", 1_700_000_000_000_000_000, bytes(range(256)))
+
+
+def test_event_packet_round_trip() -> None:
+    assert decode(encode(packet()), EventPacket) == packet()
+
+
+def test_centrelines_round_trip_exactly() -> None:
+    msg = centreline_message()
+    got = decode(encode(msg), CentrelineMessage)
+    for f in dataclasses.fields(msg):
+        a, b = getattr(msg, f.name), getattr(got, f.name)
+        assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b, f.name
+    np.testing.assert_array_equal(got.batch().tip_x, msg.x[:, -1])
+
+
+@pytest.mark.parametrize(
+    "message",
+    [
+        CameraStatus("cam0", "streaming", "simulated", 640, 480, "evt3", {"biases": {"bias_fo": 3}}),
+        TunnelCommand("set", 5.5),
+        SensorSamples("om70", 1, "m", np.arange(5, dtype=np.int64), np.linspace(0, 1, 5)),
+    ],
+)
+def test_other_messages_round_trip(message: object) -> None:
+    got = decode(encode(message))
+    assert type(got) is type(message)
+    assert encode(got) == encode(message)
+
+
+def with_meta(meta: dict, type_id: int = schema.MessageType.EVENT_PACKET, payload: bytes = b"") -> bytes:
+    body = json.dumps(meta).encode()
+    return struct.pack("<2sBBI", b"FT", schema.VERSION, type_id, len(body)) + body + payload
+
+
+GOOD_META = {f.name: getattr(packet(), f.name) for f in dataclasses.fields(EventPacket) if f.name != "data"}
+
+
+@pytest.mark.parametrize(
+    ("data", "words"),
+    [
+        (b"FT\x01", "shorter than"),
+        (b"XX" + encode(packet())[2:], "bad magic"),
+        (encode(packet())[:2] + b"\x09" + encode(packet())[3:], "unsupported schema version 9"),
+        (encode(packet())[:3] + b"\x63" + encode(packet())[4:], "unknown message type 99"),
+        (encode(packet())[:-1], "truncated"),
+        (encode(packet()) + b"\x00", "trailing"),
+        (with_meta({**GOOD_META, "_blobs": []})[:-3], "runs past"),
+        (struct.pack("<2sBBI", b"FT", 1, 1, 3) + b"{x}", "not valid JSON"),
+        (with_meta({**GOOD_META, "seq": "three", "_blobs": []}), "seq"),
+        (with_meta({**{k: v for k, v in GOOD_META.items() if k != "width"}, "_blobs": []}), "width"),
+        (with_meta({**GOOD_META, "_blobs": [["data", "bytes", [4]]]}), "truncated"),
+        (with_meta({**GOOD_META, "_blobs": [["nope", "bytes", [0]]]}), "bad payload descriptor"),
+        (with_meta({**GOOD_META}), "_blobs"),
+    ],
+)
+def test_malformed_bytes_raise_clear_errors(data: bytes, words: str) -> None:
+    with pytest.raises(SchemaError, match=words) as info:
+        decode(data, key="flagtrack/x/camera/cam0/events")
+    assert "flagtrack/x/camera/cam0/events" in str(info.value)
+
+
+def test_wrong_type_is_refused() -> None:
+    with pytest.raises(SchemaError, match="expected CentrelineMessage, got EventPacket"):
+        decode(encode(packet()), CentrelineMessage)
+
+
+def test_keys_are_lowercase_slash_words_under_namespace() -> None:
+    keys = Keys("flagtrack/rig1")
+    names = [keys.camera_events("cam0"), keys.camera_status("cam0"), keys.event_rate("cam0"), keys.centrelines(),
+             keys.tracker_status(), keys.tunnel_state(), keys.tunnel_command(), keys.supervisor_state(),
+             keys.recorder_command(), keys.recorder_status(), keys.sensor_samples("om70"), keys.alive("tracker")]
+    assert len(set(names)) == len(names)
+    for name in names:
+        assert name.startswith("flagtrack/rig1/") and name == name.lower() and "//" not in name
