@@ -1,0 +1,71 @@
+"""Service runner: a finishing service ends the group, a failing one stops all, shutdown reports stragglers."""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+
+from flagtrack.daemon.services.runner import ServiceGroup, run_services
+
+
+@dataclass
+class Looping:
+    name: str
+    stopped: bool = False
+    ticks: int = 0
+
+    def run(self, stop: threading.Event) -> None:
+        while not stop.wait(0.001):
+            self.ticks += 1
+        self.stopped = True
+
+
+@dataclass
+class Finishing:
+    name: str
+    after: int = 3
+    done: list = field(default_factory=list)
+
+    def run(self, stop: threading.Event) -> None:
+        for i in range(self.after):
+            self.done.append(i)
+
+
+@dataclass
+class Failing:
+    name: str
+
+    def run(self, stop: threading.Event) -> None:
+        raise RuntimeError("device unplugged")
+
+
+@dataclass
+class Stubborn:
+    name: str
+    release: threading.Event = field(default_factory=threading.Event)
+
+    def run(self, stop: threading.Event) -> None:
+        self.release.wait(5.0)
+
+
+def test_finishing_service_stops_the_others() -> None:
+    loop, fin = Looping("tracker"), Finishing("camera")
+    report = run_services([loop, fin], stop_when_any_finishes=["camera"], handle_signals=False)
+    assert loop.stopped and fin.done == [0, 1, 2]
+    assert sorted(report.finished) == ["camera", "tracker"] and not report.errors
+
+
+def test_failure_stops_everything_and_is_reported() -> None:
+    loop = Looping("tracker")
+    report = run_services([loop, Failing("camera")], handle_signals=False)
+    assert loop.stopped
+    assert isinstance(report.errors["camera"], RuntimeError)
+
+
+def test_shutdown_names_services_that_do_not_stop() -> None:
+    stubborn = Stubborn("recorder")
+    group = ServiceGroup([stubborn, Looping("tracker")])
+    group.start()
+    report = group.shutdown(timeout_s=0.2)
+    assert report.abandoned == ["recorder"]
+    stubborn.release.set()
