@@ -1,0 +1,96 @@
+"""The bytes of a line-oriented serial link: one ``_send`` / ``_recv`` pair that logs at DEBUG.
+
+Opens anything pyserial opens: a device path (``/dev/ttyUSB0``), a pseudo-terminal of the
+simulated tunnel (``/dev/pts/5``), or a URL (``loop://``, ``socket://host:port``, ``rfc2217://``).
+Every failure is a :class:`DriverError` naming the port.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import serial
+
+from flagtrack.daemon.errors import DriverError
+
+log = logging.getLogger(__name__)
+
+
+class SerialAdapter:
+    """A serial port read and written in lines.
+
+    Args:
+        port: device path or pyserial URL.
+        baudrate: bits per second.
+        timeout_s: how long to wait for a whole reply line, s.
+        eol: line terminator sent after each command and expected after each reply.
+        port_obj: an already-open pyserial port (tests); ``port`` then only names it.
+        parity, stopbits, bytesize: frame format (``N``/``E``/``O``, 1 or 2, 7 or 8).
+    """
+
+    def __init__(
+        self,
+        port: str,
+        baudrate: int = 9600,
+        timeout_s: float = 0.5,
+        eol: bytes = b"\n",
+        port_obj: serial.SerialBase | None = None,
+        *,
+        parity: str = "N",
+        stopbits: int = 1,
+        bytesize: int = 8,
+    ) -> None:
+        self.device = port
+        self.eol = eol
+        self.timeout_s = timeout_s
+        if port_obj is not None:
+            self.serial = port_obj
+            return
+        try:
+            self.serial = serial.serial_for_url(
+                port, baudrate=baudrate, timeout=timeout_s, write_timeout=timeout_s,
+                parity=parity, stopbits=stopbits, bytesize=bytesize,
+            )  # fmt: skip
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise DriverError(f"cannot open serial port: {exc}", device=port) from exc
+
+    def _send(self, data: bytes) -> None:
+        """Write ``data`` as is (after dropping unread input, so replies stay aligned)."""
+        log.debug("%s <- %r", self.device, data)
+        try:
+            self.serial.reset_input_buffer()
+            self.serial.write(data)
+            self.serial.flush()
+        except (serial.SerialException, OSError) as exc:
+            raise DriverError(f"write failed: {exc}", device=self.device) from exc
+
+    def _recv(self) -> bytes:
+        """Read one line (terminator removed); DriverError when none arrives within the timeout."""
+        try:
+            data = self.serial.read_until(self.eol)
+        except (serial.SerialException, OSError) as exc:
+            raise DriverError(f"read failed: {exc}", device=self.device) from exc
+        log.debug("%s -> %r", self.device, data)
+        if not data.endswith(self.eol):
+            got = f" (got {data!r})" if data else ""
+            raise DriverError(f"no reply within {self.timeout_s:g} s{got}", device=self.device)
+        return data[: -len(self.eol)]
+
+    def write_line(self, line: str) -> None:
+        """Send ``line`` followed by the terminator."""
+        self._send(line.encode("ascii") + self.eol)
+
+    def read_line(self) -> str:
+        """Receive one reply line as text (stripped of surrounding white space)."""
+        data = self._recv()
+        try:
+            return data.decode("ascii").strip()
+        except UnicodeDecodeError as exc:
+            raise DriverError(f"reply is not ASCII: {data!r}", device=self.device) from exc
+
+    def close(self) -> None:
+        """Close the port (idempotent)."""
+        try:
+            self.serial.close()
+        except (serial.SerialException, OSError) as exc:  # pragma: no cover - closing a dead port
+            log.debug("%s: close failed: %s", self.device, exc)

@@ -1,0 +1,126 @@
+"""``flagtrack tunnel``: real processes, real pseudo-terminals, real signals.
+
+The supervisor's safe state at process level: SIGTERM ramps the tunnel to zero through the driver;
+a process killed outright (SIGKILL) leaves it to the tunnel's own watchdog.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from flagtrack.drivers.tunnel.ascii import AsciiTunnel
+from flagtrack.drivers.tunnel.sim_model import SimParams
+from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
+
+FLAGTRACK = [sys.executable, "-m", "flagtrack.daemon"]
+
+
+def wait_until(predicate, timeout_s: float = 5.0) -> bool:  # noqa: ANN001 - tiny test helper
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return predicate()
+
+
+@pytest.fixture
+def sim() -> Iterator[SimulatedTunnel]:
+    with SimulatedTunnel(SimParams(tau_s=0.05, ramp_mps2=100.0, watchdog_s=1.0)) as tunnel:
+        yield tunnel
+
+
+def rig_config(tmp_path: Path, port: str) -> Path:
+    path = tmp_path / "rig.yaml"
+    path.write_text(
+        "tunnel:\n"
+        "  driver: ascii\n"
+        f"  port: {port}\n"
+        "  timeout_s: 0.3\n"
+        "  safety: {max_speed_mps: 8, max_ramp_mps2: 10, ramp_period_s: 0.05, tolerance_mps: 0.1,\n"
+        "           settle_timeout_s: 2, poll_period_s: 0.05, keepalive_s: 0.2, watchdog_s: 1.0}\n"
+    )
+    return path
+
+
+def start_set(config: Path, speed: str) -> subprocess.Popen[str]:
+    proc = subprocess.Popen([*FLAGTRACK, "tunnel", "set", speed, "-c", str(config)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    line = proc.stdout.readline() if proc.stdout else ""
+    assert "holding" in line, (line, proc.stderr.read() if proc.stderr else "")
+    return proc
+
+
+def test_sigterm_ramps_to_zero_through_the_driver(sim: SimulatedTunnel, tmp_path: Path) -> None:
+    proc = start_set(rig_config(tmp_path, sim.port), "3")
+    try:
+        assert sim.speed_mps == pytest.approx(3.0, abs=0.15)
+        time.sleep(1.5)  # longer than the watchdog: the keep-alive holds the speed
+        assert sim.watchdog_trips == 0 and sim.setpoint_mps == 3.0
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=10)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "ramped to zero" in out
+    assert sim.setpoint_mps == 0.0 and sim.watchdog_trips == 0
+    assert wait_until(lambda: sim.speed_mps < 0.05)
+
+
+def test_sigkill_leaves_it_to_the_tunnel_watchdog(sim: SimulatedTunnel, tmp_path: Path) -> None:
+    proc = start_set(rig_config(tmp_path, sim.port), "4")
+    proc.kill()
+    proc.wait(timeout=5)
+    assert sim.setpoint_mps == 4.0  # nobody told it to stop ...
+    assert wait_until(lambda: sim.watchdog_trips == 1)  # ... its own watchdog did
+    assert wait_until(lambda: sim.speed_mps < 0.05)
+
+
+def test_set_beyond_bounds_is_one_line_error(sim: SimulatedTunnel, tmp_path: Path) -> None:
+    result = subprocess.run([*FLAGTRACK, "tunnel", "set", "9", "-c", str(rig_config(tmp_path, sim.port))],
+                            capture_output=True, text=True, timeout=20)  # fmt: skip
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        f"flagtrack tunnel: error: {sim.port}: set-point 9 m/s outside the bounds [0, 8] m/s (tunnel.safety); nothing sent"
+    ]
+    assert sim.valid_commands == 0  # refused before anything was sent
+
+
+def test_get_and_stop(sim: SimulatedTunnel, tmp_path: Path) -> None:
+    link = AsciiTunnel.open(sim.port, timeout_s=0.3)
+    link.write_setpoint_mps(2.0)
+    link.close()
+    assert wait_until(lambda: abs(sim.speed_mps - 2.0) < 0.01)
+    config = str(rig_config(tmp_path, sim.port))
+    got = subprocess.run([*FLAGTRACK, "tunnel", "get", "-c", config], capture_output=True, text=True, timeout=20)
+    assert got.returncode == 0 and f"{sim.port}: speed 2.00 m/s, fault none" in got.stdout
+    stopped = subprocess.run([*FLAGTRACK, "tunnel", "stop", "-c", config], capture_output=True, text=True, timeout=20)
+    assert stopped.returncode == 0, stopped.stderr
+    assert sim.setpoint_mps == 0.0 and sim.speed_mps < 0.15
+
+
+def test_sim_command_prints_a_pty_the_driver_can_use() -> None:
+    proc = subprocess.Popen([*FLAGTRACK, "tunnel", "sim", "--tau-s", "0.02"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        port = proc.stdout.readline().strip() if proc.stdout else ""
+        assert port.startswith("/dev/")
+        link = AsciiTunnel.open(port, timeout_s=0.5)
+        try:
+            link.write_setpoint_mps(1.5)
+            assert wait_until(lambda: abs(link.read_speed_mps() - 1.5) < 0.01)
+            link.stop()
+        finally:
+            link.close()
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=5)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0
