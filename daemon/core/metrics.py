@@ -1,0 +1,261 @@
+"""Accuracy and dynamics metrics of centreline series (Raynaud & Mulleners 2024, sections 3-4).
+
+- tip error delta(t) and its RMS; shape error eps_RMS(t) along the arc length and its maximum;
+- travelling-wave index by complex orthogonal decomposition (Feeny 2013) of the lateral
+  displacement;
+- Delta_RMS: RMS distance of an event cloud to a polyline;
+- tip amplitude A/L and flapping frequency f.
+
+Two series are compared on their common time span: the truth is interpolated (linearly in time,
+linearly along s) at the reconstruction's times and arc lengths. Pure numpy/scipy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import hilbert
+
+from flagtrack.daemon.core.centreline import CentrelineBatch
+
+
+@dataclass(frozen=True)
+class AlignedPair:
+    """Reconstruction and truth on the same times and arc lengths.
+
+    Attributes:
+        t_s: (n_t,) common times.
+        s: (n_s,) common arc lengths.
+        x, y: (n_t, n_s) reconstruction.
+        x_ref, y_ref: (n_t, n_s) truth.
+    """
+
+    t_s: np.ndarray
+    s: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    x_ref: np.ndarray
+    y_ref: np.ndarray
+
+
+def _interp_weights(grid: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Left indices and weights of linear interpolation of ``grid`` (sorted) at ``at`` (inside)."""
+    i0 = np.clip(np.searchsorted(grid, at, side="right") - 1, 0, max(len(grid) - 2, 0))
+    if len(grid) < 2:
+        return i0, np.zeros_like(at, dtype=np.float64)
+    w = (at - grid[i0]) / (grid[i0 + 1] - grid[i0])
+    return i0, np.clip(w, 0.0, 1.0)
+
+
+def resample_s(values: np.ndarray, s: np.ndarray, s_new: np.ndarray) -> np.ndarray:
+    """Linear resampling of (n_t, n_s) ``values`` from arc lengths ``s`` to ``s_new``."""
+    if len(s) == len(s_new) and np.allclose(s, s_new, rtol=0, atol=1e-12 * max(1.0, float(np.abs(s).max()))):
+        return values
+    i0, w = _interp_weights(s, s_new)
+    return values[:, i0] * (1 - w) + values[:, np.minimum(i0 + 1, len(s) - 1)] * w
+
+
+def resample_t(values: np.ndarray, t_s: np.ndarray, t_new: np.ndarray) -> np.ndarray:
+    """Linear resampling of (n_t, ...) ``values`` from times ``t_s`` to ``t_new`` (inside the span)."""
+    i0, w = _interp_weights(t_s, t_new)
+    w = w.reshape(-1, *([1] * (values.ndim - 1)))
+    return values[i0] * (1 - w) + values[np.minimum(i0 + 1, len(t_s) - 1)] * w
+
+
+def align(recon: CentrelineBatch, truth: CentrelineBatch, time_tol_s: float = 1e-9) -> AlignedPair:
+    """Put ``truth`` on the reconstruction's times (within the truth's span) and arc lengths.
+
+    Raises:
+        ValueError: the two series share no time.
+    """
+    t0, t1 = truth.t_s[0] - time_tol_s, truth.t_s[-1] + time_tol_s
+    keep = (recon.t_s >= t0) & (recon.t_s <= t1)
+    if not np.any(keep):
+        raise ValueError(
+            f"no common time: reconstruction {recon.t_s[:1]}..{recon.t_s[-1:]} s, truth {truth.t_s[0]}..{truth.t_s[-1]} s"
+        )
+    t_common = recon.t_s[keep]
+    s_common = recon.s[recon.s <= truth.s[-1] * (1 + 1e-9) + 1e-12]
+    x = resample_s(recon.x[keep], recon.s, s_common)
+    y = resample_s(recon.y[keep], recon.s, s_common)
+    xr = resample_t(resample_s(truth.x, truth.s, s_common), truth.t_s, t_common)
+    yr = resample_t(resample_s(truth.y, truth.s, s_common), truth.t_s, t_common)
+    return AlignedPair(t_common, s_common, x, y, xr, yr)
+
+
+def trapezoid(values: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Trapezoid integral of (n_t, n_s) ``values`` over ``s`` along the last axis, (n_t,)."""
+    return np.sum(0.5 * (values[:, 1:] + values[:, :-1]) * np.diff(s), axis=1)
+
+
+def tip_error(recon: CentrelineBatch, truth: CentrelineBatch) -> tuple[np.ndarray, np.ndarray]:
+    """Tip distance delta(t) on the common times; returns (t_s, delta), both (n_t,)."""
+    pair = align(recon, truth)
+    return pair.t_s, np.hypot(pair.x[:, -1] - pair.x_ref[:, -1], pair.y[:, -1] - pair.y_ref[:, -1])
+
+
+def rms(values: np.ndarray) -> float:
+    """Root mean square ignoring NaN (NaN if nothing is finite)."""
+    values = np.asarray(values, dtype=np.float64)
+    finite = values[np.isfinite(values)]
+    return float(np.sqrt(np.mean(finite**2))) if len(finite) else float("nan")
+
+
+def eps_rms(recon: CentrelineBatch, truth: CentrelineBatch) -> tuple[np.ndarray, np.ndarray]:
+    """Shape error eps_RMS(t) = sqrt(1/L int |r - r_ref|^2 ds) (trapezoid over the common s).
+
+    Returns (t_s, eps), both (n_t,), L being the common arc-length span.
+    """
+    pair = align(recon, truth)
+    sq = (pair.x - pair.x_ref) ** 2 + (pair.y - pair.y_ref) ** 2
+    span = pair.s[-1] - pair.s[0]
+    if span <= 0:
+        return pair.t_s, np.sqrt(sq[:, 0])
+    return pair.t_s, np.sqrt(trapezoid(sq, pair.s) / span)
+
+
+def lateral_displacement(
+    x: np.ndarray, y: np.ndarray, root: tuple[float, float], direction_deg: float
+) -> np.ndarray:
+    """Displacement perpendicular to the rest direction (positive to its left), same shape as ``x``."""
+    d = np.deg2rad(direction_deg)
+    return -(np.asarray(x) - root[0]) * np.sin(d) + (np.asarray(y) - root[1]) * np.cos(d)
+
+
+def rest_frame(batch: CentrelineBatch) -> tuple[tuple[float, float], float]:
+    """Root (time mean of the first sample) and rest direction (mean root-to-tip chord), degrees."""
+    root = (float(np.nanmean(batch.x[:, 0])), float(np.nanmean(batch.y[:, 0])))
+    chord_x = float(np.nanmean(batch.x[:, -1] - batch.x[:, 0]))
+    chord_y = float(np.nanmean(batch.y[:, -1] - batch.y[:, 0]))
+    return root, float(np.degrees(np.arctan2(chord_y, chord_x)))
+
+
+def travelling_wave_index(lateral: np.ndarray) -> float:
+    """Travelling-wave index of a (n_t, n_s) lateral displacement (uniform time sampling).
+
+    Complex orthogonal decomposition: the time mean is removed, the analytic signal in time is
+    taken (Hilbert transform), the complex modes come from the SVD, and the index is the inverse
+    condition number of [Re, Im] of the dominant spatial mode: 1 for a pure travelling wave, 0
+    for a pure standing wave.
+    """
+    lateral = np.asarray(lateral, dtype=np.float64)
+    if lateral.ndim != 2 or lateral.shape[0] < 4 or lateral.shape[1] < 2:
+        raise ValueError(f"travelling_wave_index needs (n_t >= 4, n_s >= 2) samples, got {lateral.shape}")
+    if not np.all(np.isfinite(lateral)):
+        raise ValueError("travelling_wave_index: lateral displacement has NaN or inf")
+    centred = lateral - lateral.mean(axis=0, keepdims=True)
+    analytic = hilbert(centred, axis=0)
+    _, _, vh = np.linalg.svd(analytic, full_matrices=False)
+    mode = vh[0].conj()
+    sv = np.linalg.svd(np.column_stack([mode.real, mode.imag]), compute_uv=False)
+    return float(sv[1] / sv[0]) if sv[0] > 0 else 0.0
+
+
+def cloud_distance(events_x: np.ndarray, events_y: np.ndarray, line_x: np.ndarray, line_y: np.ndarray,
+                   block: int = 4096) -> float:
+    """Delta_RMS: RMS distance of events to the polyline (line_x, line_y), distance to segments.
+
+    Args:
+        events_x, events_y: (n,) event positions, same unit as the line.
+        line_x, line_y: (m,) polyline vertices, m >= 1.
+        block: events processed at once (bounds memory to block * m).
+    """
+    ex, ey = np.asarray(events_x, dtype=np.float64), np.asarray(events_y, dtype=np.float64)
+    lx, ly = np.asarray(line_x, dtype=np.float64), np.asarray(line_y, dtype=np.float64)
+    if len(ex) == 0:
+        return float("nan")
+    if len(lx) == 1:
+        return float(np.sqrt(np.mean((ex - lx[0]) ** 2 + (ey - ly[0]) ** 2)))
+    ax, ay = lx[:-1], ly[:-1]
+    dx, dy = lx[1:] - ax, ly[1:] - ay
+    len2 = np.maximum(dx * dx + dy * dy, 1e-300)
+    total = 0.0
+    for start in range(0, len(ex), block):
+        px, py = ex[start:start + block, None], ey[start:start + block, None]
+        u = np.clip(((px - ax) * dx + (py - ay) * dy) / len2, 0.0, 1.0)
+        d2 = (px - ax - u * dx) ** 2 + (py - ay - u * dy) ** 2
+        total += float(d2.min(axis=1).sum())
+    return float(np.sqrt(total / len(ex)))
+
+
+def tip_amplitude_over_l(tip_lateral: np.ndarray, length: float, robust: bool = False) -> float:
+    """Tip amplitude A/L: half the peak-to-peak of the tip lateral displacement over L.
+
+    With ``robust``, sqrt(2) times the standard deviation (exact for a sinusoid, insensitive to outliers).
+    """
+    values = np.asarray(tip_lateral, dtype=np.float64)
+    values = values[np.isfinite(values)]
+    if len(values) == 0:
+        return float("nan")
+    if robust:
+        return float(np.sqrt(2.0) * np.std(values) / length)
+    return float((values.max() - values.min()) / 2.0 / length)
+
+
+def flapping_frequency_hz(t_s: np.ndarray, signal: np.ndarray, pad: int = 8) -> float:
+    """Dominant frequency of ``signal`` (e.g. tip lateral displacement), Hz, with sub-bin refinement.
+
+    The signal is resampled on a uniform grid (median step), its mean removed, Hann-windowed and
+    zero-padded ``pad`` times; the spectral peak is refined by a parabola through the log magnitudes
+    of the three bins around it.
+    """
+    t_s, signal = np.asarray(t_s, dtype=np.float64), np.asarray(signal, dtype=np.float64)
+    ok = np.isfinite(signal)
+    t_s, signal = t_s[ok], signal[ok]
+    if len(t_s) < 8:
+        return float("nan")
+    dt = float(np.median(np.diff(t_s)))
+    grid = np.arange(t_s[0], t_s[-1] + 0.5 * dt, dt)
+    uniform = np.interp(grid, t_s, signal)
+    uniform = (uniform - uniform.mean()) * np.hanning(len(uniform))
+    n_fft = pad * len(uniform)
+    mag = np.abs(np.fft.rfft(uniform, n_fft))
+    k = int(np.argmax(mag[1:]) + 1)
+    if k + 1 >= len(mag):
+        return float(k / (n_fft * dt))
+    a, b, c = np.log(mag[k - 1 : k + 2] + 1e-300)
+    denom = a - 2 * b + c
+    shift = 0.5 * (a - c) / denom if denom != 0 else 0.0
+    return float((k + shift) / (n_fft * dt))
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Summary of a reconstruction against the truth (lengths over L)."""
+
+    delta_rms_over_l: float
+    max_eps_rms_over_l: float
+    twi: float
+    twi_ref: float
+    n_common: int
+    t_start_s: float
+    t_stop_s: float
+    length: float
+
+    @property
+    def twi_abs_error(self) -> float:
+        """|I - I_ref|."""
+        return abs(self.twi - self.twi_ref)
+
+
+def compare(recon: CentrelineBatch, truth: CentrelineBatch, length: float | None = None) -> Comparison:
+    """delta_RMS/L, max eps_RMS/L and travelling-wave indices of ``recon`` against ``truth``.
+
+    Both indices use the same common times and arc lengths and the truth's rest frame.
+    """
+    pair = align(recon, truth)
+    length = float(length if length is not None else truth.s[-1] - truth.s[0])
+    delta = np.hypot(pair.x[:, -1] - pair.x_ref[:, -1], pair.y[:, -1] - pair.y_ref[:, -1])
+    sq = (pair.x - pair.x_ref) ** 2 + (pair.y - pair.y_ref) ** 2
+    span = pair.s[-1] - pair.s[0]
+    eps = np.sqrt(trapezoid(sq, pair.s) / span) if span > 0 else np.sqrt(sq[:, 0])
+    root, direction = rest_frame(truth)
+    rows = np.all(np.isfinite(pair.x) & np.isfinite(pair.y), axis=1)  # updates the tracker had no shape for
+    twi = travelling_wave_index(lateral_displacement(pair.x[rows], pair.y[rows], root, direction))
+    twi_ref = travelling_wave_index(lateral_displacement(pair.x_ref[rows], pair.y_ref[rows], root, direction))
+    return Comparison(
+        delta_rms_over_l=rms(delta) / length, max_eps_rms_over_l=float(np.nanmax(eps)) / length,
+        twi=twi, twi_ref=twi_ref, n_common=len(pair.t_s), t_start_s=float(pair.t_s[0]),
+        t_stop_s=float(pair.t_s[-1]), length=length,
+    )
