@@ -1,0 +1,215 @@
+"""EVT 2.0 and EVT 2.1 word loops (numba).
+
+EVT 2.0: little-endian 32-bit words, type in bits 28-31: CD_OFF 0x0 / CD_ON 0x1 (time low 6 bits
+22-27, x bits 11-21, y bits 0-10), EV_TIME_HIGH 0x8 (time bits 6-33 in bits 0-27), EXT_TRIGGER 0xA
+(time low bits 22-27, channel bits 8-12, edge bit 0), OTHERS 0xE, CONTINUED 0xF; other types are
+reserved. Semantics follow OpenEB's standalone EVT 2.0 decoder: words before the first TIME_HIGH
+are skipped, t = base + low, and the 34-bit base is unwrapped with OpenEB's threshold rule.
+
+EVT 2.1: 64-bit words made of two 32-bit halves. The high half holds what an EVT 2.0 word holds
+(type, time low, x, y; TIME_HIGH and EXT_TRIGGER as in EVT 2.0) and the low half a 32-bit validity
+mask: bit b set means an event at x + b. In the default ("little") layout the low half comes
+first in the file; in the "legacy" layout (IMX636 EVKs, ``endianness=legacy``) the high half
+comes first. The caller passes the two halves as separate strided views, so one kernel serves
+both. Time wraps follow OpenEB's EVT 2.1 decoder (a wrap only from the maximum to zero).
+
+Decoder state (int64[16]): 0 base set, 1 base µs, 2 loops. Encoder state: 0 started, 1 base µs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from flagtrack.drivers.formats._timebase import (
+    BAD_VALUE,
+    BAD_WORD,
+    FULL,
+    NEGATIVE_TIME,
+    OK,
+    OUT_OF_SENSOR,
+    TIME_JUMP_BACK,
+    next_high_step,
+    step_back_allowed,
+    unwrap_threshold,
+)
+
+
+@njit(cache=True, nogil=True)
+def _reserved_evt2(typ: int) -> bool:
+    return (2 <= typ <= 7) or typ == 9 or (11 <= typ <= 13)
+
+
+@njit(cache=True, nogil=True)
+def decode_evt2(words, start, state, ev, tr, width, height, t_offset):  # noqa: ANN001, ANN201
+    """Decode ``words[start:]`` into ``ev``/``tr``; return (next word, n events, n triggers, status)."""
+    base_set = state[0]
+    base = state[1]
+    n_loop = state[2]
+    n = 0
+    nt = 0
+    ev_room = len(ev)
+    tr_room = len(tr)
+    status = OK
+    i = start
+    nw = len(words)
+    while i < nw:
+        if n >= ev_room or nt >= tr_room:
+            status = FULL
+            break
+        w = np.int64(words[i])
+        typ = w >> 28
+        if typ <= 1 and base_set:
+            x = (w >> 11) & 0x7FF
+            y = w & 0x7FF
+            if x >= width or y >= height:
+                status = OUT_OF_SENSOR
+                break
+            r = ev[n]
+            r.t = base + ((w >> 22) & 63) + t_offset
+            r.x = x
+            r.y = y
+            r.p = typ
+            n += 1
+        elif typ == 8:
+            base, n_loop = unwrap_threshold(base, n_loop, w & 0xFFFFFFF, 6, 28)
+            base_set = 1
+        elif typ == 10 and base_set:
+            r2 = tr[nt]
+            r2.t = base + ((w >> 22) & 63) + t_offset
+            r2.channel = (w >> 8) & 0x1F
+            r2.edge = w & 1
+            nt += 1
+        elif _reserved_evt2(typ):
+            status = BAD_WORD
+            break
+        i += 1
+    state[0] = base_set
+    state[1] = base
+    state[2] = n_loop
+    return i, n, nt, status
+
+
+@njit(cache=True, nogil=True)
+def decode_evt21(high, low, start, state, ev, tr, width, height, t_offset):  # noqa: ANN001, ANN201
+    """Decode EVT 2.1 words from their 32-bit halves; return as :func:`decode_evt2`."""
+    base_set = state[0]
+    base = state[1]
+    n_loop = state[2]
+    period = np.int64(1) << 34
+    max_base = np.int64((1 << 28) - 1) << 6
+    n = 0
+    nt = 0
+    ev_room = len(ev) - 32
+    tr_room = len(tr)
+    status = OK
+    i = start
+    nw = len(high)
+    while i < nw:
+        if n > ev_room or nt >= tr_room:
+            status = FULL
+            break
+        w = np.int64(high[i])
+        typ = w >> 28
+        if typ <= 1 and base_set:
+            x = (w >> 11) & 0x7FF
+            y = w & 0x7FF
+            t = base + ((w >> 22) & 63) + t_offset
+            valid = np.int64(low[i])
+            k = 0
+            for b in range(32):
+                if (valid >> b) & 1:
+                    r = ev[n + k]
+                    r.t = t
+                    r.x = x + b
+                    r.y = y
+                    r.p = typ
+                    k += 1
+                    if x + b >= width:
+                        status = OUT_OF_SENSOR
+            if y >= height:
+                status = OUT_OF_SENSOR
+            if status != OK:
+                break
+            n += k
+        elif typ == 8:
+            new_high = (w & 0xFFFFFFF) << 6
+            last_high = base - n_loop * period
+            if new_high < last_high and last_high - new_high >= max_base:
+                n_loop += 1
+            base = new_high + n_loop * period
+            base_set = 1
+        elif typ == 10 and base_set:
+            r2 = tr[nt]
+            r2.t = base + ((w >> 22) & 63) + t_offset
+            r2.channel = (w >> 8) & 0x1F
+            r2.edge = w & 1
+            nt += 1
+        elif _reserved_evt2(typ):
+            status = BAD_WORD
+            break
+        i += 1
+    state[0] = base_set
+    state[1] = base
+    state[2] = n_loop
+    return i, n, nt, status
+
+
+@njit(cache=True, nogil=True)
+def encode_evt2(ev_t, ev_x, ev_y, ev_p, i, tr_t, tr_c, tr_e, j, state, out, t_offset, width, height):  # noqa: ANN001, ANN201
+    """Encode events from ``i`` and triggers from ``j`` (merged by time) as EVT 2.0 into ``out``.
+
+    Returns (next event, next trigger, words written, status) as the EVT 3.0 encoder does.
+    """
+    started = state[0]
+    cur = state[1]
+    n_ev = len(ev_t)
+    n_tr = len(tr_t)
+    cap = len(out) - 4
+    k = 0
+    status = OK
+    while i < n_ev or j < n_tr:
+        if k > cap:
+            status = FULL
+            break
+        is_trigger = j < n_tr and (i >= n_ev or tr_t[j] < ev_t[i])
+        t = tr_t[j] if is_trigger else ev_t[i]
+        target = t - t_offset
+        if target < 0:
+            status = NEGATIVE_TIME
+            break
+        units = target >> 6
+        if started == 0 or units != cur >> 6:
+            if started and units < cur >> 6 and not step_back_allowed(cur >> 6, units, 28):
+                status = TIME_JUMP_BACK
+                break
+            while (started == 0 or units != cur >> 6) and k <= cap:
+                step = next_high_step(cur >> 6, started, units, 28)
+                out[k] = 0x80000000 | (step & 0xFFFFFFF)
+                k += 1
+                cur = step << 6
+                started = 1
+            if units != cur >> 6:
+                status = FULL
+                break
+        low = target & 63
+        if is_trigger:
+            if tr_c[j] > 31 or tr_e[j] > 1:
+                status = BAD_VALUE
+                break
+            out[k] = 0xA0000000 | (low << 22) | (np.int64(tr_c[j]) << 8) | tr_e[j]
+            k += 1
+            j += 1
+            continue
+        x = np.int64(ev_x[i])
+        y = np.int64(ev_y[i])
+        p = np.int64(ev_p[i])
+        if x >= width or y >= height or p > 1:
+            status = BAD_VALUE
+            break
+        out[k] = (p << 28) | (low << 22) | (x << 11) | y
+        k += 1
+        i += 1
+    state[0] = started
+    state[1] = cur
+    return i, j, k, status
