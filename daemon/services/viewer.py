@@ -1,0 +1,209 @@
+"""The viewer service: bridges the bus to Rerun (the only module that imports rerun).
+
+Entities (stable paths), all on the ``camera`` timeline (seconds of the camera clock):
+``camera/events`` recent events coloured by age, ``tracker/joints``, ``tracker/centreline``,
+``tracker/tip_trail``, and time series under ``plots/`` (event rate, Δ_RMS, events per update,
+tip lateral position, wind speed). Centrelines and scalars are batched with ``send_columns``;
+point clouds and the trail are logged at most ``geometry_rate_hz`` times per second.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import rerun as rr
+
+from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, TunnelState
+from flagtrack.daemon.transport import Bus
+
+log = logging.getLogger(__name__)
+TIMELINE = "camera"
+
+
+@dataclass(frozen=True)
+class ViewerConfig:
+    """Where the Rerun data goes and how much of it.
+
+    Attributes:
+        sink: ``auto`` (a viewer window when a display exists, else an .rrd file), ``spawn``, ``serve``
+            (gRPC + web viewer for a browser), ``rrd`` (headless file) or ``none``.
+        rrd_path: the .rrd file for the ``rrd`` sink (and ``auto`` without display).
+        web_port: port of the web viewer for ``serve``.
+        camera_id: the camera whose events are shown.
+        recent_events_ms: events younger than this are drawn.
+        max_points: at most this many event points per frame (subsampled beyond).
+        trail_s: length of the tip trail.
+        geometry_rate_hz: frames per second for event clouds and the tip trail.
+    """
+
+    sink: Literal["auto", "spawn", "serve", "rrd", "none"] = "auto"
+    rrd_path: Path = Path("flagtrack.rrd")
+    web_port: int = 9090
+    camera_id: str = "cam0"
+    recent_events_ms: float = 10.0
+    max_points: int = 20_000
+    trail_s: float = 0.5
+    geometry_rate_hz: float = 30.0
+
+
+def open_recording(cfg: ViewerConfig) -> tuple[rr.RecordingStream, str]:
+    """Create the Rerun recording stream and connect its sink; return it and a description."""
+    rec = rr.RecordingStream("flagtrack")
+    sink = cfg.sink
+    if sink == "auto":
+        sink = "spawn" if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") else "rrd"
+    if sink == "spawn":
+        rec.spawn()
+        return rec, "Rerun viewer window"
+    if sink == "serve":
+        url = rec.serve_grpc()
+        rr.serve_web_viewer(web_port=cfg.web_port, open_browser=False, connect_to=url)
+        return rec, f"web viewer on http://localhost:{cfg.web_port} (data {url})"
+    if sink == "rrd":
+        path = Path(cfg.rrd_path).expanduser()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        rec.save(path)
+        return rec, f"recording to {path.resolve()}"
+    if sink == "none":
+        return rec, "nowhere (sink none)"
+    raise ConfigError(f"unknown sink {sink!r}", key="viewer.sink")
+
+
+def age_colours(age_s: np.ndarray, horizon_s: float) -> np.ndarray:
+    """RGB uint8 (n, 3): young events yellow, old ones dark purple (viridis-like ramp)."""
+    frac = np.clip(1.0 - age_s / max(horizon_s, 1e-9), 0.0, 1.0)[:, None]
+    dark, bright = np.array([68, 1, 84], float), np.array([253, 231, 37], float)
+    return (dark + frac * (bright - dark)).astype(np.uint8)
+
+
+class RerunLogger:
+    """Turns bus messages into Rerun entities (no bus code here)."""
+
+    def __init__(self, rec: rr.RecordingStream, cfg: ViewerConfig) -> None:
+        self.rec = rec
+        self.cfg = cfg
+        self._events: deque[np.ndarray] = deque()
+        self._trail: deque[tuple[float, float, float]] = deque()
+        self._last_frame = 0.0
+        self._camera_minus_wall_s: float | None = None
+
+    def centrelines(self, msg: CentrelineMessage) -> None:
+        """Log a batch of tracker updates (all of them, batched)."""
+        if len(msg.t_s) == 0:
+            return
+        times = [rr.TimeColumn(TIMELINE, duration=msg.t_s)]
+        ones = [1] * len(msg.t_s)
+        self.rec.send_columns("tracker/centreline", times, rr.LineStrips2D.columns(
+            strips=list(np.stack([msg.x, msg.y], axis=-1))).partition(ones))
+        self.rec.send_columns("tracker/joints", times, rr.Points2D.columns(
+            positions=np.stack([msg.joints_x, msg.joints_y], axis=-1).reshape(-1, 2)).partition(
+            [msg.joints_x.shape[1]] * len(msg.t_s)))
+        for name, values in (("plots/delta_rms", msg.delta_rms), ("plots/events_per_update", msg.n_events),
+                             ("plots/tip_y", msg.tip_y)):
+            self.rec.send_columns(name, times, rr.Scalars.columns(scalars=np.asarray(values, float)))
+        for t, x, y in zip(msg.t_s, msg.tip_x, msg.tip_y):
+            self._trail.append((float(t), float(x), float(y)))
+        while self._trail and self._trail[0][0] < msg.t_s[-1] - self.cfg.trail_s:
+            self._trail.popleft()
+
+    def events(self, events: np.ndarray, packet: EventPacket) -> None:
+        """Keep the packet's events for the next frame; note the camera/wall clock offset."""
+        if len(events):
+            self._events.append(events)
+        self._camera_minus_wall_s = packet.t_last_us * 1e-6 - packet.sent_ns * 1e-9
+
+    def rate(self, msg: EventRate) -> None:
+        """Log the camera's event rate."""
+        self.rec.set_time(TIMELINE, duration=msg.t_us * 1e-6)
+        self.rec.log("plots/event_rate_hz", rr.Scalars(msg.rate_hz))
+
+    def tunnel(self, msg: TunnelState) -> None:
+        """Log the wind speed, placed on the camera clock when the offset is known."""
+        if self._camera_minus_wall_s is None:
+            return
+        self.rec.set_time(TIMELINE, duration=msg.t_wall_s + self._camera_minus_wall_s)
+        self.rec.log("plots/wind_speed_mps", rr.Scalars(msg.speed_mps))
+
+    def frame(self, now_s: float) -> bool:
+        """Log the event cloud and the tip trail if a frame is due; return whether one was logged."""
+        if now_s - self._last_frame < 1.0 / self.cfg.geometry_rate_hz or not self._events:
+            return False
+        self._last_frame = now_s
+        t_newest = int(self._events[-1]["t"][-1])
+        horizon_us = self.cfg.recent_events_ms * 1e3
+        while self._events and int(self._events[0]["t"][-1]) < t_newest - horizon_us:
+            self._events.popleft()
+        recent = np.concatenate(list(self._events))
+        recent = recent[recent["t"] >= t_newest - horizon_us]
+        if len(recent) > self.cfg.max_points:
+            recent = recent[:: int(np.ceil(len(recent) / self.cfg.max_points))]
+        self.rec.set_time(TIMELINE, duration=t_newest * 1e-6)
+        age_s = (t_newest - recent["t"]) * 1e-6
+        self.rec.log("camera/events", rr.Points2D(
+            np.stack([recent["x"], recent["y"]], axis=1).astype(np.float32),
+            colors=age_colours(age_s, horizon_us * 1e-6), radii=0.5))
+        if len(self._trail) > 1:
+            trail = np.array([(x, y) for _, x, y in self._trail], dtype=np.float32)
+            self.rec.log("tracker/tip_trail", rr.LineStrips2D([trail]))
+        return True
+
+
+class ViewerService:
+    """Subscribes to camera, tracker and tunnel topics and logs them to Rerun."""
+
+    name = "viewer"
+
+    def __init__(self, bus: Bus, cfg: ViewerConfig) -> None:
+        self.bus = bus
+        self.cfg = cfg
+        self.description = ""
+        self.frames = 0
+        self.updates = 0
+
+    def run(self, stop: threading.Event) -> None:
+        from flagtrack.drivers.formats import make_decoder
+
+        keys = self.bus.keys
+        subs: dict[str, Any] = {
+            "centrelines": self.bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000),
+            "events": self.bus.subscribe(keys.camera_events(self.cfg.camera_id), EventPacket, capacity=100_000),
+            "rate": self.bus.subscribe(keys.event_rate(self.cfg.camera_id), EventRate, capacity=1000, ring=True),
+            "tunnel": self.bus.subscribe(keys.tunnel_state(), TunnelState, capacity=1000, ring=True),
+        }
+        self.bus.declare_alive(self.name)
+        rec, self.description = open_recording(self.cfg)
+        log.info("viewer: %s", self.description)
+        logger = RerunLogger(rec, self.cfg)
+        decoder, encoding = None, None
+        try:
+            while not stop.is_set():
+                busy = False
+                while (msg := subs["centrelines"].recv(timeout_s=0)) is not None:
+                    logger.centrelines(msg)
+                    self.updates += len(msg.t_s)
+                    busy = True
+                while (packet := subs["events"].recv(timeout_s=0)) is not None:
+                    if packet.encoding != encoding:
+                        decoder, encoding = make_decoder(packet.encoding), packet.encoding
+                    events, _ = decoder.decode(packet.data)
+                    logger.events(events, packet)
+                    busy = True
+                while (msg := subs["rate"].recv(timeout_s=0)) is not None:
+                    logger.rate(msg)
+                while (msg := subs["tunnel"].recv(timeout_s=0)) is not None:
+                    logger.tunnel(msg)
+                self.frames += logger.frame(time.monotonic())
+                if not busy:
+                    stop.wait(0.005)
+        finally:
+            rec.flush()
+            rec.disconnect()

@@ -1,0 +1,55 @@
+"""The viewer bridges real bus messages into a Rerun .rrd file (headless sink)."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate
+from flagtrack.daemon.services.viewer import ViewerConfig, ViewerService, age_colours
+from flagtrack.daemon.transport import Bus, BusConfig
+from flagtrack.drivers.formats import make_encoder
+from flagtrack.drivers.sim.quickline import WavyFlag, line_events
+from tests.integration.test_transport import free_port, wait_for
+
+
+def test_viewer_logs_events_and_centrelines_to_rrd(tmp_path: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    rrd = tmp_path / "view.rrd"
+    with Bus(BusConfig(namespace="flagtrack/view", listen=(endpoint,))) as bus, \
+            Bus(BusConfig(namespace="flagtrack/view", connect=(endpoint,))) as source:
+        viewer = ViewerService(bus, ViewerConfig(sink="rrd", rrd_path=rrd, geometry_rate_hz=1000.0))
+        stop = threading.Event()
+        thread = threading.Thread(target=viewer.run, args=(stop,))
+        thread.start()
+        time.sleep(0.5)
+        events_pub = source.publisher(source.keys.camera_events("cam0"))
+        lines_pub = source.publisher(source.keys.centrelines())
+        rate_pub = source.publisher(source.keys.event_rate("cam0"))
+        encoder = make_encoder("evt3")
+        for seq, chunk in enumerate(line_events(WavyFlag(), 0, 50_000, 640, 480, chunk_us=1000)):
+            events_pub.put(EventPacket("cam0", seq, int(chunk["t"][0]), int(chunk["t"][-1]), len(chunk), 640, 480,
+                                       "evt3", time.time_ns(), encoder.encode(chunk)))
+            time.sleep(0.002)
+        n_t, n_s = 20, 51
+        batch = CentrelineBatch(np.arange(n_t) * 1e-3, np.linspace(0, 200, n_s), np.zeros((n_t, n_s)),
+                                np.zeros((n_t, n_s)), np.zeros((n_t, 11)), np.zeros((n_t, 11)), np.ones(n_t),
+                                np.ones(n_t, dtype=np.int64))
+        lines_pub.put(CentrelineMessage.from_batch(batch, source="tracker", seq=0, units="px",
+                                                   source_ns=np.zeros(n_t, dtype=np.int64)))
+        rate_pub.put(EventRate("cam0", 50_000, 0.1, 1000, 1e4, 0.5))
+        assert wait_for(lambda: viewer.updates == n_t and viewer.frames > 0)
+        stop.set()
+        thread.join(10)
+    assert not thread.is_alive()
+    assert rrd.stat().st_size > 10_000
+
+
+def test_age_colours_run_from_bright_to_dark() -> None:
+    colours = age_colours(np.array([0.0, 0.005, 0.01]), 0.01)
+    assert colours.dtype == np.uint8 and colours.shape == (3, 3)
+    assert colours[0].sum() > colours[1].sum() > colours[2].sum()
