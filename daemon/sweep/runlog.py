@@ -1,0 +1,296 @@
+"""The run log of a sweep: one folder per run, an append-only JSON-lines file ``run.jsonl``.
+
+Records (one JSON object per line, each with ``type`` and the format version ``v``):
+
+- ``start``: run id, flagtrack version, the run's config, the planned points;
+- ``resume``: appended when an interrupted run is resumed, with the points already done;
+- ``point``: one per measured point: id, branch, speed, state, metrics, pointers to the raw and
+  centreline files (relative to the run folder), status ``done`` or ``failed``;
+- ``stop``: reason (``finished``, ``SIGTERM``, an error), appended on any orderly end.
+
+Every line is written, flushed and fsync'ed before the writer returns, so after a power loss the
+file holds every finished record and at most one torn last line, which the reader ignores (and
+:meth:`RunLog.resume` cuts off before appending). NaN metrics are written as ``null``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import math
+import os
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Literal
+
+from flagtrack.daemon import __version__
+from flagtrack.daemon.errors import FormatError
+from flagtrack.daemon.sweep.plan import Point
+
+log = logging.getLogger(__name__)
+
+RUN_LOG = "run.jsonl"
+LOG_VERSION = 1
+POINTS_DIR = "points"
+_BLANK = b" \t\r\n\x00"
+
+
+@dataclass(frozen=True)
+class PointResult:
+    """What one point measured (the ``point`` record; also a row of the summary CSV).
+
+    Attributes:
+        point_id, index, branch: as planned (:class:`~flagtrack.daemon.sweep.plan.Point`).
+        speed_mps: the set-point, m/s.
+        status: ``done`` (counts as finished on resume) or ``failed``.
+        state: flag state over the recording (``still``, ``flapping``, ``unknown``).
+        speed_readback_mps: mean tunnel readback during the recording, m/s.
+        amplitude_over_l, amplitude_std_over_l: tip amplitude A/L, time mean and std.
+        frequency_hz: flapping frequency, Hz.
+        twi: travelling-wave index.
+        delta_rms_over_l: mean cloud distance Delta_RMS / L.
+        event_rate_mev_s: mean event rate, millions of events per second.
+        raw_bytes: size of the raw event file, bytes.
+        raw_file, centreline_file: paths relative to the run folder, or ``None``.
+        t_start_unix, t_stop_unix: recording start and stop, Unix time s.
+        error: what went wrong, for a failed point.
+    """
+
+    point_id: str
+    index: int
+    branch: str
+    speed_mps: float
+    status: Literal["done", "failed"] = "done"
+    state: str = "unknown"
+    speed_readback_mps: float = math.nan
+    amplitude_over_l: float = math.nan
+    amplitude_std_over_l: float = math.nan
+    frequency_hz: float = math.nan
+    twi: float = math.nan
+    delta_rms_over_l: float = math.nan
+    event_rate_mev_s: float = math.nan
+    raw_bytes: int = 0
+    raw_file: str | None = None
+    centreline_file: str | None = None
+    t_start_unix: float = math.nan
+    t_stop_unix: float = math.nan
+    error: str | None = None
+
+    @classmethod
+    def planned(cls, point: Point, **values: Any) -> PointResult:
+        """A result for ``point`` with the given metric ``values``."""
+        return cls(point.point_id, point.index, point.branch.value, point.speed_mps, **values)
+
+
+_FLOAT_FIELDS = {f.name for f in dataclasses.fields(PointResult) if f.type in ("float", float)}
+
+
+def point_paths(point_id: str) -> tuple[str, str]:
+    """Raw and centreline file paths of a point, relative to the run folder."""
+    return f"{POINTS_DIR}/{point_id}.raw", f"{POINTS_DIR}/{point_id}.h5"
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """Everything a run log holds.
+
+    Attributes:
+        run_dir: the run folder.
+        start: the start record.
+        points: every point record, in file order (a point redone after a failure appears twice).
+        resumes: the resume records.
+        stop: the last stop record, or ``None`` (running, or killed).
+        torn_tail: the last line was incomplete (power loss) and was ignored.
+        valid_bytes: length of the file up to the last complete record.
+    """
+
+    run_dir: Path
+    start: dict[str, Any]
+    points: tuple[PointResult, ...]
+    resumes: tuple[dict[str, Any], ...]
+    stop: dict[str, Any] | None
+    torn_tail: bool
+    valid_bytes: int
+
+    @property
+    def planned_ids(self) -> list[str]:
+        """Point ids of the plan stored in the start record."""
+        return [p["point_id"] for p in self.start.get("plan", [])]
+
+    def latest_points(self) -> dict[str, PointResult]:
+        """The last record of each point, by point id, in plan order."""
+        latest = {p.point_id: p for p in self.points}
+        order = {pid: i for i, pid in enumerate(self.planned_ids)}
+        return dict(sorted(latest.items(), key=lambda item: (order.get(item[0], len(order)), item[1].index)))
+
+
+def read_run(run_dir: str | Path) -> RunRecord:
+    """Read ``run_dir/run.jsonl``; a torn last line is ignored.
+
+    Raises:
+        FormatError: missing file, a malformed record before the last line, an unknown version,
+            or a first record that is not ``start`` (the error names the file and byte offset).
+    """
+    run_dir = Path(run_dir)
+    path = run_dir / RUN_LOG
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise FormatError(f"cannot read the run log: {exc.strerror}", path=str(path)) from exc
+    records: list[tuple[int, dict[str, Any]]] = []
+    offset, torn = 0, False
+    while offset < len(data):
+        if not data[offset:].strip(_BLANK):  # a tail of NUL bytes (a crash during a write)
+            torn = True
+            break
+        end = data.find(b"\n", offset)
+        line = data[offset:] if end < 0 else data[offset:end]
+        try:
+            record = _decode(line, end < 0)
+        except ValueError as exc:
+            if end < 0 or not data[end + 1 :].strip(_BLANK):
+                torn = True
+                log.warning("%s: ignoring a torn last record at byte %d (%s)", path, offset, exc)
+                break
+            raise FormatError(f"malformed record: {exc}", path=str(path), offset=offset) from exc
+        records.append((offset, record))
+        offset = end + 1
+    return _assemble(run_dir, path, records, torn, offset)
+
+
+def _decode(line: bytes, last: bool) -> dict[str, Any]:
+    if last:
+        raise ValueError("no end of line")
+    record = json.loads(line)
+    if not isinstance(record, dict) or "type" not in record:
+        raise ValueError("not a record object")
+    return record
+
+
+def _assemble(run_dir: Path, path: Path, records: list[tuple[int, dict[str, Any]]], torn: bool, valid: int) -> RunRecord:
+    if not records or records[0][1]["type"] != "start":
+        raise FormatError("the run log does not begin with a start record", path=str(path), offset=0)
+    points, resumes, stop = [], [], None
+    for offset, record in records:
+        if record.get("v") != LOG_VERSION:
+            raise FormatError(f"unknown run-log version {record.get('v')!r}", path=str(path), offset=offset)
+        kind = record["type"]
+        if kind == "point":
+            points.append(_point_from_json(record, path, offset))
+        elif kind == "resume":
+            resumes.append(record)
+        elif kind == "stop":
+            stop = record
+        elif kind != "start" or offset != 0:
+            raise FormatError(f"unexpected record type {kind!r}", path=str(path), offset=offset)
+    return RunRecord(run_dir, records[0][1], tuple(points), tuple(resumes), stop, torn, valid)
+
+
+def _point_from_json(record: dict[str, Any], path: Path, offset: int) -> PointResult:
+    names = {f.name for f in dataclasses.fields(PointResult)}
+    values = {k: (math.nan if v is None and k in _FLOAT_FIELDS else v) for k, v in record.items() if k in names}
+    try:
+        return PointResult(**values)
+    except TypeError as exc:
+        raise FormatError(f"point record: {exc}", path=str(path), offset=offset) from exc
+
+
+def completed_points(run_dir: str | Path) -> set[str]:
+    """Ids of the points whose latest record has status ``done`` (skip these on resume)."""
+    return {pid for pid, p in read_run(run_dir).latest_points().items() if p.status == "done"}
+
+
+class RunLog:
+    """Appends records to a run's log; create with :meth:`create` or :meth:`resume`."""
+
+    def __init__(self, run_dir: Path, handle: Any) -> None:
+        self.run_dir = run_dir
+        self.path = run_dir / RUN_LOG
+        self._handle = handle
+
+    @classmethod
+    def create(
+        cls, run_dir: str | Path, *, run_id: str, config: Mapping[str, Any], plan: Sequence[Point],
+        t_unix: float | None = None,
+    ) -> RunLog:  # fmt: skip
+        """Make the run folder (and ``points/``) and write the start record.
+
+        Raises:
+            FormatError: the folder already holds a run log (resume it instead).
+        """
+        run_dir = Path(run_dir)
+        (run_dir / POINTS_DIR).mkdir(parents=True, exist_ok=True)
+        try:
+            handle = open(run_dir / RUN_LOG, "x", encoding="utf-8")  # noqa: SIM115 - closed by close()
+        except FileExistsError as exc:
+            raise FormatError("a run log exists already; resume the run instead", path=str(run_dir / RUN_LOG)) from exc
+        _fsync_dir(run_dir)
+        runlog = cls(run_dir, handle)
+        plan_json = [{"point_id": p.point_id, "index": p.index, "branch": p.branch.value, "speed_mps": p.speed_mps} for p in plan]
+        runlog._append({"type": "start", "run_id": run_id, "t_unix": _now(t_unix), "flagtrack_version": __version__,
+                        "config": dict(config), "plan": plan_json})  # fmt: skip
+        return runlog
+
+    @classmethod
+    def resume(cls, run_dir: str | Path, *, t_unix: float | None = None) -> tuple[RunLog, RunRecord]:
+        """Reopen a run for appending: cut a torn last line, write a ``resume`` record.
+
+        Returns:
+            The writer and what the log held before resuming.
+        """
+        record = read_run(run_dir)
+        run_dir = Path(run_dir)
+        handle = open(run_dir / RUN_LOG, "r+", encoding="utf-8")  # noqa: SIM115 - closed by close()
+        if record.torn_tail:
+            handle.truncate(record.valid_bytes)
+            os.fsync(handle.fileno())
+        handle.seek(record.valid_bytes)
+        runlog = cls(run_dir, handle)
+        done = sorted(pid for pid, p in record.latest_points().items() if p.status == "done")
+        runlog._append({"type": "resume", "t_unix": _now(t_unix), "done": done, "cut_torn_tail": record.torn_tail})
+        return runlog, record
+
+    def point(self, result: PointResult) -> None:
+        """Append one point record."""
+        record = {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in dataclasses.asdict(result).items()}
+        self._append({"type": "point", **record})
+
+    def stop(self, reason: str, *, error: str | None = None, t_unix: float | None = None) -> None:
+        """Append the stop record (``finished``, ``SIGTERM``, ``error``, ...)."""
+        self._append({"type": "stop", "t_unix": _now(t_unix), "reason": reason, "error": error})
+
+    def close(self) -> None:
+        """Close the file (idempotent)."""
+        if not self._handle.closed:
+            self._handle.close()
+
+    def __enter__(self) -> RunLog:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def _append(self, record: dict[str, Any]) -> None:
+        line = json.dumps({"type": record["type"], "v": LOG_VERSION, **record}, allow_nan=False)
+        self._handle.write(line + "\n")
+        self._handle.flush()
+        os.fsync(self._handle.fileno())
+
+
+def _now(t_unix: float | None) -> float:
+    return time.time() if t_unix is None else t_unix
+
+
+def _fsync_dir(path: Path) -> None:
+    """Make a new file's directory entry durable."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
