@@ -3,8 +3,8 @@
 The lit centreline is a Gaussian ridge (standard deviation ``line_sigma_px`` across it, peak
 ``peak``) on a uniform ``background``. It is drawn by splatting Gaussians along the projected
 polyline every sigma (the sum is the ridge to ~1e-9), into the pixels within 3.5 sigma only.
-Render steps are fixed so that no point of the line moves more than ``max_step_px`` between two
-steps; between steps each pixel's log intensity is linear in time (timestamps interpolated). Only
+Render steps are adaptive so that no point of the line moves more than ``max_step_px`` between two
+steps (``step_us`` is the shortest step, at the fastest motion); between steps each pixel's log intensity is linear in time (timestamps interpolated). Only
 the pixels the line touches at a step or the step before are processed: the rest of the sensor is
 constant and is caught up lazily by the camera.
 """
@@ -158,6 +158,7 @@ class LaserLineScene:
         self._prev, self._cur = np.empty(n, np.int64), np.empty(n, np.int64)
         self._scratch_i, self._scratch_l = np.empty(n, np.int64), np.empty(n)
         self._stamp, self._n_prev, self.t_us = 0, 0, 0.0
+        self.n_steps = 0
 
     def max_pixel_speed(self, n_phase: int = 512) -> float:
         """Largest speed of the projected line over one period, pixels per second."""
@@ -185,12 +186,32 @@ class LaserLineScene:
         camera.reset(np.log(image + camera.params.log_eps), t_us)
         self.t_us = float(t_us)
 
+    def step_times_us(self, t_us: float, coarse: int = 8) -> np.ndarray:
+        """Render-step times in (self.t_us, t_us]: adaptive, so the line moves <= ``max_step_px`` per step.
+
+        The line is sampled every ``coarse`` minimum steps; each coarse interval is cut into as many
+        steps as its largest pixel displacement (times 1.25 for curved paths) needs.
+        """
+        if t_us <= self.t_us:
+            return np.empty(0)
+        coarse_t = np.arange(self.t_us, t_us, coarse * self.step_us, dtype=np.float64)
+        coarse_t = np.append(coarse_t, float(t_us))
+        u, v = self.pixels(coarse_t)
+        moved = np.max(np.hypot(np.diff(u, axis=0), np.diff(v, axis=0)), axis=1)
+        limit = np.maximum(1, np.ceil((coarse_t[1:] - coarse_t[:-1]) / self.step_us))
+        n_sub = np.clip(np.ceil(1.25 * moved / self.params.max_step_px), 1, limit).astype(np.int64)
+        starts = np.repeat(coarse_t[:-1], n_sub)
+        widths = np.repeat(np.diff(coarse_t) / n_sub, n_sub)
+        index = np.arange(len(starts)) - np.repeat(np.cumsum(n_sub) - n_sub, n_sub) + 1
+        return starts + index * widths
+
     def advance(self, camera: EventCamera, t_us: int) -> None:
         """Render steps from the last time to ``t_us`` and feed the changes to ``camera``."""
-        steps = np.arange(self.t_us + self.step_us, t_us, self.step_us, dtype=np.float64)
-        steps = np.append(steps, float(t_us)) if t_us > self.t_us else steps
+        steps = self.step_times_us(float(t_us))
         if len(steps) == 0:
             return
+        steps[-1] = float(t_us)
+        self.n_steps += len(steps)
         u, v = self.pixels(steps)
         p, c = self.params, camera
         self._stamp, self._n_prev, c.out_t, c.out_i, c.out_p, c.n_out = line_steps(

@@ -41,6 +41,11 @@ def test_line_events_lie_on_the_moving_line_and_are_sorted() -> None:
     # timestamps are interpolated between render steps, not snapped to them
     assert np.mean(events["t"] % scene.step_us == 0) < 0.2
     assert scene.step_us * scene.max_pixel_speed() * 1e-6 <= 0.5 + 1e-9
+    fresh = LaserLineScene(kin, PlaneCamera.identity(), 640, 480)
+    steps = fresh.step_times_us(20_000.0)
+    u, v = fresh.pixels(np.concatenate([[0.0], steps]))
+    assert np.max(np.hypot(np.diff(u, axis=0), np.diff(v, axis=0))) <= 0.5  # adaptive steps, line moves <= 0.5 px
+    assert steps[-1] == 20_000.0 and np.all(np.diff(steps) > 0) and len(steps) < 20_000 / fresh.step_us
 
 
 def test_same_seed_same_events_and_a_still_flag_is_silent() -> None:
@@ -100,3 +105,16 @@ def test_blinking_checkerboard_fires_on_white_squares_at_switches() -> None:
     assert pattern(np.array([199.0]), np.array([149.0]))[0] == 1.0
     assert pattern(np.array([201.0]), np.array([149.0]))[0] == 0.0
     assert len(spec.corners()) == 20 and tuple(spec.corners()[0]) == (200.0, 150.0)
+
+
+def test_event_cloud_is_within_two_pixels_of_the_truth() -> None:
+    from flagtrack.daemon.core.metrics import cloud_distance
+
+    kin = sample_kinematics(6)
+    _, events = line_events(kin, 10_000)
+    s = np.linspace(0, kin.length, 201)
+    for centre_us in (2_000, 5_000, 8_000):
+        window = events[np.abs(events["t"] - centre_us) <= 150]
+        x, y = kin.positions(np.array([centre_us * 1e-6]), s)
+        assert len(window) > 100
+        assert cloud_distance(window["x"], window["y"], x[0], y[0]) < 2.0
