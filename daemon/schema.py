@@ -111,6 +111,9 @@ class Keys:
 class EventPacket:
     """About 1 ms of one camera's events in its native encoding (EVT 3.0 / 2.0 bytes).
 
+    Every packet decodes alone (it starts with the stream's time base), and the packets of a
+    stream concatenate into one valid stream (what the recorder writes). ``t_offset_us`` is the
+    stream's encoder offset (a whole number of the encoding's time loops) added back on decoding.
     ``sent_ns`` is the wall-clock time (ns) at which the adapter received the data, for latency.
     """
 
@@ -124,6 +127,8 @@ class EventPacket:
     height: int
     encoding: str
     sent_ns: int
+    t_offset_us: int = 0
+    n_triggers: int = 0
     data: bytes = b""
 
 

@@ -1,0 +1,128 @@
+"""The camera service: runs one camera adapter and publishes its stream on the bus.
+
+Publishes self-contained native-encoding event packets (about ``packet_us`` of camera time each,
+numbered), event-rate statistics every ``rate_interval_s`` of camera time, and the camera status
+(with settings read back); declares its liveliness as ``camera/<id>``.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+
+from flagtrack.daemon.schema import CameraStatus, EventPacket, EventRate
+from flagtrack.daemon.transport import Bus
+from flagtrack.drivers.camera.base import Camera, CameraInfo, EndOfStream
+from flagtrack.drivers.camera.packets import Packet, PacketParams, Packetizer
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class CameraStreamConfig:
+    """How the stream is cut and counted.
+
+    Attributes:
+        id: camera name in key expressions.
+        packet_us: camera time per packet.
+        max_packet_events: packets are cut earlier when they reach this many events.
+        rate_interval_s: camera time per event-rate statistic.
+        read_timeout_s: how long one read of the adapter may wait.
+    """
+
+    id: str = "cam0"
+    packet_us: int = 1000
+    max_packet_events: int = 65_536
+    rate_interval_s: float = 0.1
+    read_timeout_s: float = 0.05
+
+
+class RateCounter:
+    """Events, ON events and bytes per interval of camera time."""
+
+    def __init__(self, interval_us: int) -> None:
+        self.interval_us = interval_us
+        self._end_us: int | None = None
+        self.events = self.on = self.bytes = 0
+
+    def add(self, packet: Packet) -> list[tuple[int, int, int, int]]:
+        """Count a packet; return ``(t_end_us, events, on, bytes)`` of every interval it closes."""
+        if self._end_us is None:
+            self._end_us = (packet.t_first_us // self.interval_us + 1) * self.interval_us
+        closed = []
+        while packet.t_last_us >= self._end_us:
+            closed.append((self._end_us, self.events, self.on, self.bytes))
+            self.events = self.on = self.bytes = 0
+            self._end_us += self.interval_us
+        self.events += packet.n_events
+        self.on += packet.n_on
+        self.bytes += len(packet.data)
+        return closed
+
+
+class CameraService:
+    """Publishes one camera's stream until stopped or until the stream ends."""
+
+    def __init__(self, bus: Bus, cfg: CameraStreamConfig, camera: Camera) -> None:
+        self.bus = bus
+        self.cfg = cfg
+        self.camera = camera
+        self.name = f"camera/{cfg.id}"
+        self.packets = 0
+        self.events = 0
+        self.ended = threading.Event()
+
+    def run(self, stop: threading.Event) -> None:
+        keys = self.bus.keys
+        events_pub = self.bus.publisher(keys.camera_events(self.cfg.id), block=True)
+        status_pub = self.bus.publisher(keys.camera_status(self.cfg.id))
+        rate_pub = self.bus.publisher(keys.event_rate(self.cfg.id))
+        self.bus.declare_alive(self.name)
+        info = self.camera.open()
+        log.info("camera %s: %s %dx%d %s", self.cfg.id, info.adapter, info.width, info.height, info.encoding)
+        status_pub.put(self._status(info, "streaming"))
+        packetizer = Packetizer(info.encoding, info.width, info.height,
+                                PacketParams(self.cfg.packet_us, self.cfg.max_packet_events))
+        rates = RateCounter(int(self.cfg.rate_interval_s * 1e6))
+        state, message = "stopped", ""
+        try:
+            while not stop.is_set():
+                try:
+                    data = self.camera.read(self.cfg.read_timeout_s)
+                except EndOfStream:
+                    self._publish(packetizer.flush(), 0, info, events_pub, rate_pub, rates)
+                    state = "eof"
+                    break
+                if data is not None:
+                    packets = packetizer.push(data.events, data.triggers, data.t_until_us)
+                    self._publish(packets, data.arrival_ns, info, events_pub, rate_pub, rates)
+        except Exception as exc:
+            state, message = "error", str(exc)
+            raise
+        finally:
+            self.camera.close()
+            status_pub.put(self._status(info, state, message))
+            self.ended.set()
+            log.info("camera %s %s after %d packets, %d events", self.cfg.id, state, self.packets, self.events)
+
+    def _publish(self, packets: list[Packet], arrival_ns: int, info: CameraInfo, events_pub, rate_pub,
+                 rates: RateCounter) -> None:  # noqa: ANN001
+        for packet in packets:
+            events_pub.put(EventPacket(
+                camera_id=self.cfg.id, seq=self.packets, t_first_us=packet.t_first_us, t_last_us=packet.t_last_us,
+                n_events=packet.n_events, width=info.width, height=info.height, encoding=info.encoding,
+                sent_ns=arrival_ns or time.time_ns(), t_offset_us=packet.t_offset_us, n_triggers=packet.n_triggers,
+                data=packet.data,
+            ))
+            self.packets += 1
+            self.events += packet.n_events
+            for t_end_us, n, n_on, n_bytes in rates.add(packet):
+                interval_s = rates.interval_us * 1e-6
+                rate_pub.put(EventRate(self.cfg.id, t_end_us, interval_s, n, n / interval_s,
+                                       n_on / n if n else 0.0, n_bytes))
+
+    def _status(self, info: CameraInfo, state: str, message: str = "") -> CameraStatus:
+        return CameraStatus(self.cfg.id, state, info.adapter, info.width, info.height, info.encoding,
+                            dict(info.settings), message, self.packets, self.events)

@@ -1,0 +1,142 @@
+"""Replay a recording file as a camera: real time, at a speed factor, or as fast as possible."""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from flagtrack.daemon.core.events import empty_events, empty_triggers
+from flagtrack.daemon.errors import DriverError
+from flagtrack.drivers.camera.base import CameraData, CameraInfo, EndOfStream
+from flagtrack.drivers.formats import open_events
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ReplayConfig:
+    """Replay settings.
+
+    Attributes:
+        path: the recording (any format the file layer reads).
+        speed: 1 = real time, 2 = twice as fast, 0 = as fast as possible.
+        loop: start again at the end (time keeps increasing across loops).
+        slice_us: camera time handed over per read (pacing granularity).
+        encoding: stream encoding to publish (default: the file's own EVT encoding, else evt3).
+        width, height: sensor size when the file does not say.
+    """
+
+    path: Path
+    speed: float = 1.0
+    loop: bool = False
+    slice_us: int = 1000
+    encoding: str | None = None
+    width: int | None = None
+    height: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.speed < 0:
+            raise ValueError("speed must be >= 0 (0 = as fast as possible)")
+        if self.slice_us < 1:
+            raise ValueError("slice_us must be positive")
+
+
+class ReplayCamera:
+    """A :class:`~flagtrack.drivers.camera.base.Camera` reading a file."""
+
+    def __init__(self, cfg: ReplayConfig) -> None:
+        self.cfg = cfg
+        self._slices: Iterator[tuple[np.ndarray, np.ndarray, int]] | None = None
+        self._pending: tuple[np.ndarray, np.ndarray, int] | None = None
+        self._wall0 = 0.0
+        self._t0_us: int | None = None
+        self.loops = 0
+
+    def open(self) -> CameraInfo:
+        path = Path(self.cfg.path).expanduser()
+        with open_events(path) as reader:
+            info = reader.info
+        width, height = info.width or self.cfg.width, info.height or self.cfg.height
+        if not width or not height:
+            raise DriverError("the file does not give the sensor size: set camera.replay.width and height",
+                              device=str(path))
+        encoding = self.cfg.encoding or (info.encoding if info.encoding in ("evt2", "evt3") else "evt3")
+        self._slices = self._loop_slices(path)
+        self._wall0 = time.monotonic()
+        return CameraInfo("replay", int(width), int(height), encoding, serial=str(path),
+                          settings={"speed": self.cfg.speed, "loop": self.cfg.loop, "source_format": info.format})
+
+    def read(self, timeout_s: float) -> CameraData | None:
+        if self._slices is None:
+            raise DriverError("replay camera is not open", device=str(self.cfg.path))
+        if self._pending is None:
+            self._pending = next(self._slices, None)
+            if self._pending is None:
+                raise EndOfStream(str(self.cfg.path))
+        events, triggers, t_until = self._pending
+        if self.cfg.speed > 0:
+            if self._t0_us is None:
+                self._t0_us = t_until - self.cfg.slice_us
+                self._wall0 = time.monotonic()
+            due = self._wall0 + (t_until - self._t0_us) * 1e-6 / self.cfg.speed
+            wait = due - time.monotonic()
+            if wait > timeout_s:
+                time.sleep(max(timeout_s, 0.0))
+                return None
+            if wait > 0:
+                time.sleep(wait)
+        self._pending = None
+        return CameraData(events, triggers, time.time_ns(), t_until_us=t_until)
+
+    def close(self) -> None:
+        self._slices = None
+
+    def _loop_slices(self, path: Path) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
+        shift = 0
+        while True:
+            t_first = t_last = None
+            for events, triggers, t_until in self._file_slices(path):
+                if shift:
+                    events = events.copy()
+                    events["t"] += shift
+                    triggers = triggers.copy()
+                    triggers["t"] += shift
+                t_first = t_until if t_first is None else t_first
+                t_last = t_until
+                yield events, triggers, t_until + shift
+            if not self.cfg.loop or t_first is None:
+                return
+            self.loops += 1
+            shift += t_last - t_first + 2 * self.cfg.slice_us
+            log.info("replay: loop %d of %s", self.loops, path)
+
+    def _file_slices(self, path: Path) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
+        """(events, triggers, t_until_us) per ``slice_us`` of camera time, from the file's chunks."""
+        slice_us = self.cfg.slice_us
+        held, held_tr = empty_events(), empty_triggers()
+        with open_events(path) as reader:
+            for chunk in reader:
+                events = np.concatenate([held, chunk.events]) if len(held) else chunk.events
+                triggers = np.concatenate([held_tr, chunk.triggers])
+                if len(events) == 0:
+                    held, held_tr = events, triggers
+                    continue
+                slots = np.maximum.accumulate(events["t"]) // slice_us
+                bounds = np.flatnonzero(np.diff(slots)) + 1
+                start = 0
+                for cut in bounds:
+                    piece = events[start:cut]
+                    t_until = (int(slots[start]) + 1) * slice_us
+                    take = triggers["t"] < t_until
+                    yield piece, triggers[take], t_until
+                    triggers = triggers[~take]
+                    start = cut
+                held, held_tr = events[start:], triggers
+            if len(held) or len(held_tr):
+                t_end = int(held["t"].max()) + 1 if len(held) else int(held_tr["t"].max()) + 1
+                yield held, held_tr, t_end
