@@ -41,57 +41,73 @@ def _reserved_evt2(typ: int) -> bool:
 
 
 @njit(cache=True, nogil=True)
-def decode_evt2(words, start, state, ev, tr, width, height, t_offset):  # noqa: ANN001, ANN201
-    """Decode ``words[start:]`` into ``ev``/``tr``; return (next word, n events, n triggers, status)."""
+def _skip_to_time_high(high, i, shift):  # noqa: ANN001, ANN202
+    """OpenEB skips every word before the first TIME_HIGH: (index of it or len, status)."""
+    while i < len(high):
+        typ = (np.int64(high[i]) >> shift) & 0xF
+        if typ == 8:
+            return i, OK
+        if _reserved_evt2(typ):
+            return i, BAD_WORD
+        i += 1
+    return i, OK
+
+
+@njit(cache=True, nogil=True)
+def decode_evt2(words, start, state, tt, xyp, tr, width, height, t_offset):  # noqa: ANN001, ANN201
+    """Decode ``words[start:]`` into events (``tt``/``xyp`` views, see the EVT 3.0 kernel) and triggers.
+
+    Returns (next word, n events, n triggers, status).
+    """
     base_set = state[0]
-    base = state[1]
+    base = state[1] + t_offset
     n_loop = state[2]
     n = 0
     nt = 0
-    ev_room = len(ev)
-    tr_room = len(tr)
     status = OK
     i = start
     nw = len(words)
-    while i < nw:
-        if n >= ev_room or nt >= tr_room:
+    if base_set == 0:
+        i, status = _skip_to_time_high(words, i, 28)
+        base_set = 1 if i < nw and status == OK else 0
+    while i < nw and status == OK:
+        limit = min(nw, i + len(tt) - n, i + len(tr) - nt)  # at most one event or trigger a word
+        if limit == i:
             status = FULL
             break
-        w = np.int64(words[i])
-        typ = w >> 28
-        if typ <= 1 and base_set:
-            x = (w >> 11) & 0x7FF
-            y = w & 0x7FF
-            if x >= width or y >= height:
-                status = OUT_OF_SENSOR
+        while i < limit:
+            w = np.int64(words[i])
+            typ = w >> 28
+            if typ <= 1:
+                x = (w >> 11) & 0x7FF
+                y = w & 0x7FF
+                if (x >= width) | (y >= height):
+                    status = OUT_OF_SENSOR
+                    break
+                tt[n] = base + ((w >> 22) & 63)
+                xyp[n] = x | (y << 16) | (typ << 32)
+                n += 1
+            elif typ == 8:
+                new_base, n_loop = unwrap_threshold(base - t_offset, n_loop, w & 0xFFFFFFF, 6, 28)
+                base = new_base + t_offset
+            elif typ == 10:
+                r = tr[nt]
+                r.t = base + ((w >> 22) & 63)
+                r.channel = (w >> 8) & 0x1F
+                r.edge = w & 1
+                nt += 1
+            elif _reserved_evt2(typ):
+                status = BAD_WORD
                 break
-            r = ev[n]
-            r.t = base + ((w >> 22) & 63) + t_offset
-            r.x = x
-            r.y = y
-            r.p = typ
-            n += 1
-        elif typ == 8:
-            base, n_loop = unwrap_threshold(base, n_loop, w & 0xFFFFFFF, 6, 28)
-            base_set = 1
-        elif typ == 10 and base_set:
-            r2 = tr[nt]
-            r2.t = base + ((w >> 22) & 63) + t_offset
-            r2.channel = (w >> 8) & 0x1F
-            r2.edge = w & 1
-            nt += 1
-        elif _reserved_evt2(typ):
-            status = BAD_WORD
-            break
-        i += 1
+            i += 1
     state[0] = base_set
-    state[1] = base
+    state[1] = base - t_offset
     state[2] = n_loop
     return i, n, nt, status
 
 
 @njit(cache=True, nogil=True)
-def decode_evt21(high, low, start, state, ev, tr, width, height, t_offset):  # noqa: ANN001, ANN201
+def decode_evt21(high, low, start, state, tt, xyp, tr, width, height, t_offset):  # noqa: ANN001, ANN201
     """Decode EVT 2.1 words from their 32-bit halves; return as :func:`decode_evt2`."""
     base_set = state[0]
     base = state[1]
@@ -100,18 +116,20 @@ def decode_evt21(high, low, start, state, ev, tr, width, height, t_offset):  # n
     max_base = np.int64((1 << 28) - 1) << 6
     n = 0
     nt = 0
-    ev_room = len(ev) - 32
+    ev_room = len(tt) - 32
     tr_room = len(tr)
     status = OK
     i = start
     nw = len(high)
-    while i < nw:
+    if base_set == 0:
+        i, status = _skip_to_time_high(high, i, 28)
+    while i < nw and status == OK:
         if n > ev_room or nt >= tr_room:
             status = FULL
             break
         w = np.int64(high[i])
         typ = w >> 28
-        if typ <= 1 and base_set:
+        if typ <= 1:
             x = (w >> 11) & 0x7FF
             y = w & 0x7FF
             t = base + ((w >> 22) & 63) + t_offset
@@ -119,11 +137,8 @@ def decode_evt21(high, low, start, state, ev, tr, width, height, t_offset):  # n
             k = 0
             for b in range(32):
                 if (valid >> b) & 1:
-                    r = ev[n + k]
-                    r.t = t
-                    r.x = x + b
-                    r.y = y
-                    r.p = typ
+                    tt[n + k] = t
+                    xyp[n + k] = (x + b) | (y << 16) | (typ << 32)
                     k += 1
                     if x + b >= width:
                         status = OUT_OF_SENSOR
@@ -139,11 +154,11 @@ def decode_evt21(high, low, start, state, ev, tr, width, height, t_offset):  # n
                 n_loop += 1
             base = new_high + n_loop * period
             base_set = 1
-        elif typ == 10 and base_set:
-            r2 = tr[nt]
-            r2.t = base + ((w >> 22) & 63) + t_offset
-            r2.channel = (w >> 8) & 0x1F
-            r2.edge = w & 1
+        elif typ == 10:
+            r = tr[nt]
+            r.t = base + ((w >> 22) & 63) + t_offset
+            r.channel = (w >> 8) & 0x1F
+            r.edge = w & 1
             nt += 1
         elif _reserved_evt2(typ):
             status = BAD_WORD

@@ -10,6 +10,10 @@ reserved. Semantics follow OpenEB's standalone EVT 3.0 decoder exactly: words be
 TIME_HIGH are skipped, TIME_LOW sets time = base + low even when that steps back, and the 24-bit
 base is unwrapped with OpenEB's threshold rule.
 
+Events are stored through two strided int64 views of the EVENT_DTYPE output (13-byte records):
+``tt`` on the time and ``xyp`` on x, y, p (bytes 8-12) plus the first 3 bytes of the next record,
+which the next store of ``tt`` overwrites; so one event costs two stores (see ``codec.event_views``).
+
 Decoder state (int64[16]): 0 base set, 1 base µs, 2 loops, 3 current time µs, 4 y, 5 x base,
 6 vector polarity, 7 CD (1) or EM (0). Encoder state: 0 started, 1 decoder's time µs, 2 last y.
 """
@@ -36,55 +40,62 @@ MAX_EVENTS_PER_WORD = 12
 
 
 @njit(cache=True, nogil=True)
-def decode_evt3(words, start, state, ev, tr, width, height, t_offset):  # noqa: ANN001, ANN201
-    """Decode ``words[start:]`` into ``ev``/``tr``; return (next word, n events, n triggers, status)."""
+def decode_evt3(words, start, state, tt, xyp, tr, width, height, t_offset):  # noqa: ANN001, ANN201, PLR0912, PLR0915
+    """Decode ``words[start:]`` into events (``tt``/``xyp`` views) and triggers ``tr``.
+
+    Returns (next word, n events, n triggers, status).
+    """
     base_set = state[0]
     base = state[1]
     n_loop = state[2]
-    cur = state[3]
+    cur = state[3] + t_offset
     y = state[4]
     x_base = state[5]
     pol = state[6]
     is_cd = state[7]
     n = 0
     nt = 0
-    ev_room = len(ev) - MAX_EVENTS_PER_WORD
+    ev_room = len(tt) - MAX_EVENTS_PER_WORD
     tr_room = len(tr)
     status = OK
     i = start
     nw = len(words)
-    while i < nw:
+    while base_set == 0 and i < nw:  # OpenEB skips every word before the first TIME_HIGH
+        typ = words[i] >> 12
+        if typ == 8:
+            base_set = 1
+        elif typ == 9 or typ == 11 or typ == 12 or typ == 13:
+            status = BAD_WORD
+            break
+        else:
+            i += 1
+    x_limit = width if is_cd else 0  # ADDR_X words count only in CD mode (after EVT_ADDR_Y)
+    y_bits = y << 16
+    while i < nw and status == OK:
         if n > ev_room or nt >= tr_room:
             status = FULL
             break
         w = np.int64(words[i])
         typ = w >> 12
-        if base_set == 0 and typ != 8:
-            if typ == 9 or typ == 11 or typ == 12 or typ == 13:
-                status = BAD_WORD
-                break
-            i += 1
-            continue
         if typ == 2:
-            if is_cd:
-                x = w & 0x7FF
-                if x >= width:
-                    status = OUT_OF_SENSOR
-                    break
-                r = ev[n]
-                r.t = cur + t_offset
-                r.x = x
-                r.y = y
-                r.p = (w >> 11) & 1
+            x = w & 0x7FF
+            if x < x_limit:
+                tt[n] = cur
+                xyp[n] = x | y_bits | (((w >> 11) & 1) << 32)
                 n += 1
+            elif is_cd:
+                status = OUT_OF_SENSOR
+                break
         elif typ == 0:
             y = w & 0x7FF
+            y_bits = y << 16
             is_cd = 1
+            x_limit = width
             if y >= height:
                 status = OUT_OF_SENSOR
                 break
         elif typ == 6:
-            cur = base + (w & 0xFFF)
+            cur = base + (w & 0xFFF) + t_offset
         elif typ == 3:
             x_base = w & 0x7FF
             pol = (w >> 11) & 1
@@ -95,11 +106,8 @@ def decode_evt3(words, start, state, ev, tr, width, height, t_offset):  # noqa: 
                 k = 0
                 for b in range(nbits):
                     if (mask >> b) & 1:
-                        r = ev[n + k]
-                        r.t = cur + t_offset
-                        r.x = x_base + b
-                        r.y = y
-                        r.p = pol
+                        tt[n + k] = cur
+                        xyp[n + k] = (x_base + b) | y_bits | (pol << 32)
                         k += 1
                         if x_base + b >= width:
                             status = OUT_OF_SENSOR
@@ -109,16 +117,16 @@ def decode_evt3(words, start, state, ev, tr, width, height, t_offset):  # noqa: 
             x_base += nbits
         elif typ == 8:
             base, n_loop = unwrap_threshold(base, n_loop, w & 0xFFF, 12, 12)
-            base_set = 1
-            cur = base
+            cur = base + t_offset
         elif typ == 10:
-            r2 = tr[nt]
-            r2.t = cur + t_offset
-            r2.channel = (w >> 8) & 0xF
-            r2.edge = w & 1
+            r = tr[nt]
+            r.t = cur
+            r.channel = (w >> 8) & 0xF
+            r.edge = w & 1
             nt += 1
         elif typ == 1:
             is_cd = 0
+            x_limit = 0
         elif typ == 7 or typ == 14 or typ == 15:
             pass
         else:
@@ -128,7 +136,7 @@ def decode_evt3(words, start, state, ev, tr, width, height, t_offset):  # noqa: 
     state[0] = base_set
     state[1] = base
     state[2] = n_loop
-    state[3] = cur
+    state[3] = cur - t_offset
     state[4] = y
     state[5] = x_base
     state[6] = pol

@@ -45,6 +45,19 @@ def check_encoding(encoding: str | None, source: str | None = None) -> str:
     return encoding
 
 
+def event_views(events: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two int64 views for the kernels' stores into an EVENT_DTYPE array of n + 1 records.
+
+    ``tt[i]`` is record i's time; ``xyp[i]`` covers its x, y, p and the first 3 bytes of record
+    i + 1 (rewritten by the next time store), so n events can be stored, two stores each.
+    """
+    buffer = events.view(np.uint8)
+    n, size = len(events) - 1, EVENT_DTYPE.itemsize
+    tt = np.ndarray(shape=(n,), dtype="<i8", buffer=buffer, offset=0, strides=(size,))
+    xyp = np.ndarray(shape=(n,), dtype="<i8", buffer=buffer, offset=8, strides=(size,))
+    return tt, xyp
+
+
 class Decoder:
     """Incremental decoder of one EVT byte stream.
 
@@ -124,8 +137,8 @@ class Decoder:
         i = 0
         while i < n_words:
             capacity = min(self.max_events, (n_words - i) * EVENTS_PER_WORD[self.encoding] + 64)
-            events = np.empty(capacity, dtype=EVENT_DTYPE)
-            i_next, n, nt, status = run(i, events)
+            events = np.empty(capacity + 1, dtype=EVENT_DTYPE)
+            i_next, n, nt, status = run(i, *event_views(events))
             if n or nt:
                 piece = events[:n] if 2 * n >= capacity else events[:n].copy()
                 yield piece, self._triggers[:nt].copy(), start_offset + i * self._word
@@ -149,10 +162,10 @@ class Decoder:
         if self.encoding == "evt21":
             halves = np.frombuffer(buf, dtype="<u4", count=2 * n_words)
             high, low = (halves[1::2], halves[0::2]) if self.endianness == "little" else (halves[0::2], halves[1::2])
-            return lambda i, ev: decode_evt21(high, low, i, state, ev, tr, width, height, off)
+            return lambda i, tt, xyp: decode_evt21(high, low, i, state, tt, xyp, tr, width, height, off)
         words = np.frombuffer(buf, dtype="<u2" if self.encoding == "evt3" else "<u4", count=n_words)
         kernel = decode_evt3 if self.encoding == "evt3" else decode_evt2
-        return lambda i, ev: kernel(words, i, state, ev, tr, width, height, off)
+        return lambda i, tt, xyp: kernel(words, i, state, tt, xyp, tr, width, height, off)
 
     def _fault(self, status: int, buf: memoryview, index: int, offset: int) -> None:
         word = bytes(buf[index * self._word : (index + 1) * self._word])

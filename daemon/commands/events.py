@@ -1,0 +1,119 @@
+"""``flagtrack events info|convert``: inspect and convert event files.
+
+Formats by extension: .raw (Prophesee EVT 2.0 / 2.1 / 3.0), .dat, .aedat4, .npy, .csv (t,x,y,p).
+``convert`` writes .raw (EVT 2.0 or 3.0), .npy, .csv or .dat, streaming in bounded memory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from pathlib import Path
+
+COMMAND = "events"
+HELP = "inspect (info) and convert event files: .raw EVT 2.0/2.1/3.0, .dat, .aedat4, .npy, .csv"
+DESCRIPTION = __doc__
+INFO_KEYS = ("format", "encoding", "width", "height", "events", "on", "off", "t_first_us", "t_last_us")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``info`` and ``convert`` actions."""
+    actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    info = actions.add_parser("info", help="format, size, event counts and time span of a file")
+    info.add_argument("file", type=Path)
+    info.add_argument("--json", action="store_true", help="print one JSON object")
+    convert = actions.add_parser("convert", help="convert between formats (chosen by the extensions)")
+    convert.add_argument("input", type=Path)
+    convert.add_argument("output", type=Path)
+    convert.add_argument("--encoding", choices=("evt2", "evt3"), help="EVT encoding of a .raw output "
+                         "(default: the input's if it is EVT 2.0/3.0, else evt3)")
+    convert.add_argument("--width", type=int, help="sensor width, when the input does not give it")
+    convert.add_argument("--height", type=int, help="sensor height, when the input does not give it")
+    for sub in (info, convert):
+        sub.add_argument("--strict", action="store_true", help="fail on a fault instead of keeping the events "
+                         "before it and warning")
+        sub.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _progress(total: int, description: str, disabled: bool):  # noqa: ANN202
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=description, unit="B", unit_scale=True, file=sys.stderr, leave=False,
+                disable=disabled or not sys.stderr.isatty())
+
+
+def file_summary(path: Path, *, strict: bool = False, progress: bool = False) -> dict:
+    """The ``events info`` figures of a file, by one streaming pass (bounded memory)."""
+    from flagtrack.drivers.formats import open_events
+
+    with open_events(path, strict=strict) as reader, _progress(reader.size_bytes, path.name, not progress) as bar:
+        info = reader.info
+        events = on = triggers = 0
+        t_first = t_last = None
+        for chunk in reader:
+            n = len(chunk.events)
+            if n:
+                events += n
+                on += int(chunk.events["p"].sum(dtype="int64"))
+                t_first = int(chunk.events["t"][0]) if t_first is None else t_first
+                t_last = int(chunk.events["t"][-1])
+            triggers += len(chunk.triggers)
+            bar.update(max(chunk.byte_offset - bar.n, 0))
+    summary = {"format": info.format, "encoding": info.encoding, "width": info.width, "height": info.height,
+               "events": events, "on": on, "off": events - on, "t_first_us": t_first, "t_last_us": t_last}
+    return {**summary, "triggers": triggers, "path": str(info.path)}
+
+
+def run_info(args: argparse.Namespace) -> int:
+    """Print the summary of one file."""
+    summary = file_summary(args.file, strict=args.strict, progress=not args.no_progress)
+    if args.json:
+        print(json.dumps({key: summary[key] for key in INFO_KEYS}))
+    else:
+        for key in ("path", *INFO_KEYS, "triggers"):
+            print(f"{key:11} {summary[key] if summary[key] is not None else '-'}")
+    return 0
+
+
+def run_convert(args: argparse.Namespace) -> int:
+    """Stream ``input`` into ``output``."""
+    from flagtrack.daemon.errors import FormatError
+    from flagtrack.drivers.formats import file_format, open_events, open_writer
+
+    if args.input.resolve() == args.output.resolve():
+        raise FormatError("input and output are the same file", path=str(args.input))
+    out_kind = file_format(args.output, sniff=False)
+    with open_events(args.input, strict=args.strict) as reader:
+        info = reader.info
+        width = args.width if args.width is not None else info.width
+        height = args.height if args.height is not None else info.height
+        encoding = None
+        if out_kind == "raw":
+            encoding = args.encoding or (info.encoding if info.encoding in ("evt2", "evt3") else "evt3")
+            if width is None or height is None:
+                raise FormatError("the input does not give the sensor size; pass --width and --height",
+                                  path=str(args.input))
+        elif args.encoding:
+            raise FormatError("--encoding applies to .raw outputs only", path=str(args.output))
+        count = 0
+        with open_writer(args.output, width=width, height=height, encoding=encoding) as writer, \
+                _progress(reader.size_bytes, args.input.name, args.no_progress) as bar:
+            for chunk in reader:
+                writer.write(chunk.events, chunk.triggers)
+                count += len(chunk.events)
+                bar.update(max(chunk.byte_offset - bar.n, 0))
+    print(f"{args.output}: {count} events", file=sys.stderr)
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the chosen action; non-strict faults print as warnings."""
+    action = run_info if args.action == "info" else run_convert
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        status = action(args)
+    for warning in caught:
+        print(f"flagtrack events: warning: {warning.message}", file=sys.stderr)
+    return status
