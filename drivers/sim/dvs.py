@@ -133,6 +133,21 @@ def advance_pixels(idx, new_levels, t1, level, t_upd, ref, t_ready, c_on, c_off,
     return out_t, out_i, out_p, n_out
 
 
+@njit(cache=True)
+def pending_pixels(level, ref, t_ready, t_upd, c_on, c_off, out):  # noqa: ANN001, ANN201
+    """Pixels that may still fire at constant level without leak (blind at their last update or at a threshold).
+
+    Writes them into ``out``; returns their count.
+    """
+    n = 0
+    for p in range(len(level)):
+        d = level[p] - ref[p]
+        if t_ready[p] > t_upd[p] or d >= c_on[p] - 1e-9 or d <= -c_off[p] + 1e-9:
+            out[n] = p
+            n += 1
+    return n
+
+
 class EventCamera:
     """State of a ``width`` x ``height`` event sensor; scenes feed it log-intensity changes.
 
@@ -154,6 +169,7 @@ class EventCamera:
         self.t_upd = np.zeros(n)
         self.t_ready = np.full(n, -np.inf)
         self.all_pixels = np.arange(n, dtype=np.int64)
+        self._pending = np.empty(n, dtype=np.int64)
         self.out_t, self.out_i = np.empty(1 << 16), np.empty(1 << 16, np.int64)
         self.out_p, self.n_out = np.empty(1 << 16, np.uint8), 0
 
@@ -187,8 +203,8 @@ class EventCamera:
         if self.params.leak_rate_hz > 0:
             idx = self.all_pixels
         else:
-            gap = np.abs(self.level - self.ref)
-            idx = np.flatnonzero((self.t_ready > self.t_upd) | (gap >= np.minimum(self.c_on, self.c_off) - 1e-9))
+            n = pending_pixels(self.level, self.ref, self.t_ready, self.t_upd, self.c_on, self.c_off, self._pending)
+            idx = self._pending[:n]
         self._run(idx, self.level[idx], t_us)
 
     def _run(self, idx: np.ndarray, new_levels: np.ndarray, t_us: float) -> None:
