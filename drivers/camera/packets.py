@@ -142,3 +142,20 @@ def decode_packet(encoding: str, data: bytes, t_offset_us: int, *, source: str =
     events, triggers = decoder.decode(data)
     decoder.finish()
     return events, triggers
+
+
+def stream_preamble(encoding: str, t_offset_us: int) -> bytes:
+    """TIME_HIGH words that move a fresh decoder from time 0 to the start of ``t_offset_us``'s loop.
+
+    Written before the first packet of a file, so a reader that starts at time 0 (every RAW reader)
+    decodes the packets' times exactly: each loop is crossed as ``max`` then ``0``, which decoders
+    read as one wrap of the time base.
+    """
+    loops = t_offset_us // LOOP_US[encoding]
+    if t_offset_us % LOOP_US[encoding] or loops < 0:
+        raise FormatError(f"time offset {t_offset_us} µs is not a whole number of {encoding} loops")
+    if encoding == "evt3":
+        pair = np.array([0x8FFF, 0x8000], dtype="<u2")
+    else:
+        pair = np.array([0x8FFFFFFF, 0x80000000], dtype="<u4")
+    return np.tile(pair, loops).tobytes()
