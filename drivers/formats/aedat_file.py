@@ -87,6 +87,8 @@ class AedatReader(EventReader):
             except StopIteration:
                 break
             except Exception as exc:
+                if batch or triggers:  # keep what was decoded before the fault
+                    yield _chunk(batch, triggers, batch_offset or self.first_packet)
                 offset = next(offsets)  # raises with the offset if the file is cut inside this packet
                 raise FormatError(f"cannot decode packet: {exc}", path=str(self.path), offset=offset) from None
             offset = next(offsets)
