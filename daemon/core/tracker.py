@@ -1,0 +1,224 @@
+"""The incremental tracker: events in (any chunking, time order), centreline updates out.
+
+``Tracker.feed(events)`` denoises and maps the events, buffers them (at most the pending windows'
+worth plus the chunk) and returns the updates whose windows are complete, i.e. whose end is covered
+by the events seen so far; ``finish()`` returns the last (partial) windows at the end of the stream.
+The offline ``flagtrack reconstruct`` and the live tracker service drive the same object, and the
+results do not depend on where the stream is cut: the denoise map, the update clock and the chain
+angles are the whole state carried between calls.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.core.chain import AreaGeometry, ChainParams, ChainState
+from flagtrack.daemon.core.denoise import BackgroundActivityFilter, DenoiseParams
+from flagtrack.daemon.core.mapping import PointMapping
+from flagtrack.daemon.core.smoothing import REL_TOL, n_samples
+from flagtrack.daemon.core.kernels import run_updates, time_order
+from flagtrack.daemon.core.windows import UpdateClock, WindowSchedule
+
+log = logging.getLogger(__name__)
+
+_BATCH_UPDATES = 4096  # updates per compiled call (bounds the output arrays)
+
+
+@dataclass(frozen=True)
+class TrackerParams:
+    """Everything that defines a reconstruction.
+
+    Attributes:
+        chain: chain geometry and search areas.
+        schedule: update times and window lengths.
+        ds: step of the smoothed centreline; ``None``: L / 50 (the paper).
+        denoise: background-activity filter, ``None`` to use every event (the paper).
+        rel_tol: tolerance of the smoothed length, relative to L.
+    """
+
+    chain: ChainParams
+    schedule: WindowSchedule
+    ds: float | None = None
+    denoise: DenoiseParams | None = None
+    rel_tol: float = REL_TOL
+
+    @property
+    def n_s(self) -> int:
+        """Samples per centreline."""
+        return n_samples(self.chain.length, self.ds if self.ds is not None else self.chain.length / 50)
+
+    @property
+    def s(self) -> np.ndarray:
+        """(n_s,) arc length of the samples."""
+        return np.linspace(0.0, self.chain.length, self.n_s)
+
+
+@dataclass
+class TrackerStats:
+    """Counters of a tracker's life (for logs and reports)."""
+
+    events_in: int = 0
+    events_kept: int = 0
+    events_out_of_order: int = 0
+    updates: int = 0
+    first_t_us: int | None = None
+    last_t_us: int | None = None
+
+
+@dataclass
+class _Buffer:
+    """Time-sorted kept events (t µs, x, y) from the earliest pending window on."""
+
+    t: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.int64))
+    x: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.float32))
+    y: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.float32))
+    n: int = 0
+
+    def reserve(self, extra: int) -> None:
+        need = self.n + extra
+        if need > len(self.t):
+            cap = max(need, 2 * len(self.t), 1024)
+            for name in ("t", "x", "y"):
+                old = getattr(self, name)
+                new = np.empty(cap, dtype=old.dtype)
+                new[:self.n] = old[:self.n]
+                setattr(self, name, new)
+
+    def drop_before(self, t_us: float) -> None:
+        cut = int(np.searchsorted(self.t[:self.n], t_us, side="left"))
+        if cut:
+            keep = self.n - cut
+            for arr in (self.t, self.x, self.y):
+                arr[:keep] = arr[cut:self.n]
+            self.n = keep
+
+
+class Tracker:
+    """Incremental centreline tracker (the paper's chain, optionally denoised).
+
+    Args:
+        params: the reconstruction parameters.
+        state: initial chain; ``None``: straight along ``params.chain.direction_deg``.
+        mapping: pixel -> tracking-plane mapping applied to every event; ``None``: identity.
+        sensor_size: (width, height) in pixels if known (sizes the denoise map up front).
+    """
+
+    def __init__(self, params: TrackerParams, state: ChainState | None = None,
+                 mapping: PointMapping | None = None, sensor_size: tuple[int, int] = (0, 0)) -> None:
+        self.params = params
+        chain = params.chain
+        self._angles = np.array((state or ChainState.at_rest(chain)).angles_rad, dtype=np.float64)
+        if self._angles.shape != (chain.n_joints,):
+            raise ValueError(f"initial state has {self._angles.shape} angles for {chain.n_joints} joints")
+        self._geo = AreaGeometry.of(chain)
+        self._mapping = mapping
+        self._filter = BackgroundActivityFilter(params.denoise, *sensor_size)
+        self._buffer = _Buffer()
+        self._clock: UpdateClock | None = None
+        self._t_max_us = np.iinfo(np.int64).min
+        self._finished = False
+        self.s = params.s
+        self.stats = TrackerStats()
+
+    @property
+    def state(self) -> ChainState:
+        """The current chain (a copy)."""
+        return ChainState(self._angles.copy())
+
+    def feed(self, events: np.ndarray) -> CentrelineBatch:
+        """Take a chunk of time-ordered events (EVENT_DTYPE); return the updates now complete."""
+        if self._finished:
+            raise RuntimeError("feed() after finish()")
+        self._ingest(events)
+        if self._clock is None:
+            return self._empty()
+        return self._run(self._t_max_us, None)
+
+    def finish(self) -> CentrelineBatch:
+        """End of stream: return the remaining updates whose windows started before the last event."""
+        self._finished = True
+        if self._clock is None:
+            return self._empty()
+        return self._run(self._t_max_us, self._t_max_us)
+
+    def _ingest(self, events: np.ndarray) -> None:
+        n_in = len(events)
+        if n_in == 0:
+            return
+        stats = self.stats
+        if self._clock is None:
+            self._clock = UpdateClock(self.params.schedule, int(events["t"][0]))
+            stats.first_t_us = int(events["t"][0])
+        buf = self._buffer
+        buf.reserve(n_in)
+        start = buf.n
+        end = self._filter.filter_into(events, buf.t, buf.x, buf.y, start)
+        if self._mapping is not None and end > start:
+            mx, my = self._mapping.map(buf.x[start:end], buf.y[start:end])
+            buf.x[start:end] = mx
+            buf.y[start:end] = my
+        buf.n = end
+        ordered, t_max = time_order(events["t"], self._t_max_us)
+        if not ordered:
+            self._sort_buffer(events["t"])
+        stats.events_in += n_in
+        stats.events_kept += end - start
+        self._t_max_us = t_max
+        stats.last_t_us = t_max
+
+    def _sort_buffer(self, t: np.ndarray) -> None:
+        late = int(np.count_nonzero(t < self._t_max_us)) + int(np.count_nonzero(t[1:] < t[:-1]))
+        if self.stats.events_out_of_order == 0:
+            log.warning("events out of time order; sorting them in (later ones are counted, not logged)")
+        self.stats.events_out_of_order += late
+        buf = self._buffer
+        order = np.argsort(buf.t[:buf.n], kind="stable")
+        for arr in (buf.t, buf.x, buf.y):
+            arr[:buf.n] = arr[:buf.n][order]
+
+    def _run(self, complete_before_us: int, started_before_us: int | None) -> CentrelineBatch:
+        assert self._clock is not None
+        batches = []
+        while True:
+            t_us, lo_us, hi_us = self._clock.take(complete_before_us, started_before_us, _BATCH_UPDATES)
+            if len(t_us) == 0:
+                break
+            batches.append(self._updates(t_us, lo_us, hi_us))
+        self._buffer.drop_before(self._clock.next_window_start_us())
+        if not batches:
+            return self._empty()
+        return batches[0] if len(batches) == 1 else CentrelineBatch.concatenate(batches)
+
+    def _updates(self, t_us: np.ndarray, lo_us: np.ndarray, hi_us: np.ndarray) -> CentrelineBatch:
+        buf, geo, chain = self._buffer, self._geo, self.params.chain
+        times = buf.t[:buf.n]
+        lo_idx = np.searchsorted(times, lo_us, side="left")
+        hi_idx = np.searchsorted(times, hi_us, side="left")
+        k, n_j, n_s = len(t_us), chain.n_joints, len(self.s)
+        jx, jy = np.empty((k, n_j + 1)), np.empty((k, n_j + 1))
+        sx, sy = np.empty((k, n_s)), np.empty((k, n_s))
+        delta, used = np.empty(k), np.empty(k, dtype=np.int64)
+        run_updates(buf.x, buf.y, lo_idx, hi_idx, float(chain.root[0]), float(chain.root[1]), self._angles,
+                    geo.lengths, geo.r2_min, geo.r2_max, geo.cos_limit_signed_sq, geo.cos_refine_signed_sq,
+                    chain.min_events, geo.bucket_width, geo.n_buckets, 4, float(chain.length), self.params.rel_tol,
+                    jx, jy, sx, sy, delta, used)
+        self.stats.updates += k
+        return CentrelineBatch(t_s=t_us * 1e-6, s=self.s, x=sx, y=sy, joints_x=jx, joints_y=jy,
+                               delta_rms=delta, n_events=used)
+
+    def _empty(self) -> CentrelineBatch:
+        n_j, n_s = self.params.chain.n_joints, len(self.s)
+        return CentrelineBatch(t_s=np.empty(0), s=self.s, x=np.empty((0, n_s)), y=np.empty((0, n_s)),
+                               joints_x=np.empty((0, n_j + 1)), joints_y=np.empty((0, n_j + 1)),
+                               delta_rms=np.empty(0), n_events=np.empty(0, dtype=np.int64))
+
+
+def track(events: np.ndarray, params: TrackerParams, state: ChainState | None = None,
+          mapping: PointMapping | None = None) -> CentrelineBatch:
+    """Reconstruct a whole in-memory recording (one feed and finish)."""
+    tracker = Tracker(params, state, mapping)
+    return CentrelineBatch.concatenate([tracker.feed(events), tracker.finish()])

@@ -1,0 +1,160 @@
+"""Update times and windows of the tracker: ``t_k`` and ``[t_k - tau/2, t_k + tau/2)``.
+
+The paper leaves the time increment ``dt`` and the update interval ``tau`` free, and lets them change
+along a recording. A :class:`WindowSchedule` is a list of segments ``(t_from_s, dt_s, tau_s)``; update
+times start at ``t_start`` and advance by the ``dt`` of the segment they fall in. When an update time
+reaches the next segment's ``t_from_s``, that update and the following ones use the new ``dt`` and
+``tau`` (the grid continues from that update). Every time is computed from a segment anchor plus an
+integer multiple of ``dt`` (no accumulated rounding), so the schedule is the same however the events
+are chunked. Times are float microseconds on the recording's clock; a window holds the events with
+integer ``t_us`` in ``[ceil(t - tau/2), ceil(t + tau/2))``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+_MAX_BATCH = 1 << 16  # update times generated per step (bounds memory after a long gap)
+
+
+@dataclass(frozen=True)
+class WindowSegment:
+    """From ``t_from_s`` on, update every ``dt_s`` with windows of ``tau_s`` (seconds)."""
+
+    t_from_s: float
+    dt_s: float
+    tau_s: float
+
+    def __post_init__(self) -> None:
+        if not (self.dt_s > 0 and math.isfinite(self.dt_s)):
+            raise ValueError(f"dt_s must be positive, got {self.dt_s}")
+        if not (self.tau_s > 0 and math.isfinite(self.tau_s)):
+            raise ValueError(f"tau_s must be positive, got {self.tau_s}")
+
+
+@dataclass(frozen=True)
+class WindowSchedule:
+    """Update times and window lengths along a recording.
+
+    Attributes:
+        segments: at least one segment, sorted by ``t_from_s``; the first applies before its
+            ``t_from_s`` too.
+        t_start_s: first update time, seconds; ``None``: the first event's time + tau/2.
+        t_stop_s: no update after this time, seconds; ``None``: until the events end.
+    """
+
+    segments: tuple[WindowSegment, ...]
+    t_start_s: float | None = None
+    t_stop_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if not self.segments:
+            raise ValueError("a window schedule needs at least one segment")
+        starts = [seg.t_from_s for seg in self.segments]
+        if any(b <= a for a, b in zip(starts, starts[1:])):
+            raise ValueError(f"schedule segments must have increasing t_from_s, got {starts}")
+
+    @staticmethod
+    def uniform(tau_s: float, dt_s: float | None = None, t_start_s: float | None = None,
+                t_stop_s: float | None = None) -> WindowSchedule:
+        """One segment: windows of ``tau_s`` every ``dt_s`` (default ``tau_s``)."""
+        return WindowSchedule((WindowSegment(0.0, dt_s or tau_s, tau_s),), t_start_s, t_stop_s)
+
+    @property
+    def max_tau_s(self) -> float:
+        """Longest window of the schedule, seconds."""
+        return max(seg.tau_s for seg in self.segments)
+
+    def segment_at(self, t_s: float) -> int:
+        """Index of the segment that applies at ``t_s``."""
+        index = 0
+        for i, seg in enumerate(self.segments):
+            if seg.t_from_s <= t_s:
+                index = i
+        return index
+
+
+class UpdateClock:
+    """Generates the update times of a :class:`WindowSchedule` incrementally (state: a few numbers).
+
+    Args:
+        schedule: the schedule.
+        first_event_t_us: time of the first event, µs (used when ``schedule.t_start_s`` is None).
+    """
+
+    def __init__(self, schedule: WindowSchedule, first_event_t_us: int) -> None:
+        self.schedule = schedule
+        if schedule.t_start_s is None:
+            seg = schedule.segments[schedule.segment_at(first_event_t_us * 1e-6)]
+            start_us = first_event_t_us + seg.tau_s * 1e6 / 2
+        else:
+            start_us = schedule.t_start_s * 1e6
+        self._segment = schedule.segment_at(start_us * 1e-6)
+        self._anchor_us = start_us
+        self._count = 0
+        self._stop_us = math.inf if schedule.t_stop_s is None else schedule.t_stop_s * 1e6
+
+    def _peek(self) -> tuple[float, float]:
+        """(t_us, tau_us) of the next update, advancing to a new segment when reached."""
+        seg = self.schedule.segments[self._segment]
+        t_us = self._anchor_us + float(self._count) * (seg.dt_s * 1e6)
+        nxt = self._segment + 1
+        while nxt < len(self.schedule.segments) and t_us >= self.schedule.segments[nxt].t_from_s * 1e6:
+            self._segment, self._anchor_us, self._count = nxt, t_us, 0
+            seg = self.schedule.segments[nxt]
+            nxt += 1
+        return t_us, seg.tau_s * 1e6
+
+    def next_window_start_us(self) -> float:
+        """Earliest event time any future window can use, µs (the buffer may drop older events)."""
+        t_us, _ = self._peek()
+        later = self.schedule.segments[self._segment:]
+        return t_us - max(seg.tau_s for seg in later) * 1e6 / 2
+
+    def take(self, complete_before_us: int, started_before_us: int | None = None, limit: int = _MAX_BATCH
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Pop the next updates whose windows end at or before ``complete_before_us``.
+
+        Args:
+            complete_before_us: windows ``[lo, hi)`` with ``hi <= complete_before_us`` are taken.
+            started_before_us: if given (end of stream), also take windows with ``lo <= started_before_us``.
+            limit: take at most about this many updates (call again for the rest).
+
+        Returns:
+            t_us (n,) float64 window centres, lo_us (n,) int64, hi_us (n,) int64 integer bounds.
+        """
+        parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        reach = complete_before_us if started_before_us is None else max(complete_before_us, started_before_us)
+        taken = 0
+        while taken < limit:
+            t_first, tau_us = self._peek()
+            seg = self.schedule.segments[self._segment]
+            dt_us = seg.dt_s * 1e6
+            nxt = self._segment + 1
+            seg_end_us = self.schedule.segments[nxt].t_from_s * 1e6 if nxt < len(self.schedule.segments) else math.inf
+            # every candidate window starts before ``reach`` (+1 for rounding); bounded count
+            n_max = min(limit - taken, max(0, int((reach + tau_us - t_first) // dt_us) + 2))
+            t_us = self._anchor_us + (self._count + np.arange(n_max, dtype=np.float64)) * dt_us
+            lo = np.ceil(t_us - tau_us / 2).astype(np.int64)
+            hi = np.ceil(t_us + tau_us / 2).astype(np.int64)
+            ready = hi <= complete_before_us
+            if started_before_us is not None:
+                ready |= lo <= started_before_us
+            ok = ready & (t_us <= self._stop_us) & (t_us < seg_end_us)
+            n = int(np.argmin(ok)) if not ok.all() else n_max
+            if n:
+                parts.append((t_us[:n], lo[:n], hi[:n]))
+                self._count += n
+                taken += n
+            if n == n_max and n > 0:
+                continue  # the bound was reached; look again
+            self._peek()
+            if self._segment == nxt and n > 0:
+                continue  # moved into the next segment: keep going there
+            break
+        if not parts:
+            return np.empty(0), np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+        return tuple(np.concatenate(cols) for cols in zip(*parts))  # type: ignore[return-value]

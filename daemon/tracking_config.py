@@ -1,0 +1,152 @@
+"""The ``tracker:`` section of a flagtrack config: every parameter of the centreline tracker.
+
+Shared by ``flagtrack reconstruct -c`` and the live tracker service. Lengths are in the events'
+units (pixels, or metres with a calibration), angles in degrees from +x towards +y, times in
+seconds on the recording's clock. Defaults are the paper's (N_j = 10, alpha = 0.6, ds = L/50,
+dt = tau) and, for the robust method, the measured ones of docs/tracking.md.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from flagtrack.daemon.config import from_mapping, load_yaml, to_mapping
+from flagtrack.daemon.errors import ConfigError
+
+SECTION = "tracker"
+
+
+class Method(enum.Enum):
+    """``paper``: the update as published; ``robust``: denoised, refined arcs, minimum evidence."""
+
+    ROBUST = "robust"
+    PAPER = "paper"
+
+
+@dataclass(frozen=True)
+class DenoiseConfig:
+    """Background-activity filter of the robust method (see docs/tracking.md)."""
+
+    enabled: bool = True
+    window_us: int = 500
+
+
+@dataclass(frozen=True)
+class SegmentConfig:
+    """From ``t_from_s`` on, update every ``dt_s`` with windows of ``tau_s``."""
+
+    t_from_s: float
+    dt_s: float
+    tau_s: float
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """Parameters of a reconstruction (YAML section ``tracker:``).
+
+    Attributes:
+        root: (x, y) of the flag's fixed root; required.
+        length: flag length L; required.
+        direction_deg: rest direction of the flag (the initial straight chain).
+        joints: number of links N_j.
+        link_lengths: N_j link lengths summing to ``length`` (default equal).
+        alpha: search radius parameter.
+        angle_limit_deg: half-angle of each search arc around the link's previous direction.
+        tau_s: update interval (window length).
+        dt_s: time increment between updates (default ``tau_s``).
+        schedule: optional segments changing dt and tau along the recording (override tau_s/dt_s).
+        ds: step of the smoothed centreline (default L / 50).
+        method: ``robust`` or ``paper`` (the paper's update: no denoising, no refining, any event).
+        min_events: robust method: fewest events in an arc that move its link.
+        refine_deg: robust method: half-angle of the refining arc around the first mean.
+        denoise: robust method: background-activity filter.
+        t_start_s: first update time (default: first event + tau/2).
+        t_stop_s: last update time (default: end of the events).
+        calibration: file of a pixel -> metre mapping (flagtrack.calibration); None: pixels.
+    """
+
+    root: tuple[float, float] | None = None
+    length: float | None = None
+    direction_deg: float = 0.0
+    joints: int = 10
+    link_lengths: tuple[float, ...] | None = None
+    alpha: float = 0.6
+    angle_limit_deg: float = 60.0
+    tau_s: float = 2.5e-4
+    dt_s: float | None = None
+    schedule: tuple[SegmentConfig, ...] = ()
+    ds: float | None = None
+    method: Method = Method.ROBUST
+    min_events: int = 5
+    refine_deg: float = 10.0
+    denoise: DenoiseConfig = field(default_factory=DenoiseConfig)
+    t_start_s: float | None = None
+    t_stop_s: float | None = None
+    calibration: Path | None = None
+
+    def with_overrides(self, **values: Any) -> TrackingConfig:
+        """A copy with the given (non-None) values replaced, e.g. from command-line flags."""
+        return dataclasses.replace(self, **{k: v for k, v in values.items() if v is not None})
+
+    def tracker_params(self, *, path: str | None = None) -> Any:
+        """The core's :class:`~flagtrack.daemon.core.tracker.TrackerParams` (imports numba).
+
+        Raises:
+            ConfigError: a required value is missing or a value is out of range (names the key).
+        """
+        from flagtrack.daemon.core.chain import ChainParams
+        from flagtrack.daemon.core.denoise import DenoiseParams
+        from flagtrack.daemon.core.tracker import TrackerParams
+        from flagtrack.daemon.core.windows import WindowSchedule, WindowSegment
+
+        for name in ("root", "length"):
+            if getattr(self, name) is None:
+                raise ConfigError("required (give it in the config or on the command line)",
+                                  key=f"{SECTION}.{name}", path=path)
+        paper = self.method is Method.PAPER
+        chain = _build(ChainParams, path, "", root=self.root, length=self.length, n_joints=self.joints,
+                       direction_deg=self.direction_deg, link_lengths=self.link_lengths, alpha=self.alpha,
+                       angle_limit_deg=self.angle_limit_deg, min_events=1 if paper else self.min_events,
+                       refine_deg=None if paper else self.refine_deg)
+        segments = self.schedule or (SegmentConfig(0.0, self.dt_s or self.tau_s, self.tau_s),)
+        schedule = _build(WindowSchedule, path, "schedule",
+                          segments=tuple(_build(WindowSegment, path, f"schedule[{i}]", **to_mapping(seg))
+                                         for i, seg in enumerate(segments)),
+                          t_start_s=self.t_start_s, t_stop_s=self.t_stop_s)
+        denoise = None
+        if not paper and self.denoise.enabled:
+            denoise = _build(DenoiseParams, path, "denoise", window_us=self.denoise.window_us)
+        if self.ds is not None and not self.ds > 0:
+            raise ConfigError(f"must be positive, got {self.ds}", key=f"{SECTION}.ds", path=path)
+        return TrackerParams(chain=chain, schedule=schedule, ds=self.ds, denoise=denoise)
+
+    def attrs(self) -> dict[str, Any]:
+        """Every processing parameter as flat HDF5-friendly attributes (effective values)."""
+        paper = self.method is Method.PAPER
+        values = to_mapping(self)
+        denoise = values.pop("denoise")
+        values.update({f"denoise_{k}": v for k, v in denoise.items()})
+        if paper:
+            values.update(min_events=1, refine_deg=None, denoise_enabled=False)
+        values["dt_s"] = self.dt_s or self.tau_s
+        values["ds"] = self.ds if self.ds is not None else (self.length or 0.0) / 50
+        values["schedule"] = [to_mapping(seg) for seg in self.schedule]
+        return values
+
+
+def _build(cls: type, path: str | None, key: str, **values: Any) -> Any:
+    """Construct a core dataclass, turning its ValueError into a ConfigError naming the key."""
+    try:
+        return cls(**values)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(str(exc), key=f"{SECTION}.{key}".rstrip("."), path=path) from exc
+
+
+def load_tracking_config(path: str | Path) -> TrackingConfig:
+    """Read the ``tracker:`` section of a YAML file (other sections are ignored)."""
+    data = load_yaml(path)
+    return from_mapping(TrackingConfig, data.get(SECTION), path=str(path), key=SECTION)

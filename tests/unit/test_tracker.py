@@ -1,0 +1,175 @@
+"""The incremental tracker: chunking does not matter, windows are where they should be, Delta_RMS."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.core.chain import ChainParams, ChainState
+from flagtrack.daemon.core.denoise import DenoiseParams
+from flagtrack.daemon.core.mapping import AffineMapping
+from flagtrack.daemon.core.tracker import Tracker, TrackerParams, track
+from flagtrack.daemon.core.windows import WindowSchedule, WindowSegment
+from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
+
+FLAG = WavyFlag()
+
+
+@pytest.fixture(scope="module")
+def events() -> np.ndarray:
+    params = QuickLineParams(events_per_px2=5, noise_rate_hz=2e5, drop_fraction=0.1)
+    return np.concatenate(list(line_events(FLAG, 1_000_000, 1_060_000, 640, 480, params, seed=7)))
+
+
+def _params(method: str = "robust", **schedule: float) -> TrackerParams:
+    robust = method == "robust"
+    chain = ChainParams(root=FLAG.root, length=FLAG.length, min_events=5 if robust else 1,
+                        refine_deg=10.0 if robust else None)
+    return TrackerParams(chain=chain, schedule=WindowSchedule.uniform(schedule.pop("tau", 2.5e-4), **schedule),
+                         denoise=DenoiseParams() if robust else None)
+
+
+def _feed_in_chunks(events: np.ndarray, params: TrackerParams, cuts: np.ndarray) -> CentrelineBatch:
+    tracker = Tracker(params)
+    out = [tracker.feed(chunk) for chunk in np.split(events, cuts)]
+    return CentrelineBatch.concatenate([*out, tracker.finish()])
+
+
+def _assert_same(a: CentrelineBatch, b: CentrelineBatch) -> None:
+    assert len(a) == len(b)
+    for name in ("t_s", "x", "y", "joints_x", "joints_y", "delta_rms"):
+        np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=1e-9, err_msg=name)
+    np.testing.assert_array_equal(a.n_events, b.n_events)
+
+
+@pytest.mark.parametrize("method", ["robust", "paper"])
+@pytest.mark.parametrize("dt_over_tau", [1.0, 0.3, 2.5])
+def test_results_do_not_depend_on_chunking(events: np.ndarray, method: str, dt_over_tau: float) -> None:
+    params = _params(method, tau=2.5e-4, dt_s=2.5e-4 * dt_over_tau)
+    whole = track(events, params)
+    rng = np.random.default_rng(3)
+    random_cuts = np.sort(rng.integers(0, len(events), 200))
+    _assert_same(whole, _feed_in_chunks(events, params, random_cuts))
+    # cuts between events of the same microsecond, and tiny packets as a live camera sends
+    same_t = np.flatnonzero(np.diff(events["t"]) == 0)[::50] + 1
+    _assert_same(whole, _feed_in_chunks(events, params, same_t))
+
+
+def test_tiny_packets_give_the_same_updates(events: np.ndarray) -> None:
+    params = _params()
+    part = events[:40_000]
+    _assert_same(track(part, params), _feed_in_chunks(part, params, np.arange(13, len(part), 13)))
+
+
+def test_feed_returns_only_complete_windows(events: np.ndarray) -> None:
+    tracker = Tracker(_params(tau=2.5e-4))
+    seen = events[events["t"] < 1_010_000]
+    batch = tracker.feed(seen)
+    assert len(batch) > 0
+    assert np.all(batch.t_s * 1e6 + 125 <= seen["t"][-1])
+    # the next window ends after the last event seen: it comes with later events
+    later = tracker.feed(events[(events["t"] >= 1_010_000) & (events["t"] < 1_010_400)])
+    assert later.t_s[0] == pytest.approx(batch.t_s[-1] + 2.5e-4)
+
+
+def test_update_times_are_window_centres(events: np.ndarray) -> None:
+    batch = track(events, _params(tau=2.5e-4, dt_s=1e-4))
+    t0 = events["t"][0] * 1e-6
+    np.testing.assert_allclose(batch.t_s, t0 + 1.25e-4 + 1e-4 * np.arange(len(batch)), atol=1e-12)
+    # finish() gave every window that starts at or before the last event, and no other
+    t_last_us = int(events["t"][-1])
+    assert np.ceil(batch.t_s[-1] * 1e6 - 125) <= t_last_us < np.ceil((batch.t_s[-1] + 1e-4) * 1e6 - 125)
+
+
+def test_start_stop_and_schedule(events: np.ndarray) -> None:
+    segments = (WindowSegment(0.0, 2e-4, 2e-4), WindowSegment(1.02, 5e-4, 1e-3))
+    schedule = WindowSchedule(segments, t_start_s=1.005, t_stop_s=1.04)
+    params = TrackerParams(chain=_params().chain, schedule=schedule, denoise=DenoiseParams())
+    batch = track(events, params)
+    assert batch.t_s[0] == pytest.approx(1.005)
+    assert batch.t_s[-1] <= 1.04 + 1e-12
+    steps = np.round(np.diff(batch.t_s) * 1e6).astype(int)
+    assert set(steps[batch.t_s[1:] <= 1.02]) == {200}
+    assert set(steps[batch.t_s[:-1] >= 1.02]) == {500}
+    first_new = batch.t_s[batch.t_s >= 1.02][0]
+    assert 1.02 <= first_new < 1.0202 + 1e-9  # the grid continues into the new segment
+    rng = np.random.default_rng(5)
+    _assert_same(batch, _feed_in_chunks(events, params, np.sort(rng.integers(0, len(events), 50))))
+
+
+def test_a_calibration_mapping_is_applied_to_every_event(events: np.ndarray) -> None:
+    scale, offset = 0.5, (10.0, -20.0)  # nearly exact in binary: the same decisions as in pixels
+    mapping = AffineMapping(((scale, 0.0), (0.0, scale)), offset)
+    px = _params("paper")
+    chain_m = ChainParams(root=(FLAG.root[0] * scale + offset[0], FLAG.root[1] * scale + offset[1]),
+                          length=FLAG.length * scale, refine_deg=None)
+    pm = TrackerParams(chain=chain_m, schedule=px.schedule)
+    in_px = track(events, px)
+    tracker = Tracker(pm, mapping=mapping)
+    in_m = CentrelineBatch.concatenate([tracker.feed(events), tracker.finish()])
+    np.testing.assert_allclose(in_m.x, in_px.x * scale + offset[0], atol=1e-4)  # single-precision rounding
+    np.testing.assert_allclose(in_m.y, in_px.y * scale + offset[1], atol=1e-4)
+    np.testing.assert_allclose(in_m.delta_rms, in_px.delta_rms * scale, rtol=1e-4)
+
+
+def test_delta_rms_is_the_rms_distance_of_the_area_events(events: np.ndarray) -> None:
+    params = _params("paper")
+    batch = track(events, params)
+    for k in (5, 100, len(batch) - 3):
+        lo, hi = np.ceil((batch.t_s[k] - 1.25e-4) * 1e6), np.ceil((batch.t_s[k] + 1.25e-4) * 1e6)
+        win = events[(events["t"] >= lo) & (events["t"] < hi)]
+        x, y = win["x"].astype(float), win["y"].astype(float)
+        inside = _in_any_area(x, y, batch, k, params.chain)
+        d2 = _polyline_d2(x[inside], y[inside], batch.x[k], batch.y[k])
+        assert batch.n_events[k] == inside.sum()
+        assert batch.delta_rms[k] == pytest.approx(np.sqrt(d2.mean()), rel=1e-5)
+
+
+def _in_any_area(x: np.ndarray, y: np.ndarray, batch: CentrelineBatch, k: int, p: ChainParams) -> np.ndarray:
+    """Events inside an area of update k: arcs around its joints, along the previous update's links."""
+    prev = np.arctan2(np.diff(batch.joints_y[k - 1]), np.diff(batch.joints_x[k - 1]))
+    inside = np.zeros(len(x), bool)
+    for j, r in enumerate(p.lengths()):
+        dx, dy = x - batch.joints_x[k, j], y - batch.joints_y[k, j]
+        d = np.hypot(dx, dy)
+        off = np.abs(np.angle(np.exp(1j * (np.arctan2(dy, dx) - prev[j]))))
+        inside |= (d >= 0.4 * r) & (d <= 1.6 * r) & (off <= np.radians(p.angle_limit_deg))
+    return inside
+
+
+def _polyline_d2(x: np.ndarray, y: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    ax, ay = px[:-1], py[:-1]
+    dx, dy = np.diff(px), np.diff(py)
+    t = np.clip(((x[:, None] - ax) * dx + (y[:, None] - ay) * dy) / (dx * dx + dy * dy), 0, 1)
+    return np.min((x[:, None] - ax - t * dx) ** 2 + (y[:, None] - ay - t * dy) ** 2, axis=1)
+
+
+def test_state_and_stats(events: np.ndarray) -> None:
+    tracker = Tracker(_params(), state=ChainState.straight(10, 5.0))
+    np.testing.assert_allclose(tracker.state.angles_rad, np.radians(5.0))
+    tracker.feed(events)
+    tracker.finish()
+    assert tracker.stats.events_in == len(events)
+    assert 0.5 * len(events) < tracker.stats.events_kept < len(events)
+    assert tracker.stats.updates > 200
+    assert not np.allclose(tracker.state.angles_rad, np.radians(5.0))
+    with pytest.raises(RuntimeError):
+        tracker.feed(events[:10])
+
+
+def test_out_of_order_events_are_sorted_in_and_counted(events: np.ndarray) -> None:
+    part = events[:20_000].copy()
+    swapped = part.copy()
+    swapped[[100, 101]] = part[[101, 100]]
+    swapped["t"][100], swapped["t"][101] = part["t"][101] + 5, part["t"][100]
+    tracker = Tracker(_params())
+    tracker.feed(swapped)
+    tracker.finish()
+    assert tracker.stats.events_out_of_order >= 1
+
+
+def test_no_events_no_updates() -> None:
+    tracker = Tracker(_params())
+    assert len(tracker.feed(np.zeros(0, dtype=[("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")]))) == 0
+    assert len(tracker.finish()) == 0
