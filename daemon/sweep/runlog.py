@@ -28,8 +28,9 @@ from types import TracebackType
 from typing import Any, Literal
 
 from flagtrack.daemon import __version__
-from flagtrack.daemon.errors import FormatError
-from flagtrack.daemon.sweep.plan import Point
+from flagtrack.daemon.config import from_mapping, to_mapping
+from flagtrack.daemon.errors import ConfigError, FormatError
+from flagtrack.daemon.sweep.plan import Point, SweepConfig, plan_points
 
 log = logging.getLogger(__name__)
 
@@ -199,6 +200,26 @@ def _point_from_json(record: dict[str, Any], path: Path, offset: int) -> PointRe
         raise FormatError(f"point record: {exc}", path=str(path), offset=offset) from exc
 
 
+def stored_sweep(record: RunRecord, section: str = "sweep") -> SweepConfig:
+    """The sweep config of the start record (to resume with the run's own plan, not today's file).
+
+    Raises:
+        FormatError: the start record has no such section, it is invalid, or the points it gives
+            differ from the stored plan (plan generation changed between versions).
+    """
+    path = str(record.run_dir / RUN_LOG)
+    config = record.start.get("config", {})
+    if not isinstance(config, dict) or section not in config:
+        raise FormatError(f"the start record has no '{section}' config to resume from", path=path, offset=0)
+    try:
+        sweep = from_mapping(SweepConfig, config[section], path=path, key=f"config.{section}")
+    except ConfigError as exc:
+        raise FormatError(f"stored sweep config is invalid: {exc}", path=path, offset=0) from exc
+    if [p.point_id for p in plan_points(sweep)] != record.planned_ids:
+        raise FormatError("the stored plan differs from the one its config gives now", path=path, offset=0)
+    return sweep
+
+
 def completed_points(run_dir: str | Path) -> set[str]:
     """Ids of the points whose latest record has status ``done`` (skip these on resume)."""
     return {pid for pid, p in read_run(run_dir).latest_points().items() if p.status == "done"}
@@ -232,7 +253,7 @@ class RunLog:
         runlog = cls(run_dir, handle)
         plan_json = [{"point_id": p.point_id, "index": p.index, "branch": p.branch.value, "speed_mps": p.speed_mps} for p in plan]
         runlog._append({"type": "start", "run_id": run_id, "t_unix": _now(t_unix), "flagtrack_version": __version__,
-                        "config": dict(config), "plan": plan_json})  # fmt: skip
+                        "config": to_mapping(dict(config)), "plan": plan_json})  # fmt: skip
         return runlog
 
     @classmethod

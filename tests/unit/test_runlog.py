@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from flagtrack.daemon.errors import FormatError
-from flagtrack.daemon.sweep.plan import EndPoint, Record, SpeedRange, SweepConfig, plan_points, sweep_plan
+from flagtrack.daemon.sweep.plan import Branch, EndPoint, Record, SpeedRange, SweepConfig, plan_points, sweep_plan
 from flagtrack.daemon.sweep.runlog import (
     RUN_LOG,
     PointResult,
@@ -22,6 +22,7 @@ from flagtrack.daemon.sweep.runlog import (
     completed_points,
     point_paths,
     read_run,
+    stored_sweep,
 )
 from flagtrack.daemon.sweep.summary import SUMMARY_COLUMNS, transition_speeds, write_summary
 
@@ -204,3 +205,21 @@ def test_transition_speeds(states: dict[str, str], expected: tuple) -> None:
               for b, order in (("up", speeds), ("down", speeds[::-1]))
               for i, (v, c) in enumerate(zip(order, states[b]))]  # fmt: skip
     assert transition_speeds(points) == expected
+
+
+def test_resume_uses_the_sweep_stored_in_the_start_record(tmp_path: Path) -> None:
+    with RunLog.create(tmp_path, run_id="r", config={"sweep": CFG, "note": Path("/x")}, plan=plan_points(CFG)):
+        pass
+    record = read_run(tmp_path)
+    assert record.start["config"]["sweep"]["branches"] == ["up", "down"]  # dataclasses and enums as plain JSON
+    assert stored_sweep(record) == CFG
+
+
+def test_stored_plan_mismatch_is_refused(tmp_path: Path) -> None:
+    other = SweepConfig(speeds=(3.0, 4.0), branches=(Branch.UP,))
+    with RunLog.create(tmp_path, run_id="r", config={"sweep": other}, plan=plan_points(CFG)):
+        pass
+    with pytest.raises(FormatError, match="stored plan differs"):
+        stored_sweep(read_run(tmp_path))
+    with pytest.raises(FormatError, match="no 'tunnel' config"):
+        stored_sweep(read_run(tmp_path), section="tunnel")
