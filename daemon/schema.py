@@ -115,6 +115,9 @@ class EventPacket:
     stream concatenate into one valid stream (what the recorder writes). ``t_offset_us`` is the
     stream's encoder offset (a whole number of the encoding's time loops) added back on decoding.
     ``sent_ns`` is the wall-clock time (ns) at which the adapter received the data, for latency.
+    ``t_last_us`` is the completeness horizon: every event with ``t <= t_last_us`` is in this packet
+    or an earlier one (an empty packet carries it forward while the scene is still).
+    ``end_of_stream`` marks the last packet of a stream (end of a replayed file).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.EVENT_PACKET
@@ -129,6 +132,7 @@ class EventPacket:
     sent_ns: int
     t_offset_us: int = 0
     n_triggers: int = 0
+    end_of_stream: bool = False
     data: bytes = b""
 
 

@@ -92,7 +92,9 @@ class CameraService:
                 try:
                     data = self.camera.read(self.cfg.read_timeout_s)
                 except EndOfStream:
-                    self._publish(packetizer.flush(), 0, info, events_pub, rate_pub, rates)
+                    last = packetizer.flush() or [Packet(b"", packetizer.horizon_us, packetizer.horizon_us,
+                                                         0, 0, 0, 0)]
+                    self._publish(last, 0, info, events_pub, rate_pub, rates, end_of_stream=True)
                     state = "eof"
                     break
                 if data is not None:
@@ -108,13 +110,13 @@ class CameraService:
             log.info("camera %s %s after %d packets, %d events", self.cfg.id, state, self.packets, self.events)
 
     def _publish(self, packets: list[Packet], arrival_ns: int, info: CameraInfo, events_pub, rate_pub,
-                 rates: RateCounter) -> None:  # noqa: ANN001
-        for packet in packets:
+                 rates: RateCounter, end_of_stream: bool = False) -> None:  # noqa: ANN001
+        for i, packet in enumerate(packets):
             events_pub.put(EventPacket(
                 camera_id=self.cfg.id, seq=self.packets, t_first_us=packet.t_first_us, t_last_us=packet.t_last_us,
                 n_events=packet.n_events, width=info.width, height=info.height, encoding=info.encoding,
                 sent_ns=arrival_ns or time.time_ns(), t_offset_us=packet.t_offset_us, n_triggers=packet.n_triggers,
-                data=packet.data,
+                end_of_stream=end_of_stream and i == len(packets) - 1, data=packet.data,
             ))
             self.packets += 1
             self.events += packet.n_events

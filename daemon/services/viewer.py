@@ -21,9 +21,10 @@ from typing import Any, Literal
 import numpy as np
 import rerun as rr
 
-from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.errors import ConfigError, FormatError
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, TunnelState
 from flagtrack.daemon.transport import Bus
+from flagtrack.drivers.camera.packets import decode_packet
 
 log = logging.getLogger(__name__)
 TIMELINE = "camera"
@@ -170,8 +171,6 @@ class ViewerService:
         self.updates = 0
 
     def run(self, stop: threading.Event) -> None:
-        from flagtrack.drivers.formats import make_decoder
-
         keys = self.bus.keys
         subs: dict[str, Any] = {
             "centrelines": self.bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000),
@@ -183,7 +182,6 @@ class ViewerService:
         rec, self.description = open_recording(self.cfg)
         log.info("viewer: %s", self.description)
         logger = RerunLogger(rec, self.cfg)
-        decoder, encoding = None, None
         try:
             while not stop.is_set():
                 busy = False
@@ -192,9 +190,12 @@ class ViewerService:
                     self.updates += len(msg.t_s)
                     busy = True
                 while (packet := subs["events"].recv(timeout_s=0)) is not None:
-                    if packet.encoding != encoding:
-                        decoder, encoding = make_decoder(packet.encoding), packet.encoding
-                    events, _ = decoder.decode(packet.data)
+                    try:
+                        events, _ = decode_packet(packet.encoding, packet.data, packet.t_offset_us,
+                                                  source=f"packet {packet.seq}")
+                    except FormatError as exc:
+                        log.debug("viewer: %s", exc)
+                        continue
                     logger.events(events, packet)
                     busy = True
                 while (msg := subs["rate"].recv(timeout_s=0)) is not None:

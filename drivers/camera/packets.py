@@ -67,6 +67,11 @@ class Packetizer:
         self._triggers = empty_triggers()
         self._horizon_us: int | None = None  # t_last_us of the last packet emitted
 
+    @property
+    def horizon_us(self) -> int:
+        """Completeness horizon of the last packet emitted (-1 before the first)."""
+        return -1 if self._horizon_us is None else self._horizon_us
+
     def push(self, events: np.ndarray, triggers: np.ndarray | None = None, t_until_us: int | None = None
              ) -> list[Packet]:
         """Add data (and, optionally, "complete before ``t_until_us``"); return the packets it closes."""

@@ -119,7 +119,7 @@ def test_malformed_packets_are_counted_not_written(tmp_path: Path) -> None:
         time.sleep(0.3)
         pub = bus.publisher(bus.keys.camera_events("cam0"))
         pub.put_bytes(b"FT\x01\x01garbage")
-        pub.put(EventPacket("cam0", 0, 0, 999, 0, 640, 480, "evt3", 0, 0, 0, b""))
+        pub.put(EventPacket("cam0", 0, 0, 999, 0, 640, 480, "evt3", 0, data=b""))
         assert wait_for(lambda: recorder.current is not None and recorder.current.packets == 1)
         assert recorder.current.malformed == 1
         stop.set()

@@ -44,7 +44,7 @@ def test_packets_cross_sessions_in_order_and_malformed_are_counted(two_buses: tu
     for seq in range(200):
         if seq == 50:
             pub.put_bytes(b"garbage")
-        pub.put(EventPacket("cam0", seq, seq, seq, 0, 640, 480, "evt3", 0, bytes(1000)))
+        pub.put(EventPacket("cam0", seq, seq, seq, 0, 640, 480, "evt3", 0, data=bytes(1000)))
     got = []
     while len(got) < 200:
         msg = sub.recv(timeout_s=5.0)

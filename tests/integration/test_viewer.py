@@ -12,7 +12,7 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate
 from flagtrack.daemon.services.viewer import ViewerConfig, ViewerService, age_colours
 from flagtrack.daemon.transport import Bus, BusConfig
-from flagtrack.drivers.formats import make_encoder
+from flagtrack.drivers.camera.packets import Packetizer
 from flagtrack.drivers.sim.quickline import WavyFlag, line_events
 from tests.integration.test_transport import free_port, wait_for
 
@@ -30,10 +30,13 @@ def test_viewer_logs_events_and_centrelines_to_rrd(tmp_path: Path) -> None:
         events_pub = source.publisher(source.keys.camera_events("cam0"))
         lines_pub = source.publisher(source.keys.centrelines())
         rate_pub = source.publisher(source.keys.event_rate("cam0"))
-        encoder = make_encoder("evt3")
-        for seq, chunk in enumerate(line_events(WavyFlag(), 0, 50_000, 640, 480, chunk_us=1000)):
-            events_pub.put(EventPacket("cam0", seq, int(chunk["t"][0]), int(chunk["t"][-1]), len(chunk), 640, 480,
-                                       "evt3", time.time_ns(), encoder.encode(chunk)))
+        packetizer = Packetizer("evt3", 640, 480)
+        seq = 0
+        for chunk in line_events(WavyFlag(), 0, 50_000, 640, 480, chunk_us=1000):
+            for p in packetizer.push(chunk):
+                seq += 1
+                events_pub.put(EventPacket("cam0", seq, p.t_first_us, p.t_last_us, p.n_events, 640, 480,
+                                           "evt3", time.time_ns(), t_offset_us=p.t_offset_us, data=p.data))
             time.sleep(0.002)
         n_t, n_s = 20, 51
         batch = CentrelineBatch(np.arange(n_t) * 1e-3, np.linspace(0, 200, n_s), np.zeros((n_t, n_s)),

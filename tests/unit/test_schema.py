@@ -29,7 +29,8 @@ def centreline_message() -> CentrelineMessage:
 
 
 def packet() -> EventPacket:
-    return EventPacket("cam0", 3, 1000, 1999, 42, 640, 480, "evt3", 1_700_000_000_000_000_000, bytes(range(256)))
+    return EventPacket("cam0", 3, 1000, 1999, 42, 640, 480, "evt3", 1_700_000_000_000_000_000, t_offset_us=16_777_216,
+                       n_triggers=2, end_of_stream=True, data=bytes(range(256)))
 
 
 def test_event_packet_round_trip() -> None:

@@ -1,0 +1,160 @@
+"""The tracker service: one camera's packets in, centrelines out, with the same core as ``reconstruct``.
+
+Packets are decoded one by one (each is self-contained), fed in order to a
+:class:`~flagtrack.daemon.core.tracker.Tracker` built from the same ``tracker:`` config as the
+offline command, so a replayed file gives the same centrelines as ``flagtrack reconstruct``.
+Completed updates are published in batches (``batch_updates``, or sooner after
+``max_batch_delay_s``); sequence gaps and malformed packets are counted and reported in the
+status (about once a second): events/s, updates/s, lag behind the newest event.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.errors import FormatError
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, TrackerStatus
+from flagtrack.daemon.transport import Bus
+from flagtrack.drivers.camera.packets import decode_packet
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class TrackerServiceConfig:
+    """How the live tracker publishes.
+
+    Attributes:
+        camera_id: the camera tracked.
+        batch_updates: updates per centreline message (at most).
+        max_batch_delay_s: publish a smaller batch after this long.
+        status_interval_s: period of the status message.
+        queue_packets: packets held while the tracker catches up (beyond: counted as dropped).
+    """
+
+    camera_id: str = "cam0"
+    batch_updates: int = 64
+    max_batch_delay_s: float = 0.002
+    status_interval_s: float = 1.0
+    queue_packets: int = 1_000_000
+
+
+class TrackerService:
+    """Tracks one camera live. ``tracker_factory`` builds a fresh core Tracker (one per stream)."""
+
+    name = "tracker"
+
+    def __init__(self, bus: Bus, cfg: TrackerServiceConfig, tracker_factory: Any, units: str = "px") -> None:
+        self.bus = bus
+        self.cfg = cfg
+        self.tracker_factory = tracker_factory
+        self.units = units
+        self.tracker = tracker_factory()
+        self.packets = 0
+        self.missing_packets = 0
+        self.malformed_packets = 0
+        self.updates = 0
+        self.events = 0
+        self.streams_ended = 0
+        self._next_seq: int | None = None
+        self._pending: list[CentrelineBatch] = []
+        self._pending_ns: list[np.ndarray] = []
+        self._pending_since = 0.0
+        self._seq_out = 0
+
+    def run(self, stop: threading.Event) -> None:
+        keys = self.bus.keys
+        packets = self.bus.subscribe(keys.camera_events(self.cfg.camera_id), EventPacket,
+                                     capacity=self.cfg.queue_packets)
+        self._lines_pub = self.bus.publisher(keys.centrelines(), block=True)
+        status_pub = self.bus.publisher(keys.tracker_status())
+        self.bus.declare_alive(self.name)
+        last_status = time.monotonic()
+        window = {"events": 0, "updates": 0, "t": last_status}
+        lag_s = 0.0
+        try:
+            while not stop.is_set():
+                packet = packets.recv(timeout_s=self.cfg.max_batch_delay_s)
+                if packet is not None:
+                    lag_s = self.handle(packet)
+                self._publish_if_due(force=False)
+                now = time.monotonic()
+                if now - last_status >= self.cfg.status_interval_s:
+                    self.malformed_packets = packets.malformed
+                    status_pub.put(self._status("tracking", window, now, lag_s))
+                    window = {"events": self.events, "updates": self.updates, "t": now}
+                    last_status = now
+        finally:
+            self._publish_if_due(force=True)
+            status_pub.put(self._status("stopped", window, time.monotonic(), lag_s))
+
+    def handle(self, packet: EventPacket) -> float:
+        """Decode and track one packet; return the lag (s) between its arrival at the camera and now."""
+        if self._next_seq is not None and packet.seq != self._next_seq:
+            gap = packet.seq - self._next_seq
+            if gap > 0:
+                self.missing_packets += gap
+                log.warning("tracker: %d packet(s) missing before seq %d", gap, packet.seq)
+        self._next_seq = packet.seq + 1
+        self.packets += 1
+        try:
+            events, _ = decode_packet(packet.encoding, packet.data, packet.t_offset_us,
+                                      source=f"packet {packet.seq} of camera {packet.camera_id}")
+        except FormatError as exc:
+            self.malformed_packets += 1
+            log.warning("tracker: %s", exc)
+            return 0.0
+        self.events += len(events)
+        batch = self.tracker.feed(events)
+        advance = getattr(self.tracker, "advance", None)
+        if advance is not None and packet.n_events == 0:
+            batch = CentrelineBatch.concatenate([batch, advance(packet.t_last_us + 1)])
+        if packet.end_of_stream:
+            batch = CentrelineBatch.concatenate([batch, self.tracker.finish()])
+            self.streams_ended += 1
+            self.tracker = self.tracker_factory()
+            self._next_seq = None
+        self._add(batch, packet.sent_ns)
+        if packet.end_of_stream:
+            self._publish_if_due(force=True)
+        return max(0.0, time.time_ns() - packet.sent_ns) * 1e-9
+
+    def _add(self, batch: CentrelineBatch, sent_ns: int) -> None:
+        if len(batch) == 0:
+            return
+        if not self._pending:
+            self._pending_since = time.monotonic()
+        self._pending.append(batch)
+        self._pending_ns.append(np.full(len(batch), sent_ns, dtype=np.int64))
+        self.updates += len(batch)
+        if sum(len(b) for b in self._pending) >= self.cfg.batch_updates:
+            self._publish_if_due(force=True)
+
+    def _publish_if_due(self, force: bool) -> None:
+        if not self._pending:
+            return
+        if not force and time.monotonic() - self._pending_since < self.cfg.max_batch_delay_s:
+            return
+        batch = CentrelineBatch.concatenate(self._pending)
+        source_ns = np.concatenate(self._pending_ns)
+        self._pending, self._pending_ns = [], []
+        for start in range(0, len(batch), self.cfg.batch_updates):
+            part = slice(start, start + self.cfg.batch_updates)
+            self._lines_pub.put(CentrelineMessage.from_batch(
+                batch.select(part), source=self.name, seq=self._seq_out, units=self.units, source_ns=source_ns[part]))
+            self._seq_out += 1
+
+    def _status(self, state: str, window: dict[str, float], now: float, lag_s: float) -> TrackerStatus:
+        elapsed = max(now - window["t"], 1e-9)
+        return TrackerStatus(
+            source=self.name, state=state, events_per_s=(self.events - window["events"]) / elapsed,
+            updates_per_s=(self.updates - window["updates"]) / elapsed, lag_s=lag_s, packets=self.packets,
+            missing_packets=self.missing_packets, malformed_packets=self.malformed_packets,
+        )

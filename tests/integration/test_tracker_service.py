@@ -1,0 +1,74 @@
+"""A replayed file through camera -> Zenoh -> tracker gives the same centrelines as offline reconstruct."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.core.tracker import Tracker
+from flagtrack.daemon.schema import CentrelineMessage, TrackerStatus
+from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
+from flagtrack.daemon.services.tracker import TrackerService, TrackerServiceConfig
+from flagtrack.daemon.tracking_config import TrackingConfig
+from flagtrack.daemon.transport import Bus, BusConfig
+from flagtrack.drivers.camera.replay import ReplayCamera, ReplayConfig
+from flagtrack.drivers.formats import open_events, write_events
+from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
+from tests.integration.test_transport import free_port, wait_for
+
+FLAG = WavyFlag(length=200.0, root=(100.0, 240.0), frequency_hz=20.0)
+CONFIG = TrackingConfig(root=FLAG.root, length=FLAG.length, tau_s=2.5e-4)
+
+
+def offline(path: Path, config: TrackingConfig) -> CentrelineBatch:
+    tracker = Tracker(config.tracker_params(), sensor_size=(640, 480))
+    with open_events(path) as reader:
+        batches = [tracker.feed(chunk.events) for chunk in reader]
+    return CentrelineBatch.concatenate([*batches, tracker.finish()])
+
+
+def live(path: Path, config: TrackingConfig, speed: float = 0.0) -> tuple[CentrelineBatch, list, TrackerService]:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    params = config.tracker_params()
+    with Bus(BusConfig(namespace="flagtrack/trk", listen=(endpoint,))) as trk_bus, \
+            Bus(BusConfig(namespace="flagtrack/trk", connect=(endpoint,))) as cam_bus:
+        lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000)
+        status = cam_bus.subscribe(cam_bus.keys.tracker_status(), TrackerStatus)
+        service = TrackerService(trk_bus, TrackerServiceConfig(status_interval_s=0.2),
+                                 lambda: Tracker(params, sensor_size=(640, 480)))
+        stop = threading.Event()
+        thread = threading.Thread(target=service.run, args=(stop,))
+        thread.start()
+        time.sleep(0.4)
+        CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(ReplayConfig(path, speed=speed))).run(threading.Event())
+        assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
+        messages = []
+        while (msg := lines.recv(timeout_s=1.0)) is not None:
+            messages.append(msg)
+        stop.set()
+        thread.join(10)
+        statuses = []
+        while (s := status.recv(timeout_s=0.5)) is not None:
+            statuses.append(s)
+    assert [m.seq for m in messages] == list(range(len(messages)))
+    return CentrelineBatch.concatenate([m.batch() for m in messages]), statuses, service
+
+
+@pytest.mark.parametrize("method", ["robust", "paper"])
+def test_replay_through_the_bus_equals_offline_reconstruct(tmp_path: Path, method: str) -> None:
+    events = np.concatenate(list(line_events(FLAG, 0, 150_000, 640, 480, QuickLineParams(noise_rate_hz=2e5))))
+    path = tmp_path / "flag.raw"
+    write_events(path, events, width=640, height=480, encoding="evt3")
+    config = CONFIG.with_overrides(method=__import__("flagtrack.daemon.tracking_config", fromlist=["Method"]).Method(method))
+    want = offline(path, config)
+    got, statuses, service = live(path, config)
+    assert len(want) > 500 and len(got) == len(want)
+    for name in ("t_s", "x", "y", "joints_x", "joints_y", "delta_rms", "n_events"):
+        np.testing.assert_allclose(getattr(got, name), getattr(want, name), rtol=0, atol=1e-9, err_msg=name)
+    assert service.missing_packets == 0 and service.malformed_packets == 0
+    assert statuses[-1].state == "stopped" and statuses[-1].packets == service.packets
