@@ -112,6 +112,9 @@ def _convert(hint: Any, value: Any, *, path: str | None, key: str) -> Any:
     if origin in (typing.Union, types.UnionType):
         if value is None and type(None) in args:
             return None
+        options = [a for a in args if a is not type(None)]
+        if len(options) == 1:  # Optional[X]: X's own error says most
+            return _convert(options[0], value, path=path, key=key)
         errors = []
         for arg in (a for a in args if a is not type(None)):
             try:

@@ -51,7 +51,7 @@ def test_nested_values_are_converted() -> None:
         ({"name": "a", "inner": {"joints": True}}, "inner.joints", "expected int"),
         ({"name": "a", "mode": "medium"}, "mode", "one of"),
         ({"name": "a", "root": [1]}, "root", "expected 2 values"),
-        ({"name": "a", "limit": "x"}, "limit", "does not fit"),
+        ({"name": "a", "limit": "x"}, "limit", "expected float"),
         ({"name": "a", "inner": {"joints": 0}}, None, "at least 1"),
     ],
 )
