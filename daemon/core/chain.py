@@ -32,9 +32,9 @@ class ChainParams:
         alpha: search radius parameter, the area of link k spans radii (1 +- alpha) r_k, 0 < alpha < 1.
         angle_limit_deg: half-angle of each search arc around the link's previous direction, degrees.
         min_events: fewest events in an area that update its link (the paper: 1).
-        refine_deg: if set, a second pass re-centres the arc on the first mean with this half-angle
-            (degrees) and takes the mean of the events there (robust to stray events); ``None``: the
-            paper's single mean.
+        refine_deg: if set, the mean of the area's events is only a pilot: the link takes the circular
+            mean of the area's events within this many degrees of it (robust to stray events);
+            ``None``: the paper's single mean.
     """
 
     root: tuple[float, float]
@@ -111,6 +111,7 @@ class AreaGeometry:
     r2_max: np.ndarray
     cos_limit_signed_sq: float
     cos_refine_signed_sq: float
+    half_angle_rad: float
     bucket_width: float
     n_buckets: int
 
@@ -125,6 +126,7 @@ class AreaGeometry:
             r2_max=((1 + params.alpha) * lengths) ** 2,
             cos_limit_signed_sq=cos_limit * abs(cos_limit),
             cos_refine_signed_sq=cos_refine * abs(cos_refine),
+            half_angle_rad=math.radians(params.angle_limit_deg),
             bucket_width=float(lengths.min()) / 4,
             n_buckets=int(math.ceil((params.length + 2 * (1 + params.alpha) * lengths.max()) / (lengths.min() / 4))) + 1,
         )
@@ -153,5 +155,5 @@ def update_chain(state: ChainState, x: np.ndarray, y: np.ndarray, params: ChainP
     counts = np.zeros(params.n_joints, dtype=np.int64)
     update_sorted(sorted_x, sorted_y, offsets, 1.0 / geo.bucket_width, root_x, root_y, angles, geo.lengths,
                   np.sqrt(geo.r2_max), geo.r2_min, geo.r2_max, geo.cos_limit_signed_sq, geo.cos_refine_signed_sq,
-                  params.min_events, np.empty((params.n_joints, 4)), jx, jy, counts)
+                  geo.half_angle_rad, params.min_events, np.empty((params.n_joints, 6)), jx, jy, counts)
     return ChainState(angles), counts

@@ -17,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-_NEVER = np.int64(-(1 << 62))
+_NEVER = np.int32(-(1 << 31) + 1)  # "never fired", in the int32 map of times relative to a base
+_REBASE_US = 1 << 30  # move the base forward when times get this far from it (~18 minutes)
 
 
 @dataclass(frozen=True)
@@ -37,8 +38,8 @@ class DenoiseParams:
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _fired_recently(last: np.ndarray, stride: int, x: int, y: int, t: int, window_us: int) -> bool:
-    """Whether a neighbour of pixel (x, y) fired within ``window_us`` before ``t``; records ``t``."""
+def _fired_recently(last: np.ndarray, stride: int, x: int, y: int, t_rel: np.int32, window_us: np.int32) -> bool:
+    """Whether a neighbour of pixel (x, y) fired within ``window_us`` before ``t_rel``; records ``t_rel``."""
     row = np.uint64(stride)
     one = np.uint64(1)
     c = (np.uint64(y) + one) * row + np.uint64(x) + one
@@ -46,55 +47,64 @@ def _fired_recently(last: np.ndarray, stride: int, x: int, y: int, t: int, windo
     dn = c + row
     recent = max(max(max(last[up - one], last[up]), max(last[up + one], last[c - one])),
                  max(max(last[c + one], last[dn - one]), max(last[dn], last[dn + one])))
-    last[c] = t
-    return recent >= t - window_us
+    last[c] = t_rel
+    return recent >= t_rel - window_us
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def filter_and_convert(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, stride: int, height: int,
-                       window_us: int, out_t: np.ndarray, out_x: np.ndarray, out_y: np.ndarray, start: int,
-                       first: int) -> tuple[int, int]:
+def scan_chunk(t: np.ndarray, x: np.ndarray, y: np.ndarray, latest: int) -> tuple[bool, int, int, int]:
+    """(times never decrease from ``latest`` on, latest time, largest x, largest y) of a chunk."""
+    ordered = True
+    top, max_x, max_y = latest, 0, 0
+    for i in range(len(t)):
+        ti = np.int64(t[i])
+        ordered &= ti >= top
+        top = max(top, ti)
+        max_x = max(max_x, np.int64(x[i]))
+        max_y = max(max_y, np.int64(y[i]))
+    return ordered, top, max_x, max_y
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def filter_and_convert(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, stride: int, base_us: int,
+                       window_us: int, out_t: np.ndarray, out_x: np.ndarray, out_y: np.ndarray, start: int) -> int:
     """Filter events through the time map ``last`` and append the kept ones as float coordinates.
 
     Args:
-        t, x, y: the events (may be strided views of an event array); x < stride - 2.
-        last: flat ((height + 2) * stride,) int64 time of each pixel's last event, updated; pixel
-            (x, y) is ``last[(y + 1) * stride + x + 1]`` (a one-pixel border that never fires).
-        stride, height: width + 2 and height of the map.
+        t, x, y: the events (may be strided views of an event array), inside the map.
+        last: flat ((height + 2) * stride,) int32 time (µs after ``base_us``) of each pixel's last
+            event, updated; pixel (x, y) is ``last[(y + 1) * stride + x + 1]`` (a one-pixel border
+            that never fires). Times must stay within 2^31 µs of the base.
+        stride: width + 2.
+        base_us: time origin of the map.
         window_us: the filter window, µs.
         out_t, out_x, out_y: output buffers, written from index ``start``.
-        first: index of the first event to take.
 
     Returns:
-        (index after the last written event, index of the first event not taken: len(t), or the
-        first event outside the map, which must grow before calling again from there).
+        The index after the last written event.
     """
     j = start
-    width = stride - 2
-    for i in range(first, len(t)):
-        if (x[i] >= width) | (y[i] >= height):
-            return j, i
+    window = np.int32(window_us)
+    for i in range(len(t)):
         ti = np.int64(t[i])
-        keep = _fired_recently(last, stride, x[i], y[i], ti, window_us)
+        keep = _fired_recently(last, stride, x[i], y[i], np.int32(ti - base_us), window)
         out_t[j] = ti  # written always, kept by advancing j: no branch
         out_x[j] = x[i]
         out_y[j] = y[i]
         j += 1 if keep else 0
-    return j, len(t)
+    return j
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def filter_indices(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, stride: int, height: int,
-                   window_us: int, out_index: np.ndarray, start: int, first: int) -> tuple[int, int]:
-    """Like :func:`filter_and_convert`, writing the indices of the kept events."""
-    j = start
-    width = stride - 2
-    for i in range(first, len(t)):
-        if (x[i] >= width) | (y[i] >= height):
-            return j, i
+def filter_indices(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, stride: int, base_us: int,
+                   window_us: int, out_index: np.ndarray) -> int:
+    """Like :func:`filter_and_convert`, writing the indices of the kept events; returns their number."""
+    j = 0
+    window = np.int32(window_us)
+    for i in range(len(t)):
         out_index[j] = i
-        j += 1 if _fired_recently(last, stride, x[i], y[i], np.int64(t[i]), window_us) else 0
-    return j, len(t)
+        j += 1 if _fired_recently(last, stride, x[i], y[i], np.int32(np.int64(t[i]) - base_us), window) else 0
+    return j
 
 
 class BackgroundActivityFilter:
@@ -108,51 +118,62 @@ class BackgroundActivityFilter:
     def __init__(self, params: DenoiseParams | None, width: int = 0, height: int = 0) -> None:
         self.params = params
         self._width, self._height = (width, height) if params else (0, 0)
-        self._last = np.full((self._height + 2) * (self._width + 2), _NEVER, dtype=np.int64)
+        self._last = np.full((self._height + 2) * (self._width + 2), _NEVER, dtype=np.int32)
+        self._base_us: int | None = None
 
-    def _fit(self, events: np.ndarray) -> None:
-        """Grow the time map so that every event's pixel fits (kept times are preserved)."""
-        if len(events) == 0:
-            return
-        width = max(self._width, int(events["x"].max()) + 1)
-        height = max(self._height, int(events["y"].max()) + 1)
+    def _fit(self, max_x: int, max_y: int) -> None:
+        """Grow the time map so that pixel (max_x, max_y) fits (kept times are preserved)."""
+        width, height = max(self._width, max_x + 1), max(self._height, max_y + 1)
         if (width, height) != (self._width, self._height):
-            grown = np.full((height + 2, width + 2), _NEVER, dtype=np.int64)
+            grown = np.full((height + 2, width + 2), _NEVER, dtype=np.int32)
             grown[:self._height + 2, :self._width + 2] = self._last.reshape(self._height + 2, self._width + 2)
             self._last = grown.ravel()
             self._width, self._height = width, height
 
+    def _prepare(self, events: np.ndarray, latest: int) -> tuple[bool, int]:
+        """Fit the map and its time base to a chunk; return (in time order, latest time)."""
+        ordered, latest, max_x, max_y = scan_chunk(events["t"], events["x"], events["y"], latest)
+        if self.params is not None:
+            self._fit(max_x, max_y)
+            t0, t1 = int(events["t"][0]), latest
+            if self._base_us is None:
+                self._base_us = t0
+            elif max(abs(t1 - self._base_us), abs(t0 - self._base_us)) >= _REBASE_US:
+                shift = t0 - self._base_us
+                self._last = np.maximum(self._last.astype(np.int64) - shift, _NEVER).astype(np.int32)
+                self._base_us = t0
+        return ordered, latest
+
     def filter_into(self, events: np.ndarray, out_t: np.ndarray, out_x: np.ndarray, out_y: np.ndarray,
-                    start: int) -> int:
+                    start: int, latest_us: int = -(1 << 62)) -> tuple[int, bool, int]:
         """Append t, x, y of the kept events of ``events`` (EVENT_DTYPE) to the buffers from ``start``.
 
+        Args:
+            latest_us: latest event time seen before this chunk (for the order check).
+
         Returns:
-            The index after the last written event.
+            (index after the last written event, whether the chunk continues the time order, latest
+            event time).
         """
-        if self.params is None:
-            return _copy_into(events["t"], events["x"], events["y"], out_t, out_x, out_y, start)
+        if len(events) == 0:
+            return start, True, latest_us
+        ordered, latest = self._prepare(events, latest_us)
         t, x, y = events["t"], events["x"], events["y"]
-        end, stop = filter_and_convert(t, x, y, self._last, self._width + 2, self._height, self.params.window_us,
-                                       out_t, out_x, out_y, start, 0)
-        while stop < len(events):
-            self._fit(events[stop:])
-            end, stop = filter_and_convert(t, x, y, self._last, self._width + 2, self._height,
-                                           self.params.window_us, out_t, out_x, out_y, end, stop)
-        return end
+        if self.params is None:
+            return _copy_into(t, x, y, out_t, out_x, out_y, start), ordered, latest
+        end = filter_and_convert(t, x, y, self._last, self._width + 2, self._base_us, self.params.window_us,
+                                 out_t, out_x, out_y, start)
+        return end, ordered, latest
 
     def keep_mask(self, events: np.ndarray) -> np.ndarray:
         """Boolean (n,) mask of the events the filter keeps (the filter state advances)."""
         mask = np.ones(len(events), dtype=bool)
         if self.params is None or len(events) == 0:
             return mask
-        t, x, y = events["t"], events["x"], events["y"]
+        self._prepare(events, -(1 << 62))
         index = np.empty(len(events), dtype=np.int64)
-        end, stop = filter_indices(t, x, y, self._last, self._width + 2, self._height, self.params.window_us,
-                                   index, 0, 0)
-        while stop < len(events):
-            self._fit(events[stop:])
-            end, stop = filter_indices(t, x, y, self._last, self._width + 2, self._height, self.params.window_us,
-                                       index, end, stop)
+        end = filter_indices(events["t"], events["x"], events["y"], self._last, self._width + 2, self._base_us,
+                             self.params.window_us, index)
         mask[:] = False
         mask[index[:end]] = True
         return mask

@@ -11,6 +11,7 @@ angles are the whole state carried between calls.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -20,12 +21,13 @@ from flagtrack.daemon.core.chain import AreaGeometry, ChainParams, ChainState
 from flagtrack.daemon.core.denoise import BackgroundActivityFilter, DenoiseParams
 from flagtrack.daemon.core.mapping import PointMapping
 from flagtrack.daemon.core.smoothing import REL_TOL, n_samples
-from flagtrack.daemon.core.kernels import run_updates, time_order
+from flagtrack.daemon.core.kernels import run_updates
 from flagtrack.daemon.core.windows import UpdateClock, WindowSchedule
 
 log = logging.getLogger(__name__)
 
 _BATCH_UPDATES = 4096  # updates per compiled call (bounds the output arrays)
+_DELTA_GROUP = 4  # rho buckets (of r/4) per Delta_RMS group: about one link length
 
 
 @dataclass(frozen=True)
@@ -89,7 +91,7 @@ class _Buffer:
                 setattr(self, name, new)
 
     def drop_before(self, t_us: float) -> None:
-        cut = int(np.searchsorted(self.t[:self.n], t_us, side="left"))
+        cut = int(np.searchsorted(self.t[:self.n], np.int64(math.ceil(t_us)), side="left"))
         if cut:
             keep = self.n - cut
             for arr in (self.t, self.x, self.y):
@@ -134,15 +136,11 @@ class Tracker:
         if self._finished:
             raise RuntimeError("feed() after finish()")
         self._ingest(events)
-        if self._clock is None:
-            return self._empty()
         return self._run(self._t_max_us, None)
 
     def finish(self) -> CentrelineBatch:
         """End of stream: return the remaining updates whose windows started before the last event."""
         self._finished = True
-        if self._clock is None:
-            return self._empty()
         return self._run(self._t_max_us, self._t_max_us)
 
     def _ingest(self, events: np.ndarray) -> None:
@@ -156,13 +154,12 @@ class Tracker:
         buf = self._buffer
         buf.reserve(n_in)
         start = buf.n
-        end = self._filter.filter_into(events, buf.t, buf.x, buf.y, start)
+        end, ordered, t_max = self._filter.filter_into(events, buf.t, buf.x, buf.y, start, self._t_max_us)
         if self._mapping is not None and end > start:
             mx, my = self._mapping.map(buf.x[start:end], buf.y[start:end])
             buf.x[start:end] = mx
             buf.y[start:end] = my
         buf.n = end
-        ordered, t_max = time_order(events["t"], self._t_max_us)
         if not ordered:
             self._sort_buffer(events["t"])
         stats.events_in += n_in
@@ -181,14 +178,16 @@ class Tracker:
             arr[:buf.n] = arr[:buf.n][order]
 
     def _run(self, complete_before_us: int, started_before_us: int | None) -> CentrelineBatch:
-        assert self._clock is not None
+        clock = self._clock
+        if clock is None:
+            return self._empty()
         batches = []
         while True:
-            t_us, lo_us, hi_us = self._clock.take(complete_before_us, started_before_us, _BATCH_UPDATES)
+            t_us, lo_us, hi_us = clock.take(complete_before_us, started_before_us, _BATCH_UPDATES)
             if len(t_us) == 0:
                 break
             batches.append(self._updates(t_us, lo_us, hi_us))
-        self._buffer.drop_before(self._clock.next_window_start_us())
+        self._buffer.drop_before(clock.next_window_start_us())
         if not batches:
             return self._empty()
         return batches[0] if len(batches) == 1 else CentrelineBatch.concatenate(batches)
@@ -204,8 +203,8 @@ class Tracker:
         delta, used = np.empty(k), np.empty(k, dtype=np.int64)
         run_updates(buf.x, buf.y, lo_idx, hi_idx, float(chain.root[0]), float(chain.root[1]), self._angles,
                     geo.lengths, geo.r2_min, geo.r2_max, geo.cos_limit_signed_sq, geo.cos_refine_signed_sq,
-                    chain.min_events, geo.bucket_width, geo.n_buckets, 4, float(chain.length), self.params.rel_tol,
-                    jx, jy, sx, sy, delta, used)
+                    geo.half_angle_rad, chain.min_events, geo.bucket_width, geo.n_buckets, _DELTA_GROUP,
+                    float(chain.length), self.params.rel_tol, jx, jy, sx, sy, delta, used)
         self.stats.updates += k
         return CentrelineBatch(t_s=t_us * 1e-6, s=self.s, x=sx, y=sy, joints_x=jx, joints_y=jy,
                                delta_rms=delta, n_events=used)

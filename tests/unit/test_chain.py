@@ -136,3 +136,20 @@ def test_given_link_lengths() -> None:
 def test_params_are_checked(kwargs: dict, words: str) -> None:
     with pytest.raises(ValueError, match=words):
         ChainParams(**{"root": (0.0, 0.0), "length": 10.0, **kwargs})
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_area_distance_to_root_bounds_hold(seed: int) -> None:
+    from flagtrack.daemon.core.kernels import sector_rho_range
+
+    rng = np.random.default_rng(seed)
+    for _ in range(200):
+        px, py, theta = *rng.uniform(-30, 30, 2), rng.uniform(-np.pi, np.pi)
+        r_in, r_out = sorted(rng.uniform(0.5, 25, 2))
+        half = rng.choice([0.3, 1.0, np.pi / 2, 2.5, np.pi])
+        lo, hi = sector_rho_range(px, py, np.cos(theta), np.sin(theta), r_in, r_out, half, 0.0, 0.0)
+        rho = rng.uniform(r_in, r_out, 4000)
+        phi = theta + rng.uniform(-half, half, 4000)
+        dist = np.hypot(px + rho * np.cos(phi), py + rho * np.sin(phi))
+        assert lo - 1e-9 <= dist.min() and dist.max() <= hi + 1e-9
+        assert dist.min() - lo < 0.05 * r_out + 0.5  # and the bound is tight
