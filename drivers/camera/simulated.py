@@ -1,0 +1,169 @@
+"""The simulated camera of the digital twin: a flag whose flutter follows the wind speed, as events.
+
+The flag's motion comes from :class:`~flagtrack.drivers.sim.flutter.FlutterModel` (still below
+onset, flapping above, with hysteresis) driven by a speed source (the simulated tunnel's readback
+when the rig has one, else a fixed speed). Events are drawn where the laser line sweeps across
+pixels (:mod:`flagtrack.drivers.sim.quickline`: ON on the leading edge, OFF on the trailing one)
+plus uniform background activity, in real time (or at ``time_scale`` times real time).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from flagtrack.daemon.core.events import empty_triggers
+from flagtrack.daemon.errors import DriverError
+from flagtrack.drivers.camera.base import CameraData, CameraInfo
+from flagtrack.drivers.sim.flutter import FlutterModel, FlutterParams, FlutterState
+from flagtrack.drivers.sim.kinematics import FlagKinematics, with_peak_to_peak
+from flagtrack.drivers.sim.quickline import QuickLineParams, line_events
+
+_REFERENCE_AMP_OVER_L = 0.3  # the base kinematics is solved for this A/L; others scale its angle wave
+
+
+@dataclass(frozen=True)
+class SimulatedCameraConfig:
+    """The simulated rig seen by the camera (pixels).
+
+    Attributes:
+        width, height: sensor size.
+        length_px, root_px, direction_deg: the flag on the sensor.
+        wavelength_over_l, w_travel: shape of the flapping wave.
+        flutter: flutter curve (onset/decay speeds, amplitude, frequency).
+        speed_mps: wind speed when no speed source is connected.
+        still_amp_over_l: residual motion of a still flag (a few events from it).
+        events_per_px2: events per pixel area swept by the line (sets the event rate).
+        line_width_px: spread of events across the line.
+        noise_rate_hz: background events per second over the whole sensor.
+        slice_us: camera time generated per read (events are released at its end).
+        time_scale: camera seconds per wall second (1 = real time).
+        seed: random seed of the twin.
+    """
+
+    width: int = 640
+    height: int = 480
+    length_px: float = 300.0
+    root_px: tuple[float, float] = (150.0, 240.0)
+    direction_deg: float = 0.0
+    wavelength_over_l: float = 2.0
+    w_travel: float = 0.7
+    flutter: FlutterParams = field(default_factory=FlutterParams)
+    speed_mps: float = 0.0
+    still_amp_over_l: float = 0.002
+    events_per_px2: float = 2.0
+    line_width_px: float = 0.8
+    noise_rate_hz: float = 20_000.0
+    slice_us: int = 4000
+    time_scale: float = 1.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.slice_us < 50 or self.time_scale <= 0:
+            raise ValueError("slice_us must be >= 50 and time_scale > 0")
+
+
+@dataclass(frozen=True)
+class _TwinSlice:
+    """The flag between two flutter states: phase and amplitude linear in time (LineKinematics)."""
+
+    kinematics: FlagKinematics
+    t0_s: float
+    t1_s: float
+    start: FlutterState
+    end: FlutterState
+    still_amp_over_l: float
+
+    @property
+    def length(self) -> float:
+        return self.kinematics.length
+
+    def positions(self, t_s: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        frac = np.clip((np.asarray(t_s, dtype=np.float64) - self.t0_s) / max(self.t1_s - self.t0_s, 1e-12), 0, 1)
+        phase = self.start.phase_rad + frac * (self.end.phase_rad - self.start.phase_rad)
+        amp = max(0.5 * (self.start.amp_over_l + self.end.amp_over_l), self.still_amp_over_l)  # slow: one per slice
+        return self.kinematics.positions_at_phase(phase, s, amp_scale=amp / _REFERENCE_AMP_OVER_L, n_fine=64)
+
+
+class SimulatedCamera:
+    """A :class:`~flagtrack.drivers.camera.base.Camera` of the digital twin.
+
+    Args:
+        cfg: the simulated rig.
+        speed_source: returns the current wind speed (m/s); default: ``cfg.speed_mps``.
+    """
+
+    def __init__(self, cfg: SimulatedCameraConfig, speed_source: Callable[[], float] | None = None) -> None:
+        self.cfg = cfg
+        self.speed_source = speed_source or (lambda: cfg.speed_mps)
+        base = FlagKinematics(length=cfg.length_px, root=cfg.root_px, direction_deg=cfg.direction_deg,
+                              wavelength_over_l=cfg.wavelength_over_l, w_travel=cfg.w_travel,
+                              w_standing=1.0 - cfg.w_travel)
+        solved = with_peak_to_peak(base, 2 * _REFERENCE_AMP_OVER_L)
+        if solved is None:
+            raise DriverError(f"simulated flag cannot reach A/L {_REFERENCE_AMP_OVER_L}", device="simulated camera")
+        self.kinematics = solved
+        self.flutter = FlutterModel(cfg.flutter, seed=cfg.seed)
+        self.line = QuickLineParams(events_per_px2=cfg.events_per_px2, line_width_px=cfg.line_width_px,
+                                    noise_rate_hz=cfg.noise_rate_hz, n_s=100, slice_us=100)
+        self._t_us = 0
+        self._wall0: float | None = None
+        self._slice = 0
+
+    @property
+    def state(self) -> FlutterState:
+        """The flag's current flutter state (flapping, A/L, frequency)."""
+        return self.flutter.state
+
+    def open(self) -> CameraInfo:
+        self._wall0 = time.monotonic()
+        flutter = self.flutter.params
+        return CameraInfo("simulated", self.cfg.width, self.cfg.height, "evt3", serial="digital-twin",
+                          settings={"onset_speed_mps": flutter.onset_speed_mps,
+                                    "decay_speed_mps": flutter.decay_speed_mps,
+                                    "noise_rate_hz": self.cfg.noise_rate_hz, "time_scale": self.cfg.time_scale})
+
+    def read(self, timeout_s: float) -> CameraData | None:
+        if self._wall0 is None:
+            raise DriverError("simulated camera is not open", device="simulated camera")
+        t1_us = self._t_us + self.cfg.slice_us
+        due = self._wall0 + t1_us * 1e-6 / self.cfg.time_scale
+        wait = due - time.monotonic()
+        if wait > timeout_s:
+            time.sleep(max(timeout_s, 0.0))
+            return None
+        if wait > 0:
+            time.sleep(wait)
+        return self._generate(t1_us)
+
+    def _generate(self, t1_us: int) -> CameraData:
+        t0_us = self._t_us
+        start = self.flutter.state
+        end = self.flutter.advance(float(self.speed_source()), (t1_us - t0_us) * 1e-6)
+        twin = _TwinSlice(self.kinematics, t0_us * 1e-6, t1_us * 1e-6, start, end, self.cfg.still_amp_over_l)
+        chunks = list(line_events(twin, t0_us, t1_us, self.cfg.width, self.cfg.height, self.line,
+                                  seed=self.cfg.seed * 1_000_003 + self._slice, chunk_us=t1_us - t0_us))
+        self._slice += 1
+        self._t_us = t1_us
+        events = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
+        return CameraData(events, empty_triggers(), time.time_ns(), t_until_us=t1_us)
+
+    def close(self) -> None:
+        self._wall0 = None
+
+
+def fast_forward(camera: SimulatedCamera, duration_s: float) -> list[np.ndarray]:
+    """Generate ``duration_s`` of camera time as fast as possible (tests and benchmarks)."""
+    if camera._wall0 is None:
+        camera.open()
+    out = []
+    stop_us = camera._t_us + int(duration_s * 1e6)
+    while camera._t_us < stop_us:
+        out.append(camera._generate(camera._t_us + camera.cfg.slice_us).events)
+    return out
+
+
+__all__ = ["SimulatedCamera", "SimulatedCameraConfig", "fast_forward", "replace"]

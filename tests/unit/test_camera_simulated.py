@@ -1,0 +1,50 @@
+"""The simulated camera flaps above onset, stays still below, with hysteresis, and its events are on the flag."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flagtrack.drivers.camera.simulated import SimulatedCamera, SimulatedCameraConfig, fast_forward
+from flagtrack.drivers.sim.flutter import FlutterParams
+
+FLUTTER = FlutterParams(onset_speed_mps=5.0, decay_speed_mps=4.5, tau_amp_s=0.05)
+
+
+def rate_mev_s(camera: SimulatedCamera, duration_s: float) -> float:
+    return sum(len(e) for e in fast_forward(camera, duration_s)) / duration_s / 1e6
+
+
+def test_rate_jumps_at_onset_and_drops_below_decay_with_hysteresis() -> None:
+    speed = {"mps": 4.0}
+    camera = SimulatedCamera(SimulatedCameraConfig(flutter=FLUTTER), speed_source=lambda: speed["mps"])
+    still = rate_mev_s(camera, 0.3)
+    speed["mps"] = 6.0
+    rate_mev_s(camera, 0.3)  # amplitude settles
+    flapping = rate_mev_s(camera, 0.3)
+    speed["mps"] = 4.8  # between decay and onset: stays flapping on the way down
+    between_down = rate_mev_s(camera, 0.5)
+    speed["mps"] = 4.0
+    rate_mev_s(camera, 0.3)
+    stopped = rate_mev_s(camera, 0.3)
+    speed["mps"] = 4.8  # between decay and onset on the way up: stays still
+    between_up = rate_mev_s(camera, 0.5)
+    assert flapping > 10 * still and between_down > 10 * still
+    assert stopped < 2 * still and between_up < 2 * still
+    assert camera.state.flapping is False
+
+
+def test_events_lie_on_the_twin_flag() -> None:
+    camera = SimulatedCamera(SimulatedCameraConfig(flutter=FLUTTER, speed_mps=7.0, noise_rate_hz=0.0, slice_us=200))
+    fast_forward(camera, 0.4)
+    state_before = camera.state
+    events = np.concatenate(fast_forward(camera, 0.0002))
+    state_after = camera.state
+    assert len(events) > 50
+    s = np.linspace(0, camera.kinematics.length, 801)
+    phase = 0.5 * (state_before.phase_rad + state_after.phase_rad)
+    amp = 0.5 * (state_before.amp_over_l + state_after.amp_over_l) / 0.3
+    x, y = camera.kinematics.positions_at_phase(np.array([phase]), s, amp_scale=amp)
+    sample = events[:: max(1, len(events) // 300)]
+    distance = np.min(np.hypot(x[0][None, :] - sample["x"][:, None], y[0][None, :] - sample["y"][:, None]), axis=1)
+    # the tip moves up to ~2 px in the 0.2 ms window; the line spreads events by ~1 px
+    assert np.median(distance) < 1.5 and np.percentile(distance, 90) < 3.0
