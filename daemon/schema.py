@@ -172,6 +172,7 @@ class CentrelineMessage:
     """A batch of tracker updates: t, joints, smoothed centreline, tip, Δ_RMS, events used.
 
     ``source_ns`` (n_t,) is the ``sent_ns`` of the newest packet each update used (for latency).
+    ``final`` marks the last message of a stream (after the camera's end of stream).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.CENTRELINES
@@ -189,14 +190,15 @@ class CentrelineMessage:
     delta_rms: np.ndarray
     n_events: np.ndarray
     source_ns: np.ndarray
+    final: bool = False
 
     @classmethod
     def from_batch(
-        cls, batch: CentrelineBatch, *, source: str, seq: int, units: str, source_ns: np.ndarray
+        cls, batch: CentrelineBatch, *, source: str, seq: int, units: str, source_ns: np.ndarray, final: bool = False
     ) -> CentrelineMessage:
         """Wrap a tracker batch for the wire."""
         return cls(
-            source=source, seq=seq, units=units, t_s=batch.t_s, s=batch.s, x=batch.x, y=batch.y,
+            final=final, source=source, seq=seq, units=units, t_s=batch.t_s, s=batch.s, x=batch.x, y=batch.y,
             joints_x=batch.joints_x, joints_y=batch.joints_y, tip_x=batch.tip_x, tip_y=batch.tip_y,
             delta_rms=batch.delta_rms, n_events=batch.n_events, source_ns=np.asarray(source_ns, np.int64),
         )

@@ -159,20 +159,25 @@ class RecorderService:
 
     name = "recorder"
 
-    def __init__(self, bus: Bus, cfg: RecorderConfig, config_snapshot: dict[str, Any] | None = None) -> None:
+    def __init__(self, bus: Bus, cfg: RecorderConfig, config_snapshot: dict[str, Any] | None = None,
+                 exit_at_end_of_stream: bool = False) -> None:
         self.bus = bus
+        self.exit_at_end_of_stream = exit_at_end_of_stream
+        self._stream_ended = False
         self.cfg = cfg
         self.config_snapshot = config_snapshot or {}
         self.current: Recording | None = None
         self.finished: list[Path] = []
         self.lost_packets = 0
 
+        keys = bus.keys
+        self._packets = bus.subscribe(keys.camera_events(cfg.camera_id), EventPacket, capacity=cfg.max_queue_packets)
+        self._lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000)
+        self._commands = bus.subscribe(keys.recorder_command(), RecorderCommand, capacity=1000)
+
     def run(self, stop: threading.Event) -> None:
         keys = self.bus.keys
-        packets = self.bus.subscribe(keys.camera_events(self.cfg.camera_id), EventPacket,
-                                     capacity=self.cfg.max_queue_packets)
-        lines = self.bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000)
-        commands = self.bus.subscribe(keys.recorder_command(), RecorderCommand, capacity=1000)
+        packets, lines, commands = self._packets, self._lines, self._commands
         self.status_pub = self.bus.publisher(keys.recorder_status())
         self.bus.declare_alive(self.name)
         if self.cfg.path:
@@ -188,6 +193,8 @@ class RecorderService:
                     self._write_raw_packet(*item)
                     for item in packets.channel.drain():
                         self._write_raw_packet(*item)
+                if self._stream_ended and self.exit_at_end_of_stream:
+                    break
                 while (msg := lines.recv(timeout_s=0)) is not None:
                     if self.current is not None:
                         self.current.write_centrelines(msg)
@@ -237,15 +244,16 @@ class RecorderService:
         self._status("idle", recording=recording, request_id=request_id)
 
     def _write_raw_packet(self, key: str, payload: bytes) -> None:
-        if self.current is None:
-            return
         try:
             packet = decode(payload, EventPacket, key=key)
         except SchemaError as exc:
-            self.current.malformed += 1
+            if self.current is not None:
+                self.current.malformed += 1
             log.debug("recorder: %s", exc)
             return
-        self.current.write_packet(packet)
+        self._stream_ended |= packet.end_of_stream
+        if self.current is not None:
+            self.current.write_packet(packet)
 
     def _status(self, state: str, *, recording: Recording | None = None, message: str = "", request_id: str = "") -> None:
         rec = recording or self.current

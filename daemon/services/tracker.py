@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.core.events import empty_events
 from flagtrack.daemon.errors import FormatError
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, TrackerStatus
 from flagtrack.daemon.transport import Bus
@@ -37,6 +38,7 @@ class TrackerServiceConfig:
         max_batch_delay_s: publish a smaller batch after this long.
         status_interval_s: period of the status message.
         queue_packets: packets held while the tracker catches up (beyond: counted as dropped).
+        exit_at_end_of_stream: stop after the camera's end of stream (a replayed file).
     """
 
     camera_id: str = "cam0"
@@ -44,6 +46,7 @@ class TrackerServiceConfig:
     max_batch_delay_s: float = 0.002
     status_interval_s: float = 1.0
     queue_packets: int = 1_000_000
+    exit_at_end_of_stream: bool = False
 
 
 class TrackerService:
@@ -68,11 +71,12 @@ class TrackerService:
         self._pending_ns: list[np.ndarray] = []
         self._pending_since = 0.0
         self._seq_out = 0
+        self.packets_sub = bus.subscribe(bus.keys.camera_events(cfg.camera_id), EventPacket,
+                                         capacity=cfg.queue_packets)
 
     def run(self, stop: threading.Event) -> None:
         keys = self.bus.keys
-        packets = self.bus.subscribe(keys.camera_events(self.cfg.camera_id), EventPacket,
-                                     capacity=self.cfg.queue_packets)
+        packets = self.packets_sub
         self._lines_pub = self.bus.publisher(keys.centrelines(), block=True)
         status_pub = self.bus.publisher(keys.tracker_status())
         self.bus.declare_alive(self.name)
@@ -84,6 +88,8 @@ class TrackerService:
                 packet = packets.recv(timeout_s=self.cfg.max_batch_delay_s)
                 if packet is not None:
                     lag_s = self.handle(packet)
+                    if packet.end_of_stream and self.cfg.exit_at_end_of_stream:
+                        break
                 self._publish_if_due(force=False)
                 now = time.monotonic()
                 if now - last_status >= self.cfg.status_interval_s:
@@ -123,7 +129,7 @@ class TrackerService:
             self._next_seq = None
         self._add(batch, packet.sent_ns)
         if packet.end_of_stream:
-            self._publish_if_due(force=True)
+            self._publish_if_due(force=True, final=True)
         return max(0.0, time.time_ns() - packet.sent_ns) * 1e-9
 
     def _add(self, batch: CentrelineBatch, sent_ns: int) -> None:
@@ -137,18 +143,24 @@ class TrackerService:
         if sum(len(b) for b in self._pending) >= self.cfg.batch_updates:
             self._publish_if_due(force=True)
 
-    def _publish_if_due(self, force: bool) -> None:
-        if not self._pending:
+    def _publish_if_due(self, force: bool, final: bool = False) -> None:
+        """Publish the pending updates if the batch is full, old enough, or ``force``; ``final`` ends a stream."""
+        if not self._pending and not final:
             return
         if not force and time.monotonic() - self._pending_since < self.cfg.max_batch_delay_s:
             return
-        batch = CentrelineBatch.concatenate(self._pending)
-        source_ns = np.concatenate(self._pending_ns)
+        if self._pending:
+            batch = CentrelineBatch.concatenate(self._pending)
+            source_ns = np.concatenate(self._pending_ns)
+        else:
+            batch, source_ns = self.tracker.feed(empty_events()), np.zeros(0, dtype=np.int64)
         self._pending, self._pending_ns = [], []
-        for start in range(0, len(batch), self.cfg.batch_updates):
+        starts = list(range(0, len(batch), self.cfg.batch_updates)) or [0]
+        for start in starts:
             part = slice(start, start + self.cfg.batch_updates)
             self._lines_pub.put(CentrelineMessage.from_batch(
-                batch.select(part), source=self.name, seq=self._seq_out, units=self.units, source_ns=source_ns[part]))
+                batch.select(part), source=self.name, seq=self._seq_out, units=self.units, source_ns=source_ns[part],
+                final=final and start == starts[-1]))
             self._seq_out += 1
 
     def _status(self, state: str, window: dict[str, float], now: float, lag_s: float) -> TrackerStatus:

@@ -163,21 +163,23 @@ class ViewerService:
 
     name = "viewer"
 
-    def __init__(self, bus: Bus, cfg: ViewerConfig) -> None:
+    def __init__(self, bus: Bus, cfg: ViewerConfig, exit_after_final: bool = False) -> None:
         self.bus = bus
         self.cfg = cfg
+        self.exit_after_final = exit_after_final
         self.description = ""
         self.frames = 0
         self.updates = 0
+        keys = bus.keys
+        self.subs: dict[str, Any] = {
+            "centrelines": bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000),
+            "events": bus.subscribe(keys.camera_events(cfg.camera_id), EventPacket, capacity=100_000),
+            "rate": bus.subscribe(keys.event_rate(cfg.camera_id), EventRate, capacity=1000, ring=True),
+            "tunnel": bus.subscribe(keys.tunnel_state(), TunnelState, capacity=1000, ring=True),
+        }
 
     def run(self, stop: threading.Event) -> None:
-        keys = self.bus.keys
-        subs: dict[str, Any] = {
-            "centrelines": self.bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000),
-            "events": self.bus.subscribe(keys.camera_events(self.cfg.camera_id), EventPacket, capacity=100_000),
-            "rate": self.bus.subscribe(keys.event_rate(self.cfg.camera_id), EventRate, capacity=1000, ring=True),
-            "tunnel": self.bus.subscribe(keys.tunnel_state(), TunnelState, capacity=1000, ring=True),
-        }
+        subs = self.subs
         self.bus.declare_alive(self.name)
         rec, self.description = open_recording(self.cfg)
         log.info("viewer: %s", self.description)
@@ -185,9 +187,11 @@ class ViewerService:
         try:
             while not stop.is_set():
                 busy = False
+                final = False
                 while (msg := subs["centrelines"].recv(timeout_s=0)) is not None:
                     logger.centrelines(msg)
                     self.updates += len(msg.t_s)
+                    final |= msg.final
                     busy = True
                 while (packet := subs["events"].recv(timeout_s=0)) is not None:
                     try:
@@ -203,6 +207,8 @@ class ViewerService:
                 while (msg := subs["tunnel"].recv(timeout_s=0)) is not None:
                     logger.tunnel(msg)
                 self.frames += logger.frame(time.monotonic())
+                if final and self.exit_after_final:
+                    break
                 if not busy:
                     stop.wait(0.005)
         finally:

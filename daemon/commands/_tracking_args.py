@@ -1,0 +1,46 @@
+"""Tracker options shared by ``flagtrack reconstruct`` and ``flagtrack up --replay``."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.tracking_config import TrackingConfig
+
+log = logging.getLogger(__name__)
+
+
+def add_tracking_arguments(parser: argparse.ArgumentParser) -> None:
+    """The tracker flags; each overrides the config file's ``tracker:`` section."""
+    parser.add_argument("--root", type=float, nargs=2, metavar=("X", "Y"), help="root of the flag")
+    parser.add_argument("--length", type=float, metavar="L", help="flag length L")
+    parser.add_argument("--direction", type=float, metavar="DEG", help="rest direction, degrees (default 0)")
+    parser.add_argument("--joints", type=int, metavar="N", help="number of links N_j (default 10)")
+    parser.add_argument("--alpha", type=float, metavar="A", help="search radius parameter (default 0.6)")
+    parser.add_argument("--tau", type=float, metavar="S", help="update interval tau, s (default 0.00025)")
+    parser.add_argument("--dt", type=float, metavar="S", help="time increment dt, s (default tau)")
+    parser.add_argument("--ds", type=float, metavar="S", help="centreline step (default L/50)")
+    parser.add_argument("--t-start", type=float, metavar="S", help="first update time, s")
+    parser.add_argument("--t-stop", type=float, metavar="S", help="last update time, s")
+    parser.add_argument("--method", choices=("robust", "paper"), help="robust (default) or the paper's update")
+    parser.add_argument("--calibration", type=Path, metavar="CAL.yaml",
+                        help="pixel -> metre calibration (flagtrack calibrate); outputs are then in metres")
+
+
+def apply_tracking_arguments(config: TrackingConfig, args: argparse.Namespace) -> TrackingConfig:
+    """``config`` with the flags given on the command line applied."""
+    from flagtrack.daemon.tracking_config import Method
+
+    config = config.with_overrides(
+        root=tuple(args.root) if args.root else None, length=args.length, direction_deg=args.direction,
+        joints=args.joints, alpha=args.alpha, tau_s=args.tau, dt_s=args.dt, ds=args.ds,
+        t_start_s=args.t_start, t_stop_s=args.t_stop, method=Method(args.method) if args.method else None,
+        calibration=getattr(args, "calibration", None),
+    )
+    if (args.tau is not None or args.dt is not None) and config.schedule:
+        log.warning("--tau/--dt given: the config's schedule is ignored")
+        config = config.with_overrides(schedule=())
+    return config

@@ -1,0 +1,109 @@
+"""``flagtrack up``: run the rig's services in one process (Zenoh peer on loopback by default)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+from flagtrack.daemon.commands._tracking_args import add_tracking_arguments
+
+COMMAND = "up"
+HELP = "run the rig's services in one process (-c rig.yaml), or replay a file through them (--replay)"
+DESCRIPTION = """\
+Run camera, tracker, recorder and viewer (the `services:` of the rig config) in one process,
+talking over Zenoh (peer mode, loopback, unless the config's `bus:` says otherwise).
+
+  flagtrack up -c deploy/rig-sim.yaml
+  flagtrack up --replay run.raw --exit-at-eof --centrelines run.h5 --rrd run.rrd --root 102 240 --length 200
+
+With --replay, the file is played through camera adapter -> Zenoh -> tracker (same options and
+results as `flagtrack reconstruct`). The first Ctrl-C stops gracefully; a second one forces.
+"""
+
+log = logging.getLogger(__name__)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``flagtrack up``."""
+    parser.add_argument("-c", "--config", type=Path, help="rig config (YAML)")
+    parser.add_argument("--replay", type=Path, metavar="FILE", help="replay this recording as the camera")
+    parser.add_argument("--speed", type=float, default=1.0, help="replay speed factor (0: as fast as possible)")
+    parser.add_argument("--loop", action="store_true", help="replay in a loop")
+    parser.add_argument("--exit-at-eof", action="store_true", help="stop when the replayed file ends")
+    parser.add_argument("--centrelines", type=Path, metavar="OUT.h5", help="write the centrelines to this file")
+    parser.add_argument("--rrd", type=Path, metavar="OUT.rrd", help="write the Rerun view to this file (headless)")
+    parser.add_argument("--record", type=Path, metavar="BASE", help="record the camera to BASE.raw (+ .json)")
+    parser.add_argument("--shutdown-timeout", type=float, default=10.0, help="seconds to wait for services to stop")
+    add_tracking_arguments(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Build the rig from the config and flags, run it, report."""
+    rig, names = rig_from_args(args)
+    return run_rig(rig, names, exit_at_end_of_stream=args.exit_at_eof, centrelines=args.centrelines,
+                   shutdown_timeout_s=args.shutdown_timeout)
+
+
+def rig_from_args(args: argparse.Namespace):  # noqa: ANN201 - (RigConfig, list[str])
+    """The rig config of ``-c`` with the command-line overrides applied; the services to run."""
+    import dataclasses
+
+    from flagtrack.daemon.commands._tracking_args import apply_tracking_arguments
+    from flagtrack.daemon.errors import ConfigError
+    from flagtrack.daemon.rig import CameraConfig, RigConfig, load_rig
+    from flagtrack.drivers.camera.replay import ReplayConfig
+
+    if args.config is None and args.replay is None:
+        raise ConfigError("give a rig config (-c rig.yaml) or a recording to replay (--replay FILE)")
+    rig = load_rig(args.config) if args.config else RigConfig(services=("camera", "tracker"))
+    names = list(rig.services)
+    if args.replay is not None:
+        if not args.replay.is_file():
+            raise ConfigError(f"no such recording: {args.replay}", key="--replay")
+        camera = CameraConfig(id=rig.camera.id, adapter="replay", packet_us=rig.camera.packet_us,
+                              replay=ReplayConfig(args.replay, speed=args.speed, loop=args.loop))
+        rig = dataclasses.replace(rig, camera=camera)
+        for name in ("camera", "tracker"):
+            if name not in names:
+                names.append(name)
+    rig = dataclasses.replace(rig, tracker=apply_tracking_arguments(rig.tracker, args))
+    if args.rrd is not None:
+        rig = dataclasses.replace(rig, viewer=dataclasses.replace(rig.viewer, sink="rrd", rrd_path=args.rrd))
+        if "viewer" not in names:
+            names.append("viewer")
+    if args.record is not None:
+        rig = dataclasses.replace(rig, recorder=dataclasses.replace(rig.recorder, path=str(args.record)))
+        if "recorder" not in names:
+            names.append("recorder")
+    return rig, names
+
+
+def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centrelines: Path | None = None,  # noqa: ANN001
+            shutdown_timeout_s: float = 10.0) -> int:
+    """Open the bus, build and run the services until a signal, a failure or the end of the stream."""
+    from flagtrack.daemon.services.build import build_services, tracker_setup
+    from flagtrack.daemon.services.centreline_file import CentrelineFileService
+    from flagtrack.daemon.services.runner import run_services
+    from flagtrack.daemon.transport import Bus
+
+    if "tracker" in names:
+        tracker_setup(rig)  # bad tracker config: one clear line, before anything opens
+    with Bus(rig.bus_config) as bus:
+        services = build_services(rig, bus, names, exit_at_end_of_stream=exit_at_end_of_stream)
+        if centrelines is not None:
+            attrs = {**rig.tracker.attrs(), "input_file": str(rig.camera.replay.path) if rig.camera.replay else ""}
+            services.insert(0, CentrelineFileService(bus, centrelines, attrs, exit_after_final=exit_at_end_of_stream))
+        print(f"flagtrack up: {', '.join(s.name for s in services)} on {rig.bus_config.namespace}", file=sys.stderr)
+        report = run_services(services, shutdown_timeout_s=shutdown_timeout_s)
+    for name, exc in report.errors.items():
+        print(f"flagtrack up: {name} failed: {exc}", file=sys.stderr)
+    if report.abandoned:
+        print(f"flagtrack up: did not stop in time: {', '.join(report.abandoned)}", file=sys.stderr)
+    if centrelines is not None:
+        print(f"flagtrack up: centrelines in {centrelines}", file=sys.stderr)
+    for service in services:
+        if getattr(service, "description", ""):
+            print(f"flagtrack up: viewer {service.description}", file=sys.stderr)
+    return 1 if report.errors else (130 if report.signal_count else 0)

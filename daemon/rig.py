@@ -1,0 +1,110 @@
+"""The rig config: one YAML file describing the bus, the camera, the tracker, the recorder, the viewer,
+the tunnel and the supervisor, read once and checked before anything opens.
+
+Example (see ``deploy/rig-*.yaml``)::
+
+    rig: lab1                     # namespace flagtrack/lab1 unless bus.namespace says otherwise
+    bus: {listen: ["tcp/127.0.0.1:7447"]}
+    camera: {id: cam0, adapter: simulated, simulated: {speed_mps: 6}}
+    tracker: {root: [150, 240], length: 300, tau_s: 0.0003}
+    recorder: {directory: recordings}
+    viewer: {sink: rrd, rrd_path: live.rrd}
+    services: [camera, tracker, recorder, viewer]
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from flagtrack.daemon.config import from_mapping, load_yaml, to_mapping
+from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.services.recorder import RecorderConfig
+from flagtrack.daemon.services.tracker import TrackerServiceConfig
+from flagtrack.daemon.services.viewer import ViewerConfig
+from flagtrack.daemon.tracking_config import TrackingConfig
+from flagtrack.daemon.transport import BusConfig
+from flagtrack.drivers.camera.replay import ReplayConfig
+from flagtrack.drivers.camera.simulated import SimulatedCameraConfig
+from flagtrack.drivers.tunnel.config import TunnelConfig
+
+SERVICE_NAMES = ("camera", "tracker", "recorder", "viewer", "supervisor")
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """The camera and how its stream is cut.
+
+    Attributes:
+        id: camera name in key expressions.
+        adapter: ``replay`` (a file), ``simulated`` (digital twin), ``prophesee``, ``metavision``, ``inivation``.
+        packet_us, max_packet_events: packet size by time and by count.
+        rate_interval_s: camera time per event-rate statistic.
+        replay, simulated: settings of those adapters.
+        hardware: settings of a hardware adapter (see docs/cameras.md), passed to it as they are.
+    """
+
+    id: str = "cam0"
+    adapter: Literal["replay", "simulated", "prophesee", "metavision", "inivation"] = "simulated"
+    packet_us: int = 1000
+    max_packet_events: int = 65_536
+    rate_interval_s: float = 0.1
+    replay: ReplayConfig | None = None
+    simulated: SimulatedCameraConfig = field(default_factory=SimulatedCameraConfig)
+    hardware: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.adapter == "replay" and self.replay is None:
+            raise ValueError("adapter 'replay' needs a 'replay:' section with a path")
+        if self.packet_us < 1 or self.max_packet_events < 1 or self.rate_interval_s <= 0:
+            raise ValueError("packet_us, max_packet_events and rate_interval_s must be positive")
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """Everything a rig runs with (YAML sections of the same names)."""
+
+    rig: str = "default"
+    bus: BusConfig | None = None
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    tracker: TrackingConfig = field(default_factory=TrackingConfig)
+    tracker_service: TrackerServiceConfig = field(default_factory=TrackerServiceConfig)
+    recorder: RecorderConfig = field(default_factory=RecorderConfig)
+    viewer: ViewerConfig = field(default_factory=ViewerConfig)
+    tunnel: TunnelConfig | None = None
+    supervisor: dict[str, Any] = field(default_factory=dict)
+    services: tuple[str, ...] = ("camera", "tracker", "recorder", "viewer")
+    path: str | None = None
+
+    def __post_init__(self) -> None:
+        unknown = [name for name in self.services if name not in SERVICE_NAMES]
+        if unknown:
+            raise ValueError(f"unknown service {unknown[0]!r} in services (known: {', '.join(SERVICE_NAMES)})")
+
+    @property
+    def bus_config(self) -> BusConfig:
+        """The bus section, with the namespace ``flagtrack/<rig>`` unless it is given."""
+        if self.bus is None:
+            return BusConfig(namespace=f"flagtrack/{self.rig}")
+        return self.bus
+
+    def snapshot(self) -> dict[str, Any]:
+        """The whole effective config as plain values (stored beside recordings)."""
+        return to_mapping(self)
+
+
+def load_rig(path: str | Path) -> RigConfig:
+    """Read and check a rig config; every error names the key and the file.
+
+    Raises:
+        ConfigError: unreadable file, unknown key, bad value.
+    """
+    data = load_yaml(path)
+    if "path" in data:
+        raise ConfigError("reserved key", key="path", path=str(path))
+    bus = data.get("bus") or {}
+    if isinstance(bus, dict) and "namespace" not in bus:
+        rig_name = data.get("rig", "default")
+        data = {**data, "bus": {**bus, "namespace": f"flagtrack/{rig_name}"}}
+    return from_mapping(RigConfig, {**data, "path": str(path)}, path=str(path))

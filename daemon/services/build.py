@@ -1,0 +1,107 @@
+"""Build the services a rig config asks for, checking everything before anything opens."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.rig import CameraConfig, RigConfig
+from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
+from flagtrack.daemon.services.recorder import RecorderService
+from flagtrack.daemon.services.runner import Service
+from flagtrack.daemon.services.tracker import TrackerService
+from flagtrack.daemon.services.viewer import ViewerService
+from flagtrack.daemon.transport import Bus
+from flagtrack.drivers.camera.base import Camera
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class TrackerSetup:
+    """What the tracker service needs, checked up front: a factory of core trackers and the units."""
+
+    factory: Callable[[], Any]
+    units: str
+    attrs: dict[str, Any]
+
+
+def tracker_setup(rig: RigConfig) -> TrackerSetup:
+    """Check the ``tracker:`` section (root, length, ranges, calibration file) and prepare the core.
+
+    Raises:
+        ConfigError: naming the key and the rig file.
+    """
+    from flagtrack.daemon.core.tracker import Tracker
+
+    params = rig.tracker.tracker_params(path=rig.path)
+    mapping = load_calibration(rig.tracker.calibration, rig.path)
+    units = "px" if mapping is None else getattr(mapping, "units", "m")
+    attrs = {**rig.tracker.attrs(), "units": units}
+    return TrackerSetup(lambda: Tracker(params, mapping=mapping), units, attrs)
+
+
+def load_calibration(path: Any, rig_path: str | None) -> Any:
+    """The pixel -> plane mapping of a calibration file, or None."""
+    if path is None:
+        return None
+    try:
+        from flagtrack.calibration import load_mapping  # type: ignore[attr-defined]
+    except ImportError:
+        raise ConfigError("calibration files are not supported by this build", key="tracker.calibration",
+                          path=rig_path) from None
+    return load_mapping(path)
+
+
+def open_camera(cfg: CameraConfig, speed_source: Callable[[], float] | None = None) -> Camera:
+    """The camera adapter the ``camera:`` section names (hardware SDKs are imported only here)."""
+    if cfg.adapter == "replay":
+        from flagtrack.drivers.camera.replay import ReplayCamera
+
+        assert cfg.replay is not None  # checked by CameraConfig
+        return ReplayCamera(cfg.replay)
+    if cfg.adapter == "simulated":
+        from flagtrack.drivers.camera.simulated import SimulatedCamera
+
+        return SimulatedCamera(cfg.simulated, speed_source)
+    import importlib
+
+    module = importlib.import_module(f"flagtrack.drivers.camera.{cfg.adapter}")
+    return module.open_from_config(cfg.hardware)
+
+
+def build_services(
+    rig: RigConfig,
+    bus: Bus,
+    names: Sequence[str],
+    *,
+    speed_source: Callable[[], float] | None = None,
+    exit_at_end_of_stream: bool = False,
+) -> list[Service]:
+    """Instantiate the named services of ``rig`` on ``bus`` (camera first, so subscribers are ready)."""
+    setup = tracker_setup(rig) if "tracker" in names else None
+    services: list[Service] = []
+    if "recorder" in names:
+        services.append(RecorderService(bus, replace(rig.recorder, camera_id=rig.camera.id), rig.snapshot(),
+                                        exit_at_end_of_stream=exit_at_end_of_stream))
+    if "tracker" in names:
+        assert setup is not None
+        cfg = replace(rig.tracker_service, camera_id=rig.camera.id,
+                      exit_at_end_of_stream=exit_at_end_of_stream or rig.tracker_service.exit_at_end_of_stream)
+        services.append(TrackerService(bus, cfg, setup.factory, setup.units))
+    if "viewer" in names:
+        services.append(ViewerService(bus, replace(rig.viewer, camera_id=rig.camera.id),
+                                      exit_after_final=exit_at_end_of_stream))
+    if "supervisor" in names:
+        from flagtrack.daemon.services.supervisor import build_supervisor  # type: ignore[import-not-found]
+
+        services.append(build_supervisor(rig, bus))
+    if "camera" in names:
+        stream = CameraStreamConfig(id=rig.camera.id, packet_us=rig.camera.packet_us,
+                                    max_packet_events=rig.camera.max_packet_events,
+                                    rate_interval_s=rig.camera.rate_interval_s)
+        services.append(CameraService(bus, stream, open_camera(rig.camera, speed_source)))
+    return services

@@ -1,0 +1,55 @@
+"""Writes the tracker's centrelines from the bus to one HDF5 file (DESIGN.md layout)."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from pathlib import Path
+from typing import Any
+
+from flagtrack.daemon.schema import CentrelineMessage
+from flagtrack.daemon.transport import Bus
+from flagtrack.drivers.formats.centreline import CentrelineWriter
+
+log = logging.getLogger(__name__)
+
+
+class CentrelineFileService:
+    """Appends every centreline message to ``path``; with ``exit_after_final`` it ends with the stream.
+
+    Args:
+        bus: the bus.
+        path: output HDF5 file.
+        attrs: root attributes (processing parameters, input file); ``units`` comes from the messages.
+        exit_after_final: return after the message that ends the stream.
+    """
+
+    name = "centrelines"
+
+    def __init__(self, bus: Bus, path: Path, attrs: dict[str, Any], exit_after_final: bool = False) -> None:
+        self.bus = bus
+        self.path = Path(path)
+        self.attrs = attrs
+        self.exit_after_final = exit_after_final
+        self.updates = 0
+        self.subscription = bus.subscribe(bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000)
+
+    def run(self, stop: threading.Event) -> None:
+        writer: CentrelineWriter | None = None
+        try:
+            while not stop.is_set():
+                msg = self.subscription.recv(timeout_s=0.05)
+                if msg is None:
+                    continue
+                if writer is None:
+                    self.path.parent.mkdir(parents=True, exist_ok=True)
+                    writer = CentrelineWriter(self.path, msg.s, msg.joints_x.shape[1] - 1,
+                                              {**self.attrs, "units": msg.units})
+                writer.append(msg.batch())
+                self.updates += len(msg.t_s)
+                if msg.final and self.exit_after_final:
+                    break
+        finally:
+            if writer is not None:
+                writer.close()
+                log.info("centrelines: %d updates written to %s", self.updates, self.path)
