@@ -66,7 +66,8 @@ class Decoder:
         width, height: sensor size; events outside it are faults. None: only the 11-bit limit.
         t_offset_us: added to every decoded time (the stream's encoder offset, a whole number of loops).
         strict: on a fault (reserved word, event outside the sensor), raise :class:`FormatError`
-            (True) or warn with :class:`FormatWarning`, skip the word and go on (False).
+            (True; the rest of that call's data is dropped, the state stays usable for the next
+            call) or warn with :class:`FormatWarning`, skip the word and go on (False).
         source: name of the stream (file path) for messages.
         base_offset: byte offset of the stream's first byte in its file (header length), so
             errors and chunk offsets are file offsets.

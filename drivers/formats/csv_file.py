@@ -14,7 +14,7 @@ from types import TracebackType
 
 import numpy as np
 
-from flagtrack.daemon.core.events import EVENT_DTYPE, TRIGGER_DTYPE, empty_events, empty_triggers
+from flagtrack.daemon.core.events import EVENT_DTYPE, TRIGGER_DTYPE, empty_events
 from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.formats._csv_kernels import BAD, FULL, format_rows, parse_rows
 from flagtrack.drivers.formats.recording import DEFAULT_CHUNK_BYTES, EventChunk, EventReader, RecordingInfo
