@@ -50,7 +50,11 @@ class AedatReader(EventReader):
         self.info = RecordingInfo(self.path, "aedat4", None, size.get("width"), size.get("height"), header)
 
     def _open_library(self):  # noqa: ANN202
-        import aedat
+        try:
+            import aedat
+        except ImportError:
+            raise FormatError("reading .aedat4 files needs the 'aedat' package (pip install aedat)",
+                              path=str(self.path)) from None
 
         try:
             return aedat.Decoder(str(self.path))
