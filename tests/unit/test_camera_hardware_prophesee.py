@@ -1,0 +1,169 @@
+"""The prophesee adapter against a fake ``neuromorphic_drivers`` that streams real EVT 3.0 bytes."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+import pytest
+import yaml
+
+from flagtrack.daemon.errors import ConfigError, DriverError
+from flagtrack.drivers.camera import prophesee
+from tests.fakes.fixtures import fake_nd, no_sdk  # noqa: F401 - fixtures
+from tests.fakes.helpers import read_until
+
+DOC_YAML = """
+camera:
+  id: cam0
+  adapter: prophesee
+  hardware:
+    serial: "00050423"
+    biases: {diff_on: 20, diff_off: 500, hpf: 10}
+    roi: {x: 200, y: 100, width: 800, height: 500}
+    rate_limiter: {reference_period_us: 1000, maximum_events_per_period: 40}
+    trigger_in: false
+    stall_timeout_s: 5.0
+"""
+
+
+def test_events_and_triggers_decode_exactly_from_buffers_cut_anywhere(fake_nd) -> None:
+    cam = fake_nd._fake.plug(fake_nd.FakeCamera())
+    camera = prophesee.open_from_config({})
+    info = camera.open()
+    assert (info.adapter, info.width, info.height, info.encoding, info.serial) == (
+        "prophesee", 1280, 720, "evt3", "00050423")
+    events, triggers, reads = read_until(camera, lambda: cam.feed is not None and cam.feed.exhausted)
+    camera.close()
+    assert len(cam.sent_events) > 10_000 and reads > 20
+    np.testing.assert_array_equal(events, cam.sent_events)
+    np.testing.assert_array_equal(triggers, cam.sent_triggers)
+    assert len(triggers) == len(cam.triggers) > 0  # the trigger input is on by default
+
+
+def test_silkyevcam_vga_streams_evt3_at_640x480(fake_nd) -> None:
+    cam = fake_nd._fake.plug(fake_nd.FakeCamera(name=fake_nd.Name.CENTURYARKS_VGA, serial="SEC-VGA-1", seed=3))
+    camera = prophesee.open_from_config({"serial": "SEC-VGA-1", "biases": {"diff_on": 400}})
+    info = camera.open()
+    assert (info.width, info.height, info.encoding) == (640, 480, "evt3")
+    assert info.settings["model"] == "CenturyArks VGA" and info.settings["biases"]["diff_on"] == 400
+    events, _, _ = read_until(camera, lambda: cam.feed.exhausted)
+    np.testing.assert_array_equal(events, cam.sent_events)
+
+
+def test_yaml_settings_are_applied_and_read_back(fake_nd) -> None:
+    cam = fake_nd._fake.plug(fake_nd.FakeCamera(duration_us=100_000))
+    hardware = yaml.safe_load(DOC_YAML)["camera"]["hardware"]
+    camera = prophesee.open_from_config(hardware)
+    info = camera.open()
+    settings = info.settings
+    applied = cam.applied
+    # biases: the device clamps diff_off to its bound (190); the adapter reports what the device uses
+    assert settings["biases"]["diff_on"] == applied.biases.diff_on == 20
+    assert settings["biases"]["diff_off"] == applied.biases.diff_off == 190
+    assert settings["biases_clamped"] == ["diff_off"] and settings["biases_bounds"]["diff_off"] == [-35, 190]
+    assert settings["roi"] == {"x": 200, "y": 100, "width": 800, "height": 500}
+    assert settings["rate_limiter"] == {"reference_period_us": 1000, "maximum_events_per_period": 40}
+    assert settings["trigger_in"] is False and applied.enable_external_trigger is False
+    assert settings["serial"] == "00050423" and settings["temperature_celsius"] == pytest.approx(36.5)
+    json.dumps(settings)  # goes on the bus as JSON
+    events, triggers, _ = read_until(camera, lambda: cam.feed.exhausted)
+    np.testing.assert_array_equal(events, cam.sent_events)
+    assert len(triggers) == 0
+    assert len(events) < len(cam.events)  # the sensor really applied ROI and rate limiter
+    assert events["x"].min() >= 200 and events["x"].max() < 1000
+    assert events["y"].min() >= 100 and events["y"].max() < 600
+    assert np.bincount(events["t"] // 1000).max() <= 40
+
+
+def test_roi_masks_are_the_complement_of_the_region() -> None:
+    words = prophesee._mask_words(3, 5, 70, 2)
+    bits = np.unpackbits(np.array(words, dtype="<u8").view(np.uint8), bitorder="little")
+    assert list(np.flatnonzero(bits == 0)) == [3, 4, 5, 6, 7] + list(range(70, 128))
+
+
+@pytest.mark.parametrize("hardware, key", [
+    ({"serail": "x"}, "camera.hardware.serail"),
+    ({"biases": {"diff_on": "high"}}, "camera.hardware.biases.diff_on"),
+    ({"biases": [1, 2]}, "camera.hardware.biases"),
+    ({"roi": {"x": 0, "width": 4, "height": 4}}, "camera.hardware.roi.y"),
+    ({"roi": {"x": 0, "y": 0, "width": 0, "height": 4}}, "camera.hardware.roi"),
+    ({"rate_limiter": {"reference_period_us": 0, "maximum_events_per_period": 5}},
+     "camera.hardware.rate_limiter.reference_period_us"),
+    ({"trigger_in": "yes"}, "camera.hardware.trigger_in"),
+    ({"encoding": "evt4"}, "camera.hardware.encoding"),
+    ({"stall_timeout_s": -1}, "camera.hardware.stall_timeout_s"),
+])
+def test_bad_hardware_keys_name_the_key(hardware: dict, key: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        prophesee.open_from_config(hardware)
+    assert err.value.key == key and key in str(err.value)
+
+
+@pytest.mark.parametrize("hardware, key", [
+    ({"biases": {"bogus": 1}}, "camera.hardware.biases.bogus"),
+    ({"roi": {"x": 600, "y": 0, "width": 100, "height": 10}}, "camera.hardware.roi"),
+    ({"trigger_in": True}, "camera.hardware.trigger_in"),
+])
+def test_settings_the_model_lacks_name_the_key_and_release_the_device(fake_nd, hardware: dict, key: str) -> None:
+    cam = fake_nd._fake.plug(fake_nd.FakeCamera(name=fake_nd.Name.CENTURYARKS_VGA, serial="V1"))
+    with pytest.raises(ConfigError) as err:
+        prophesee.open_from_config(hardware).open()
+    assert err.value.key == key
+    assert cam.opened == cam.closed == 1
+
+
+def test_missing_sdk_gives_the_install_line(no_sdk) -> None:
+    camera = prophesee.open_from_config({"serial": "1"})  # checking the config imports nothing
+    with pytest.raises(DriverError, match=r"pip install 'flagtrack\[prophesee\]'"):
+        camera.open()
+    assert sys.modules.get("neuromorphic_drivers") is None
+
+
+def test_devices_not_found_or_unusable_are_named(fake_nd) -> None:
+    with pytest.raises(DriverError, match="first camera: no such Prophesee-sensor camera"):
+        prophesee.open_from_config({}).open()
+    fake_nd._fake.plug(fake_nd.FakeCamera(serial="AAA"))
+    with pytest.raises(DriverError, match=r"camera '123'.*connected: Prophesee EVK4 'AAA'"):
+        prophesee.open_from_config({"serial": "123"}).open()
+    fake_nd._fake.reset()
+    fake_nd._fake.plug(fake_nd.FakeCamera(serial="BBB", error="permission denied"))
+    with pytest.raises(DriverError, match="camera 'BBB'.*permission denied.*udev"):
+        prophesee.open_from_config({"serial": "BBB"}).open()
+
+
+def test_an_inivation_camera_is_pointed_to_its_adapter(fake_nd) -> None:
+    fake_nd._fake.plug(fake_nd.FakeCamera(name=fake_nd.Name.INIVATION_DVXPLORER, serial="DXA1"))
+    with pytest.raises(DriverError, match="use adapter: inivation"):
+        prophesee.open_from_config({"serial": "DXA1"}).open()
+
+
+def test_unplugged_mid_stream_raises_after_the_data_that_came(fake_nd) -> None:
+    cam = fake_nd._fake.plug(fake_nd.FakeCamera(unplug_after_bytes=40_000))
+    camera = prophesee.open_from_config({})
+    camera.open()
+    got = []
+    with pytest.raises(DriverError, match="camera '00050423': camera failed or was unplugged"):
+        while True:
+            data = camera.read(0.05)
+            if data is not None:
+                got.append(data.events)
+    events = np.concatenate(got)
+    assert 1000 < len(events) < len(cam.sent_events)
+    np.testing.assert_array_equal(events, cam.sent_events[: len(events)])
+    camera.close()
+    camera.close()
+    assert cam.closed == 1
+
+
+def test_a_stalled_camera_reads_none_then_raises(fake_nd) -> None:
+    fake_nd._fake.plug(fake_nd.FakeCamera(stall_after_bytes=5_000))
+    camera = prophesee.open_from_config({"stall_timeout_s": 0.3})
+    camera.open()
+    results = []
+    with pytest.raises(DriverError, match="camera stopped delivering data"):
+        for _ in range(200):
+            results.append(camera.read(0.05))
+    assert results[0] is not None and results[-1] is None
+    camera.close()
