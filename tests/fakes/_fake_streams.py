@@ -30,16 +30,20 @@ def flapping_source(width: int, height: int, duration_us: int, seed: int = 0, no
     return events, triggers
 
 
-def encode(encoding: str, events: np.ndarray, triggers: np.ndarray, width: int, height: int) -> bytes:
-    """The byte stream a camera in ``encoding`` (evt3, evt2, evt21) sends for these events (time offset 0)."""
+def encode(encoding: str, events: np.ndarray, triggers: np.ndarray, width: int, height: int,
+           legacy: bool = False) -> bytes:
+    """The byte stream a camera in ``encoding`` (evt3, evt2, evt21) sends for these events (time offset 0).
+
+    ``legacy``: EVT 2.1 in the IMX636 layout (the 32-bit halves of each word swapped).
+    """
     if encoding == "evt21":
-        return encode_evt21(events, triggers)
+        return encode_evt21(events, triggers, legacy)
     encoder = make_encoder(encoding, t_offset_us=0, width=width, height=height)
     return encoder.encode(events, triggers)
 
 
-def encode_evt21(events: np.ndarray, triggers: np.ndarray) -> bytes:
-    """EVT 2.1 (little layout): TIME_HIGH words, one single-pixel vector per event, trigger words."""
+def encode_evt21(events: np.ndarray, triggers: np.ndarray, legacy: bool = False) -> bytes:
+    """EVT 2.1: TIME_HIGH words, one single-pixel vector per event, trigger words (little or legacy layout)."""
     t = np.concatenate([events["t"], triggers["t"]])
     kind = np.concatenate([np.zeros(len(events), np.uint8), np.ones(len(triggers), np.uint8)])
     index = np.concatenate([np.arange(len(events)), np.arange(len(triggers))])
@@ -61,7 +65,8 @@ def encode_evt21(events: np.ndarray, triggers: np.ndarray) -> bytes:
             words.append(((0xA << 28) | (low_t << 22) | (int(tr["channel"]) << 8) | int(tr["edge"]), 0))
     out = bytearray()
     for high, low in words:
-        out += low.to_bytes(4, "little") + high.to_bytes(4, "little")
+        first, second = (high, low) if legacy else (low, high)
+        out += first.to_bytes(4, "little") + second.to_bytes(4, "little")
     return bytes(out)
 
 

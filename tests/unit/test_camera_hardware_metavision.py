@@ -1,0 +1,147 @@
+"""The metavision adapter against a fake ``metavision_hal`` that streams real EVT 3.0 / 2.0 / 2.1 bytes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from flagtrack.daemon.errors import ConfigError, DriverError
+from flagtrack.drivers.camera import metavision
+from tests.fakes.fixtures import fake_hal, no_sdk  # noqa: F401 - fixtures
+from tests.fakes.helpers import read_until
+
+DOC_YAML = """
+camera:
+  id: cam0
+  adapter: metavision
+  hardware:
+    serial: "00ca0009"
+    format: EVT3
+    biases: {bias_diff_on: 25, bias_diff_off: 30, bias_hpf: 0, bias_fo: 0, bias_refr: 20}
+    roi: {x: 320, y: 180, width: 640, height: 360}
+    rate_limiter_events_per_s: 1_002_000
+    trigger_in: true
+"""
+
+
+@pytest.mark.parametrize("sensor, fmt, options, raw_type, encoding, published", [
+    ("IMX636", "EVT3", "", "numpy", "EVT3", "evt3"),
+    ("IMX636", "EVT21", "", "vector", "EVT21", "evt2"),  # old format string: OpenEB's rule says legacy
+    ("IMX636", "EVT21", "endianness=little", "numpy", "EVT21;endianness=little", "evt2"),
+    ("Gen3.1", None, "", "vector", "EVT2", "evt2"),
+])
+def test_events_decode_exactly_in_every_format(fake_hal, sensor: str, fmt: str | None, options: str,
+                                               raw_type: str, encoding: str, published: str) -> None:
+    cam = fake_hal._fake.plug(fake_hal.FakeHalCamera(sensor=sensor, format_options=options, raw_type=raw_type,
+                                                     duration_us=60_000, seed=7))
+    camera = metavision.open_from_config({"format": fmt} if fmt else {})
+    info = camera.open()
+    size = (1280, 720) if sensor == "IMX636" else (640, 480)
+    assert (info.adapter, info.width, info.height, info.encoding) == ("metavision", *size, published)
+    assert info.settings["device_encoding"] == encoding and info.serial == "00ca0009"
+    events, triggers, reads = read_until(camera, lambda: camera._events_stream._feed.exhausted)
+    camera.close()
+    assert reads > 5 and len(cam.sent_events) > 1000
+    np.testing.assert_array_equal(events, cam.sent_events)
+    np.testing.assert_array_equal(triggers, cam.sent_triggers)
+
+
+def test_yaml_settings_are_applied_and_read_back(fake_hal) -> None:
+    cam = fake_hal._fake.plug(fake_hal.FakeHalCamera(duration_us=100_000))
+    camera = metavision.open_from_config(yaml.safe_load(DOC_YAML)["camera"]["hardware"])
+    info = camera.open()
+    s = info.settings
+    assert s["biases"] == {"bias_diff_on": 25, "bias_diff_off": 30, "bias_hpf": 0, "bias_fo": 0, "bias_refr": 20}
+    assert s["roi"] == {"x": 320, "y": 180, "width": 640, "height": 360, "read_back": False}
+    # the ERC counts events per 200 µs: 1 002 000 ev/s is 200.4 per period, the camera keeps 200 = 1 000 000 ev/s
+    assert s["rate_limiter"] == {"enabled": True, "events_per_s": 1_000_000}
+    assert s["trigger_in"] is True
+    assert (s["sensor"], s["integrator"], s["available_formats"]) == ("IMX636", "Prophesee", ["EVT3", "EVT21"])
+    json.dumps(s)
+    events, triggers, _ = read_until(camera, lambda: camera._events_stream._feed.exhausted)
+    np.testing.assert_array_equal(events, cam.sent_events)
+    assert len(triggers) == len(cam.triggers) > 0
+    assert events["x"].min() >= 320 and events["x"].max() < 960 and events["y"].min() >= 180
+    assert np.bincount(events["t"] // 200).max() <= 200
+
+
+def test_trigger_input_off_by_default_on_the_fake_hal(fake_hal) -> None:
+    fake_hal._fake.plug(fake_hal.FakeHalCamera(duration_us=50_000))
+    camera = metavision.open_from_config({})
+    info = camera.open()
+    assert info.settings["trigger_in"] is False and info.settings["rate_limiter"]["enabled"] is False
+    _, triggers, _ = read_until(camera, lambda: camera._events_stream._feed.exhausted)
+    assert len(triggers) == 0
+
+
+@pytest.mark.parametrize("hardware, key, match", [
+    ({"biases": {"bias_diff_on": 500}}, "camera.hardware.biases.bias_diff_on", r"allowed: -85\.\.140"),
+    ({"biases": {"bias_pr": 5}}, "camera.hardware.biases.bias_pr", "unknown bias"),
+    ({"roi": {"x": 1200, "y": 0, "width": 100, "height": 10}}, "camera.hardware.roi", "does not fit"),
+    ({"rate_limiter_events_per_s": 2_000_000_000}, "camera.hardware.rate_limiter_events_per_s", "refused"),
+])
+def test_values_the_camera_refuses_name_the_key(fake_hal, hardware: dict, key: str, match: str) -> None:
+    fake_hal._fake.plug(fake_hal.FakeHalCamera())
+    with pytest.raises(ConfigError, match=match) as err:
+        metavision.open_from_config(hardware).open()
+    assert err.value.key == key
+
+
+def test_a_camera_without_erc_refuses_a_rate_limit(fake_hal) -> None:
+    fake_hal._fake.plug(fake_hal.FakeHalCamera(sensor="Gen3.1"))
+    with pytest.raises(ConfigError, match="no event rate controller") as err:
+        metavision.open_from_config({"rate_limiter_events_per_s": 1000}).open()
+    assert err.value.key == "camera.hardware.rate_limiter_events_per_s"
+
+
+@pytest.mark.parametrize("hardware, key", [
+    ({"seriall": "x"}, "camera.hardware.seriall"),
+    ({"biases": {"bias_fo": 1.5}}, "camera.hardware.biases.bias_fo"),
+    ({"rate_limiter_events_per_s": -5}, "camera.hardware.rate_limiter_events_per_s"),
+    ({"evt21_endianness": "big"}, "camera.hardware.evt21_endianness"),
+    ({"roi": {"x": 0, "y": 0, "width": 10}}, "camera.hardware.roi.height"),
+])
+def test_bad_hardware_keys_name_the_key(hardware: dict, key: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        metavision.open_from_config(hardware)
+    assert err.value.key == key
+
+
+def test_missing_openeb_says_how_to_get_it(no_sdk) -> None:
+    with pytest.raises(DriverError, match="install OpenEB.*metavision_hal"):
+        metavision.open_from_config({}).open()
+
+
+def test_missing_camera_and_unsupported_format_are_named(fake_hal) -> None:
+    with pytest.raises(DriverError, match="first camera: camera not found"):
+        metavision.open_from_config({}).open()
+    fake_hal._fake.plug(fake_hal.FakeHalCamera(serial="AAA"))
+    with pytest.raises(DriverError, match=r"camera 'BBB': camera not found \(connected: AAA"):
+        metavision.open_from_config({"serial": "BBB"}).open()
+    with pytest.raises(DriverError, match="camera 'AAA': cannot open.*EVT2 is not supported"):
+        metavision.open_from_config({"serial": "AAA", "format": "EVT2"}).open()
+
+
+def test_unplug_and_stall_raise(fake_hal) -> None:
+    cam = fake_hal._fake.plug(fake_hal.FakeHalCamera(serial="U", unplug_after_bytes=20_000))
+    fake_hal._fake.plug(fake_hal.FakeHalCamera(serial="S", stall_after_bytes=3_000))
+    camera = metavision.open_from_config({"serial": "U"})
+    camera.open()
+    got = []
+    with pytest.raises(DriverError, match="camera 'U': the camera's events stream stopped"):
+        while True:
+            if (data := camera.read(0.05)) is not None:
+                got.append(data.events)
+    events = np.concatenate(got)
+    np.testing.assert_array_equal(events, cam.sent_events[: len(events)])
+    camera.close()
+    camera.close()
+    assert cam.stopped == 1
+    camera = metavision.open_from_config({"serial": "S", "stall_timeout_s": 0.2})
+    camera.open()
+    with pytest.raises(DriverError, match="camera 'S': camera stopped delivering data"):
+        for _ in range(100):
+            camera.read(0.05)
