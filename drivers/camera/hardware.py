@@ -174,8 +174,8 @@ def plain(value: Any) -> Any:
     """A JSON-friendly copy of a settings value (dataclasses, enums, numpy scalars, tuples)."""
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
-    if isinstance(value, enum.Enum):
-        return plain(value.value) if isinstance(value.value, str | int | float | bool) else value.name
+    if isinstance(value, enum.Enum):  # text values (neuromorphic-drivers' names) read better than member names
+        return value.value if isinstance(value.value, str) else value.name
     if isinstance(value, dict):
         return {str(k): plain(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
