@@ -62,6 +62,13 @@ class Roi:
         return {"x": self.x, "y": self.y, "width": self.width, "height": self.height}
 
 
+def check_serial(serial: object) -> None:
+    """A serial YAML read as a number (``serial: 00050423`` unquoted) is an error that says to quote it."""
+    if isinstance(serial, int) and not isinstance(serial, bool):
+        raise ConfigError(f'write the serial in quotes (serial: "..."): YAML read it as the number {serial}',
+                          key=f"{KEY}.serial")
+
+
 def device_label(serial: str | None) -> str:
     """How errors name the device: ``camera 'SERIAL'`` or ``first camera``."""
     return f"camera '{serial}'" if serial else "first camera"

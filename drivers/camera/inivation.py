@@ -22,7 +22,9 @@ from flagtrack.daemon.config import from_mapping
 from flagtrack.daemon.core.events import EVENT_DTYPE, TRIGGER_DTYPE, empty_events, empty_triggers
 from flagtrack.daemon.errors import ConfigError, DriverError
 from flagtrack.drivers.camera.base import CameraData, CameraInfo
-from flagtrack.drivers.camera.hardware import KEY, Roi, StallWatch, call_or_none, device_label, import_sdk, plain
+from flagtrack.drivers.camera.hardware import (
+    KEY, Roi, StallWatch, call_or_none, check_serial, device_label, import_sdk, plain,
+)
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +34,8 @@ TRIGGERS = {"EXTERNAL_SIGNAL_RISING_EDGE": (0, 1), "EXTERNAL_SIGNAL_FALLING_EDGE
             "EXTERNAL_SIGNAL_PULSE": (0, 1), "EXTERNAL_GENERATOR_RISING_EDGE": (1, 1),
             "EXTERNAL_GENERATOR_FALLING_EDGE": (1, 0)}
 """dv TriggerType name -> (channel, edge), as the AEDAT4 reader maps them."""
+YAML_BOOLEANS = {True: "On", False: "Off"}
+"""DAVIS346 bias names that YAML 1.1 turns into booleans when unquoted."""
 
 
 @dataclass(frozen=True)
@@ -39,27 +43,36 @@ class InivationConfig:
     """``camera.hardware`` of ``adapter: inivation``.
 
     Attributes:
-        serial: serial number ("": the first iniVation camera found).
+        serial: serial number ("": the first iniVation camera found; a number YAML read unquoted is refused).
         roi: event crop area.
         contrast_threshold_on, contrast_threshold_off: DVXplorer contrast thresholds (None: default).
         readout_fps: DVXplorer event readout rate, a ``ReadoutFPS`` name (``VARIABLE_15000``, ...).
-        davis_biases: DAVIS346 bias name (``On``, ``Off``, ``Diff``, ``Refractory``, ...) -> [coarse, fine].
+        davis_biases: DAVIS346 bias name (``On``, ``Off``, ``Diff``, ``Refractory``, ...) -> [coarse, fine]
+            (unquoted On / Off, which YAML reads as true / false, are taken back as names).
         trigger_in: run the external signal detector on both edges (None: untouched).
         stall_timeout_s: raise "camera stopped delivering data" after this long without any event (0: never).
     """
 
-    serial: str = ""
+    serial: str | int = ""
     roi: Roi | None = None
     contrast_threshold_on: int | None = None
     contrast_threshold_off: int | None = None
     readout_fps: str | None = None
-    davis_biases: dict[str, tuple[int, int]] = field(default_factory=dict)
+    davis_biases: dict[Any, tuple[int, int]] = field(default_factory=dict)
     trigger_in: bool | None = None
     stall_timeout_s: float = 5.0
 
     def __post_init__(self) -> None:
+        check_serial(self.serial)
         if self.stall_timeout_s < 0:
             raise ConfigError("must be >= 0 (0: never)", key=f"{KEY}.stall_timeout_s")
+        names = {}
+        for name, value in self.davis_biases.items():  # YAML 1.1 reads unquoted On / Off as true / false
+            name = YAML_BOOLEANS.get(name, name) if isinstance(name, bool) else name
+            if not isinstance(name, str):
+                raise ConfigError(f"bias names are text, got {name!r}", key=f"{KEY}.davis_biases")
+            names[name] = value
+        object.__setattr__(self, "davis_biases", names)
 
 
 def open_from_config(hardware: dict[str, Any]) -> InivationCamera:

@@ -22,7 +22,8 @@ from flagtrack.daemon.config import from_mapping
 from flagtrack.daemon.errors import ConfigError, DriverError
 from flagtrack.drivers.camera.base import CameraData, CameraInfo
 from flagtrack.drivers.camera.hardware import (
-    KEY, RawStream, Roi, StallWatch, call_or_none, device_label, import_sdk, parse_encoding, plain, sdk_version,
+    KEY, RawStream, Roi, StallWatch, call_or_none, check_serial, device_label, import_sdk, parse_encoding, plain,
+    sdk_version,
 )
 
 log = logging.getLogger(__name__)
@@ -38,7 +39,7 @@ class MetavisionConfig:
     """``camera.hardware`` of ``adapter: metavision``.
 
     Attributes:
-        serial: serial number of the camera ("" : the first camera found).
+        serial: serial number of the camera ("": the first camera found; quote it in YAML).
         format: data format asked of the camera at open (``EVT3``, ``EVT21``, ``EVT2``; None: its default).
         biases: HAL bias name (``bias_diff_on``, ``bias_diff_off``, ``bias_fo``, ``bias_hpf``, ``bias_refr``,
             ...) -> value; others keep the camera's defaults.
@@ -49,7 +50,7 @@ class MetavisionConfig:
         stall_timeout_s: raise "camera stopped delivering data" after this long without any byte (0: never).
     """
 
-    serial: str = ""
+    serial: str | int = ""
     format: str | None = None
     biases: dict[str, int] = field(default_factory=dict)
     roi: Roi | None = None
@@ -59,6 +60,7 @@ class MetavisionConfig:
     stall_timeout_s: float = 5.0
 
     def __post_init__(self) -> None:
+        check_serial(self.serial)
         if self.stall_timeout_s < 0:
             raise ConfigError("must be >= 0 (0: never)", key=f"{KEY}.stall_timeout_s")
         if self.rate_limiter_events_per_s is not None and self.rate_limiter_events_per_s < 0:

@@ -23,7 +23,7 @@ from flagtrack.daemon.config import from_mapping
 from flagtrack.daemon.errors import ConfigError, DriverError
 from flagtrack.drivers.camera.base import CameraData, CameraInfo
 from flagtrack.drivers.camera.hardware import (
-    KEY, RawStream, Roi, StallWatch, call_or_none, device_label, import_sdk, plain, sdk_version,
+    KEY, RawStream, Roi, StallWatch, call_or_none, check_serial, device_label, import_sdk, plain, sdk_version,
 )
 
 log = logging.getLogger(__name__)
@@ -52,7 +52,8 @@ class PropheseeConfig:
     """``camera.hardware`` of ``adapter: prophesee``.
 
     Attributes:
-        serial: serial number of the camera to open (None: the first Prophesee-sensor camera found).
+        serial: serial number of the camera to open (None: the first Prophesee-sensor camera found; a
+            number YAML read from an unquoted serial is refused with a hint to quote it).
         biases: bias name -> value, names as neuromorphic-drivers spells them for the model
             (EVK4: ``diff_on``, ``diff_off``, ``fo``, ``hpf``, ``refr``, ...); others keep their defaults.
         roi: region of interest (pixels outside it are masked by row/column masks).
@@ -63,7 +64,7 @@ class PropheseeConfig:
         stall_timeout_s: raise "camera stopped delivering data" after this long without any byte (0: never).
     """
 
-    serial: str | None = None
+    serial: str | int | None = None
     biases: dict[str, int] = field(default_factory=dict)
     roi: Roi | None = None
     rate_limiter: RateLimiterConfig | None = None
@@ -72,6 +73,7 @@ class PropheseeConfig:
     stall_timeout_s: float = 5.0
 
     def __post_init__(self) -> None:
+        check_serial(self.serial)
         if self.stall_timeout_s < 0:
             raise ConfigError("must be >= 0 (0: never)", key=f"{KEY}.stall_timeout_s")
 
@@ -86,7 +88,7 @@ def open_from_config(hardware: dict[str, Any]) -> PropheseeCamera:
 
 
 class PropheseeCamera:
-    """A :class:`~flagtrack.drivers.camera.base.Camera` reading a Prophesee-sensor camera through neuromorphic-drivers."""
+    """A :class:`~flagtrack.drivers.camera.base.Camera` reading a Prophesee-sensor camera (neuromorphic-drivers)."""
 
     def __init__(self, cfg: PropheseeConfig) -> None:
         self.cfg = cfg
@@ -159,7 +161,8 @@ class PropheseeCamera:
         prophesee = [d for d in devices if not d.name.name.startswith("INIVATION")]
         matches = [d for d in prophesee if not self.cfg.serial or d.serial == self.cfg.serial]
         if not matches:
-            seen = ", ".join(f"{d.name.value} '{d.serial}'" for d in devices) or "none"
+            seen = ", ".join(f"{d.name.value} '{d.serial}'" + (f" ({d.error})" if d.error else "")
+                             for d in devices) or "none"
             hint = " (an iniVation camera: use adapter: inivation)" if any(
                 d.serial == self.cfg.serial for d in devices) else ""
             raise DriverError(f"no such Prophesee-sensor camera found{hint}; connected: {seen}", device=self.label)

@@ -51,7 +51,8 @@ def test_yaml_settings_are_applied_and_read_back(fake_dv) -> None:
     camera = inivation.open_from_config(yaml.safe_load(DOC_YAML)["camera"]["hardware"])
     s = camera.open().settings
     assert s["roi"] == {"x": 40, "y": 20, "width": 560, "height": 440}
-    assert (s["contrast_threshold_on"], s["contrast_threshold_off"]) == (12, 31)  # the sensor's register holds 31 at most
+    # the sensor's register holds 31 at most
+    assert (s["contrast_threshold_on"], s["contrast_threshold_off"]) == (12, 31)
     assert s["readout_fps"] == "VARIABLE_15000" and s["trigger_in"] is True
     assert (s["camera"], s["firmware"], s["connection"]) == ("DVXplorer_DXA00093", 7, "LIBUSB_SPEED_SUPER")
     json.dumps(s)
@@ -63,7 +64,9 @@ def test_yaml_settings_are_applied_and_read_back(fake_dv) -> None:
 
 def test_davis_biases_are_set_and_read_back(fake_dv) -> None:
     fake_dv._fake.plug(fake_dv.FakeDvCamera(model="DAVIS", serial="00000104", duration_us=30_000))
-    camera = inivation.open_from_config({"davis_biases": {"On": [5, 120], "Off": [3, 10]}})
+    hardware = yaml.safe_load("davis_biases: {On: [5, 120], Off: [3, 10]}")  # YAML 1.1: On/Off are booleans
+    assert set(hardware["davis_biases"]) == {True, False}
+    camera = inivation.open_from_config(hardware)
     info = camera.open()
     assert (info.width, info.height) == (346, 260)
     assert info.settings["davis_biases"] == {"On": [5, 120], "Off": [3, 10]}

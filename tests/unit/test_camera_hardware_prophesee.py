@@ -85,6 +85,7 @@ def test_roi_masks_are_the_complement_of_the_region() -> None:
 
 @pytest.mark.parametrize("hardware, key", [
     ({"serail": "x"}, "camera.hardware.serail"),
+    (yaml.safe_load("serial: 00050423"), "camera.hardware.serial"),  # unquoted: YAML reads an (octal) number
     ({"biases": {"diff_on": "high"}}, "camera.hardware.biases.diff_on"),
     ({"biases": [1, 2]}, "camera.hardware.biases"),
     ({"roi": {"x": 0, "width": 4, "height": 4}}, "camera.hardware.roi.y"),

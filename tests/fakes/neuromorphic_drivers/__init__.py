@@ -225,9 +225,11 @@ class Device:
         check_words("x_mask", configuration.x_mask, len(defaults.x_mask))
         check_words("y_mask", configuration.y_mask, len(defaults.y_mask))
         bounds = self.model.DEVICE_BOUNDS
-        clamped = {f.name: min(max(getattr(configuration.biases, f.name), bounds.get(f.name, (0, 0))[0]),
-                               bounds.get(f.name, (0, 0))[1]) if f.name in bounds else getattr(configuration.biases, f.name)
-                   for f in dataclasses.fields(configuration.biases)}
+        clamped = {}
+        for f in dataclasses.fields(configuration.biases):  # the DACs hold values within the bounds
+            value = getattr(configuration.biases, f.name)
+            low, high = bounds.get(f.name, (0, 0))
+            clamped[f.name] = min(max(value, low), high)
         self.camera.applied = dataclasses.replace(configuration, biases=type(configuration.biases)(**clamped))
 
     def _start_stream(self) -> _fake_streams.ByteFeed:
