@@ -110,6 +110,7 @@ def reconstruct_file(path: Path, output: Path, config: TrackingConfig, *, config
                     writer.append(CentrelineBatch.concatenate(pending))
                     pending, n_pending = [], 0
                 bar(chunk.byte_offset)
+            bar(path.stat().st_size)
             pending.append(tracker.finish())
             writer.append(CentrelineBatch.concatenate(pending))
             stats = tracker.stats
