@@ -77,8 +77,8 @@ def find_grid(image_u8: np.ndarray, board: tuple[int, int]) -> np.ndarray:
                 f"(the count of INNER corners: a board of 10x7 squares has 9x6)")
         return grid
     found, corners, meta = cv2.findChessboardCornersSBWithMeta(image_u8, (3, 3), flags)
-    if found and meta.shape[0] * meta.shape[1] > 9:
-        grid = corners.reshape(*meta.shape[:2], 2).astype(np.float64)
+    grid = corners.reshape(*meta.shape[:2], 2).astype(np.float64) if found else None
+    if grid is not None and grid.shape[0] * grid.shape[1] > 9 and _looks_like_board(image_u8, grid):
         seen = _size_text(grid, n >= m)
         if _touches_border(grid, image_u8.shape):
             raise CalibrationError(
@@ -89,6 +89,21 @@ def find_grid(image_u8: np.ndarray, board: tuple[int, int]) -> np.ndarray:
             f"(the count of INNER corners: a board of 10x7 squares has 9x6)")
     raise CalibrationError(f"no {n}x{m} checkerboard found in the pseudo-image (is the board in view, "
                            f"in focus and blinking?)")
+
+
+def _looks_like_board(image: np.ndarray, grid: np.ndarray) -> bool:
+    """True if the squares between the corners alternate dark and light, clearly (no chance grid in noise)."""
+    centres = 0.25 * (grid[:-1, :-1] + grid[1:, :-1] + grid[:-1, 1:] + grid[1:, 1:])
+    h, w = image.shape[:2]
+    values = []
+    for cx, cy in centres.reshape(-1, 2):
+        x, y = int(round(cx)), int(round(cy))
+        values.append(float(image[max(y - 1, 0):min(y + 2, h), max(x - 1, 0):min(x + 2, w)].mean()))
+    cells = np.asarray(values).reshape(centres.shape[:2])
+    jj, ii = np.mgrid[0:cells.shape[0], 0:cells.shape[1]]
+    even, odd = cells[(ii + jj) % 2 == 0], cells[(ii + jj) % 2 == 1]
+    light, dark = (even, odd) if even.mean() > odd.mean() else (odd, even)
+    return bool(light.min() > dark.max() and light.min() - dark.max() > 0.25 * float(np.percentile(image, 99)))
 
 
 def _size_text(grid: np.ndarray, long_first: bool) -> str:
