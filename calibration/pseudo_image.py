@@ -204,6 +204,10 @@ def detect_blink(t_us: np.ndarray, p: np.ndarray, search: BlinkSearch = BlinkSea
                            margin)
     period_us = _fit_period(on, off, period_us)
     snr = _step_snr(level, bin_us, on, off, margin)
+    if not snr >= search.min_step_snr:
+        raise CalibrationError(
+            f"no blinking pattern found: the event level has no clear steps (step {snr:.1f} x its spread < "
+            f"{search.min_step_snr}; is the pattern blinking on and off, and in view?)")
     gap = float(np.median([(t - on[0]) % period_us for t in off])) if on and off else period_us / 2
     half = 0.5 * min(gap, period_us - gap)
     first, last = float(t_us[0]) + half, float(t_us[-1]) - half
@@ -212,10 +216,6 @@ def detect_blink(t_us: np.ndarray, p: np.ndarray, search: BlinkSearch = BlinkSea
     if not on or not off:
         raise CalibrationError(f"recording of {duration_us / 1e6:.3f} s holds no full blink period of "
                                f"{period_us / 1e6:.4f} s (record at least 2 periods)")
-    if not snr >= search.min_step_snr:
-        raise CalibrationError(
-            f"no blinking pattern found: the event level has no clear steps (step {snr:.1f} x its spread < "
-            f"{search.min_step_snr}; is the pattern blinking on and off, and in view?)")
     log.info("blink period %.1f us (score %.2f, steps %.0f x spread), %d on / %d off switches", period_us,
              strength, snr, len(on), len(off))
     return BlinkTiming(float(period_us), on, off, float(half), float(strength), float(snr))
