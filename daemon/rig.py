@@ -21,6 +21,7 @@ from typing import Any, Literal
 from flagtrack.daemon.config import from_mapping, load_yaml, to_mapping
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.services.recorder import RecorderConfig
+from flagtrack.daemon.services.supervisor.config import SupervisorConfig
 from flagtrack.daemon.services.tracker import TrackerServiceConfig
 from flagtrack.daemon.services.viewer import ViewerConfig
 from flagtrack.daemon.tracking_config import TrackingConfig
@@ -73,7 +74,7 @@ class RigConfig:
     recorder: RecorderConfig = field(default_factory=RecorderConfig)
     viewer: ViewerConfig = field(default_factory=ViewerConfig)
     tunnel: TunnelConfig | None = None
-    supervisor: dict[str, Any] = field(default_factory=dict)
+    supervisor: SupervisorConfig = field(default_factory=SupervisorConfig)
     services: tuple[str, ...] = ("camera", "tracker", "recorder", "viewer")
     path: str | None = None
 
@@ -81,6 +82,8 @@ class RigConfig:
         unknown = [name for name in self.services if name not in SERVICE_NAMES]
         if unknown:
             raise ValueError(f"unknown service {unknown[0]!r} in services (known: {', '.join(SERVICE_NAMES)})")
+        if "supervisor" in self.services and self.tunnel is None:
+            raise ValueError("the supervisor needs a 'tunnel:' section (driver: simulated for no hardware)")
 
     @property
     def bus_config(self) -> BusConfig:

@@ -18,4 +18,4 @@ def run_one_service(name: str, args: argparse.Namespace) -> int:
     from flagtrack.daemon.rig import load_rig
 
     rig = load_rig(args.config)
-    return run_rig(rig, [name], shutdown_timeout_s=args.shutdown_timeout)
+    return run_rig(rig, [name], shutdown_timeout_s=args.shutdown_timeout).code

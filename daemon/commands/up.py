@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     """Build the rig from the config and flags, run it, report."""
     rig, names = rig_from_args(args)
     return run_rig(rig, names, exit_at_end_of_stream=args.exit_at_eof, centrelines=args.centrelines,
-                   shutdown_timeout_s=args.shutdown_timeout)
+                   shutdown_timeout_s=args.shutdown_timeout).code
 
 
 def rig_from_args(args: argparse.Namespace):  # noqa: ANN201 - (RigConfig, list[str])
@@ -81,29 +81,52 @@ def rig_from_args(args: argparse.Namespace):  # noqa: ANN201 - (RigConfig, list[
 
 
 def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centrelines: Path | None = None,  # noqa: ANN001
-            shutdown_timeout_s: float = 10.0) -> int:
-    """Open the bus, build and run the services until a signal, a failure or the end of the stream."""
+            shutdown_timeout_s: float = 10.0, resume_dir: Path | None = None, quiet: bool = False):  # noqa: ANN201
+    """Open the bus, build and run the services until a signal, a failure or the end of the work.
+
+    Returns:
+        A :class:`RigRun` (exit code, the services, the runner's report).
+    """
     from flagtrack.daemon.services.build import build_services, tracker_setup
     from flagtrack.daemon.services.centreline_file import CentrelineFileService
     from flagtrack.daemon.services.runner import run_services
     from flagtrack.daemon.transport import Bus
 
+    def say(text: str) -> None:
+        if not quiet:
+            print(f"flagtrack up: {text}", file=sys.stderr)
+
     if "tracker" in names:
         tracker_setup(rig)  # bad tracker config: one clear line, before anything opens
+    finishers = []
+    if "supervisor" in names and rig.supervisor.mode != "monitor" and rig.supervisor.exit_when_done:
+        finishers.append("supervisor")
     with Bus(rig.bus_config) as bus:
-        services = build_services(rig, bus, names, exit_at_end_of_stream=exit_at_end_of_stream)
+        services = build_services(rig, bus, names, exit_at_end_of_stream=exit_at_end_of_stream, resume_dir=resume_dir)
         if centrelines is not None:
             attrs = {**rig.tracker.attrs(), "input_file": str(rig.camera.replay.path) if rig.camera.replay else ""}
             services.insert(0, CentrelineFileService(bus, centrelines, attrs, exit_after_final=exit_at_end_of_stream))
-        print(f"flagtrack up: {', '.join(s.name for s in services)} on {rig.bus_config.namespace}", file=sys.stderr)
-        report = run_services(services, shutdown_timeout_s=shutdown_timeout_s)
+        say(f"{', '.join(s.name for s in services)} on {rig.bus_config.namespace}")
+        report = run_services(services, shutdown_timeout_s=shutdown_timeout_s, stop_when_any_finishes=finishers)
     for name, exc in report.errors.items():
         print(f"flagtrack up: {name} failed: {exc}", file=sys.stderr)
     if report.abandoned:
         print(f"flagtrack up: did not stop in time: {', '.join(report.abandoned)}", file=sys.stderr)
     if centrelines is not None:
-        print(f"flagtrack up: centrelines in {centrelines}", file=sys.stderr)
+        say(f"centrelines in {centrelines}")
     for service in services:
         if getattr(service, "description", ""):
-            print(f"flagtrack up: viewer {service.description}", file=sys.stderr)
-    return 1 if report.errors else (130 if report.signal_count else 0)
+            say(f"viewer {service.description}")
+    code = 1 if report.errors else (130 if report.signal_count else 0)
+    return RigRun(code, services, report)
+
+
+class RigRun:
+    """How a run of the rig ended: exit code, the services (to read their results), the report."""
+
+    def __init__(self, code: int, services: list, report) -> None:  # noqa: ANN001
+        self.code, self.services, self.report = code, services, report
+
+    def service(self, name: str):  # noqa: ANN201
+        """The service called ``name`` (or None)."""
+        return next((s for s in self.services if s.name == name), None)

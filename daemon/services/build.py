@@ -73,17 +73,50 @@ def open_camera(cfg: CameraConfig, speed_source: Callable[[], float] | None = No
     return module.open_from_config(cfg.hardware)
 
 
+class BusSpeedSource:
+    """The wind speed as the supervisor publishes it (for a simulated camera in another process)."""
+
+    def __init__(self, bus: Bus) -> None:
+        from flagtrack.daemon.schema import TunnelState
+
+        self._sub = bus.subscribe(bus.keys.tunnel_state(), TunnelState, capacity=100, ring=True)
+        self._speed_mps = 0.0
+
+    def __call__(self) -> float:
+        while (msg := self._sub.recv(timeout_s=0)) is not None:
+            if msg.speed_mps >= 0:
+                self._speed_mps = msg.speed_mps
+        return self._speed_mps
+
+
 def build_services(
     rig: RigConfig,
     bus: Bus,
     names: Sequence[str],
     *,
-    speed_source: Callable[[], float] | None = None,
     exit_at_end_of_stream: bool = False,
+    resume_dir: Any = None,
 ) -> list[Service]:
-    """Instantiate the named services of ``rig`` on ``bus`` (camera first, so subscribers are ready)."""
+    """Instantiate the named services of ``rig`` on ``bus`` (subscribers before the camera).
+
+    A simulated camera reads the wind speed from the simulated tunnel when the supervisor runs in
+    this process, else from the tunnel state on the bus.
+    """
     setup = tracker_setup(rig) if "tracker" in names else None
     services: list[Service] = []
+    speed_source: Callable[[], float] | None = None
+    if "supervisor" in names:
+        from flagtrack.daemon.services.supervisor import build_supervisor
+        from flagtrack.drivers.tunnel.config import open_tunnel
+
+        assert rig.tunnel is not None  # checked by RigConfig
+        tunnel = open_tunnel(rig.tunnel)
+        simulator = getattr(tunnel, "simulator", None)
+        if simulator is not None:
+            speed_source = lambda: float(simulator.speed_mps)  # noqa: E731
+        services.append(build_supervisor(rig, bus, tunnel, resume_dir))
+    elif "camera" in names and rig.camera.adapter == "simulated" and rig.tunnel is not None:
+        speed_source = BusSpeedSource(bus)
     if "recorder" in names:
         services.append(RecorderService(bus, replace(rig.recorder, camera_id=rig.camera.id), rig.snapshot(),
                                         exit_at_end_of_stream=exit_at_end_of_stream))
@@ -95,10 +128,6 @@ def build_services(
     if "viewer" in names:
         services.append(ViewerService(bus, replace(rig.viewer, camera_id=rig.camera.id),
                                       exit_after_final=exit_at_end_of_stream))
-    if "supervisor" in names:
-        from flagtrack.daemon.services.supervisor import build_supervisor  # type: ignore[import-not-found]
-
-        services.append(build_supervisor(rig, bus))
     if "camera" in names:
         stream = CameraStreamConfig(id=rig.camera.id, packet_us=rig.camera.packet_us,
                                     max_packet_events=rig.camera.max_packet_events,

@@ -49,8 +49,10 @@ class RateCounter:
 
     def add(self, packet: Packet) -> list[tuple[int, int, int, int]]:
         """Count a packet; return ``(t_end_us, events, on, bytes)`` of every interval it closes."""
-        if self._end_us is None:
+        if self._end_us is None or packet.t_first_us >= self._end_us + self.interval_us:
+            # first packet, or the stream jumped (data dropped): no rate for the gap, start afresh
             self._end_us = (packet.t_first_us // self.interval_us + 1) * self.interval_us
+            self.events = self.on = self.bytes = 0
         closed = []
         while packet.t_last_us >= self._end_us:
             closed.append((self._end_us, self.events, self.on, self.bytes))

@@ -87,39 +87,31 @@ def age_colours(age_s: np.ndarray, horizon_s: float) -> np.ndarray:
 
 
 class RerunLogger:
-    """Turns bus messages into Rerun entities (no bus code here)."""
+    """Turns bus messages into Rerun entities (no bus code here).
+
+    Messages are only queued as they come; :meth:`frame` (``geometry_rate_hz`` times a second)
+    sends every queued centreline in one ``send_columns`` per entity and decodes only the packets
+    of the recent-events window, so the viewer keeps up with kHz update rates.
+    """
 
     def __init__(self, rec: rr.RecordingStream, cfg: ViewerConfig) -> None:
         self.rec = rec
         self.cfg = cfg
-        self._events: deque[np.ndarray] = deque()
-        self._trail: deque[tuple[float, float, float]] = deque()
+        self._lines: list[CentrelineMessage] = []
+        self._packets: deque[EventPacket] = deque()
+        self._trail: deque[np.ndarray] = deque()  # (n, 3) arrays of t, tip x, tip y
         self._last_frame = 0.0
         self._camera_minus_wall_s: float | None = None
 
     def centrelines(self, msg: CentrelineMessage) -> None:
-        """Log a batch of tracker updates (all of them, batched)."""
-        if len(msg.t_s) == 0:
-            return
-        times = [rr.TimeColumn(TIMELINE, duration=msg.t_s)]
-        ones = [1] * len(msg.t_s)
-        self.rec.send_columns("tracker/centreline", times, rr.LineStrips2D.columns(
-            strips=list(np.stack([msg.x, msg.y], axis=-1))).partition(ones))
-        self.rec.send_columns("tracker/joints", times, rr.Points2D.columns(
-            positions=np.stack([msg.joints_x, msg.joints_y], axis=-1).reshape(-1, 2)).partition(
-            [msg.joints_x.shape[1]] * len(msg.t_s)))
-        for name, values in (("plots/delta_rms", msg.delta_rms), ("plots/events_per_update", msg.n_events),
-                             ("plots/tip_y", msg.tip_y)):
-            self.rec.send_columns(name, times, rr.Scalars.columns(scalars=np.asarray(values, float)))
-        for t, x, y in zip(msg.t_s, msg.tip_x, msg.tip_y):
-            self._trail.append((float(t), float(x), float(y)))
-        while self._trail and self._trail[0][0] < msg.t_s[-1] - self.cfg.trail_s:
-            self._trail.popleft()
+        """Queue a batch of tracker updates."""
+        if len(msg.t_s):
+            self._lines.append(msg)
 
-    def events(self, events: np.ndarray, packet: EventPacket) -> None:
-        """Keep the packet's events for the next frame; note the camera/wall clock offset."""
-        if len(events):
-            self._events.append(events)
+    def events(self, packet: EventPacket) -> None:
+        """Queue an event packet; note the camera/wall clock offset."""
+        if packet.n_events:
+            self._packets.append(packet)
         self._camera_minus_wall_s = packet.t_last_us * 1e-6 - packet.sent_ns * 1e-9
 
     def rate(self, msg: EventRate) -> None:
@@ -129,32 +121,70 @@ class RerunLogger:
 
     def tunnel(self, msg: TunnelState) -> None:
         """Log the wind speed, placed on the camera clock when the offset is known."""
-        if self._camera_minus_wall_s is None:
+        if self._camera_minus_wall_s is None or msg.speed_mps < 0:
             return
         self.rec.set_time(TIMELINE, duration=msg.t_wall_s + self._camera_minus_wall_s)
         self.rec.log("plots/wind_speed_mps", rr.Scalars(msg.speed_mps))
 
-    def frame(self, now_s: float) -> bool:
-        """Log the event cloud and the tip trail if a frame is due; return whether one was logged."""
-        if now_s - self._last_frame < 1.0 / self.cfg.geometry_rate_hz or not self._events:
+    def frame(self, now_s: float, force: bool = False) -> bool:
+        """Send what is queued if a frame is due (or ``force``); return whether one was sent."""
+        if not force and now_s - self._last_frame < 1.0 / self.cfg.geometry_rate_hz:
             return False
         self._last_frame = now_s
-        t_newest = int(self._events[-1]["t"][-1])
+        sent = self._send_lines()
+        return self._send_events() or sent
+
+    def _send_lines(self) -> bool:
+        if not self._lines:
+            return False
+        msgs, self._lines = self._lines, []
+        t_s = np.concatenate([m.t_s for m in msgs])
+        times = [rr.TimeColumn(TIMELINE, duration=t_s)]
+        x, y = np.concatenate([m.x for m in msgs]), np.concatenate([m.y for m in msgs])
+        jx, jy = np.concatenate([m.joints_x for m in msgs]), np.concatenate([m.joints_y for m in msgs])
+        self.rec.send_columns("tracker/centreline", times, rr.LineStrips2D.columns(
+            strips=list(np.stack([x, y], axis=-1))).partition(np.ones(len(t_s), dtype=np.int32)))
+        self.rec.send_columns("tracker/joints", times, rr.Points2D.columns(
+            positions=np.stack([jx, jy], axis=-1).reshape(-1, 2)).partition(np.full(len(t_s), jx.shape[1], np.int32)))
+        for name, field_name in (("plots/delta_rms", "delta_rms"), ("plots/events_per_update", "n_events"),
+                                 ("plots/tip_y", "tip_y")):
+            values = np.concatenate([np.asarray(getattr(m, field_name), float) for m in msgs])
+            self.rec.send_columns(name, times, rr.Scalars.columns(scalars=values))
+        self._trail.append(np.stack([t_s, x[:, -1], y[:, -1]], axis=1))
+        while len(self._trail) > 1 and self._trail[0][-1, 0] < t_s[-1] - self.cfg.trail_s:
+            self._trail.popleft()
+        trail = np.concatenate(list(self._trail))
+        trail = trail[trail[:, 0] >= t_s[-1] - self.cfg.trail_s]
+        if len(trail) > 1:
+            self.rec.set_time(TIMELINE, duration=float(t_s[-1]))
+            self.rec.log("tracker/tip_trail", rr.LineStrips2D([trail[:, 1:].astype(np.float32)]))
+        return True
+
+    def _send_events(self) -> bool:
+        if not self._packets:
+            return False
         horizon_us = self.cfg.recent_events_ms * 1e3
-        while self._events and int(self._events[0]["t"][-1]) < t_newest - horizon_us:
-            self._events.popleft()
-        recent = np.concatenate(list(self._events))
+        t_newest = self._packets[-1].t_last_us
+        while self._packets and self._packets[0].t_last_us < t_newest - horizon_us:
+            self._packets.popleft()
+        decoded = []
+        for packet in self._packets:
+            try:
+                decoded.append(decode_packet(packet.encoding, packet.data, packet.t_offset_us,
+                                             source=f"packet {packet.seq}")[0])
+            except FormatError as exc:
+                log.debug("viewer: %s", exc)
+        self._packets.clear()
+        if not decoded:
+            return False
+        recent = np.concatenate(decoded)
         recent = recent[recent["t"] >= t_newest - horizon_us]
         if len(recent) > self.cfg.max_points:
             recent = recent[:: int(np.ceil(len(recent) / self.cfg.max_points))]
         self.rec.set_time(TIMELINE, duration=t_newest * 1e-6)
-        age_s = (t_newest - recent["t"]) * 1e-6
         self.rec.log("camera/events", rr.Points2D(
             np.stack([recent["x"], recent["y"]], axis=1).astype(np.float32),
-            colors=age_colours(age_s, horizon_us * 1e-6), radii=0.5))
-        if len(self._trail) > 1:
-            trail = np.array([(x, y) for _, x, y in self._trail], dtype=np.float32)
-            self.rec.log("tracker/tip_trail", rr.LineStrips2D([trail]))
+            colors=age_colours((t_newest - recent["t"]) * 1e-6, horizon_us * 1e-6), radii=0.5))
         return True
 
 
@@ -186,31 +216,22 @@ class ViewerService:
         logger = RerunLogger(rec, self.cfg)
         try:
             while not stop.is_set():
-                busy = False
                 final = False
                 while (msg := subs["centrelines"].recv(timeout_s=0)) is not None:
                     logger.centrelines(msg)
                     self.updates += len(msg.t_s)
                     final |= msg.final
-                    busy = True
                 while (packet := subs["events"].recv(timeout_s=0)) is not None:
-                    try:
-                        events, _ = decode_packet(packet.encoding, packet.data, packet.t_offset_us,
-                                                  source=f"packet {packet.seq}")
-                    except FormatError as exc:
-                        log.debug("viewer: %s", exc)
-                        continue
-                    logger.events(events, packet)
-                    busy = True
+                    logger.events(packet)
                 while (msg := subs["rate"].recv(timeout_s=0)) is not None:
                     logger.rate(msg)
                 while (msg := subs["tunnel"].recv(timeout_s=0)) is not None:
                     logger.tunnel(msg)
-                self.frames += logger.frame(time.monotonic())
+                self.frames += logger.frame(time.monotonic(), force=final)
                 if final and self.exit_after_final:
                     break
-                if not busy:
-                    stop.wait(0.005)
+                stop.wait(0.25 / self.cfg.geometry_rate_hz)
+            logger.frame(time.monotonic(), force=True)
         finally:
             rec.flush()
             rec.disconnect()

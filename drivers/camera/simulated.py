@@ -9,6 +9,7 @@ plus uniform background activity, in real time (or at ``time_scale`` times real 
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -21,6 +22,8 @@ from flagtrack.drivers.camera.base import CameraData, CameraInfo
 from flagtrack.drivers.sim.flutter import FlutterModel, FlutterParams, FlutterState
 from flagtrack.drivers.sim.kinematics import FlagKinematics, with_peak_to_peak
 from flagtrack.drivers.sim.quickline import QuickLineParams, line_events
+
+log = logging.getLogger(__name__)
 
 _REFERENCE_AMP_OVER_L = 0.3  # the base kinematics is solved for this A/L; others scale its angle wave
 
@@ -41,6 +44,9 @@ class SimulatedCameraConfig:
         noise_rate_hz: background events per second over the whole sensor.
         slice_us: camera time generated per read (events are released at its end).
         time_scale: camera seconds per wall second (1 = real time).
+        max_lag_s: when the machine cannot generate events in real time and falls this far behind,
+            the twin skips ahead (the flag moves on, no events for the skipped time), as a real
+            camera's event-rate controller drops events, so the flag stays in step with the tunnel.
         seed: random seed of the twin.
     """
 
@@ -59,6 +65,7 @@ class SimulatedCameraConfig:
     noise_rate_hz: float = 20_000.0
     slice_us: int = 4000
     time_scale: float = 1.0
+    max_lag_s: float = 0.25
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -112,6 +119,7 @@ class SimulatedCamera:
         self._t_us = 0
         self._wall0: float | None = None
         self._slice = 0
+        self.skipped_us = 0
 
     @property
     def state(self) -> FlutterState:
@@ -132,6 +140,9 @@ class SimulatedCamera:
         t1_us = self._t_us + self.cfg.slice_us
         due = self._wall0 + t1_us * 1e-6 / self.cfg.time_scale
         wait = due - time.monotonic()
+        if -wait > self.cfg.max_lag_s:
+            self._skip(int(-wait * self.cfg.time_scale * 1e6) // self.cfg.slice_us * self.cfg.slice_us)
+            t1_us = self._t_us + self.cfg.slice_us
         if wait > timeout_s:
             time.sleep(max(timeout_s, 0.0))
             return None
@@ -153,6 +164,16 @@ class SimulatedCamera:
 
     def close(self) -> None:
         self._wall0 = None
+
+    def _skip(self, skip_us: int) -> None:
+        """Move the flag (and the camera clock) on by ``skip_us`` without events."""
+        if skip_us <= 0:
+            return
+        if self.skipped_us == 0:
+            log.warning("simulated camera: cannot keep up with real time; skipping ahead (events dropped)")
+        self.flutter.advance(float(self.speed_source()), skip_us * 1e-6)
+        self._t_us += skip_us
+        self.skipped_us += skip_us
 
 
 def fast_forward(camera: SimulatedCamera, duration_s: float) -> list[np.ndarray]:

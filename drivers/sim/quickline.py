@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+from numba import njit
 
 from flagtrack.daemon.core.events import EVENT_DTYPE
 
@@ -113,58 +114,71 @@ def line_events(
     ds = s[1] - s[0]
     for chunk_start in range(t_start_us, t_stop_us, chunk_us):
         chunk_stop = min(chunk_start + chunk_us, t_stop_us)
-        edges_us = np.arange(chunk_start, chunk_stop + params.slice_us, params.slice_us)
-        edges_us = np.minimum(edges_us, chunk_stop)
-        edges_us = np.unique(edges_us)
+        edges_us = np.unique(np.minimum(np.arange(chunk_start, chunk_stop + params.slice_us, params.slice_us), chunk_stop))
         x, y = kinematics.positions(edges_us * 1e-6, s)
-        parts = [_slice_events(x, y, edges_us, ds, params, rng)]
-        if params.noise_rate_hz > 0:
-            parts.append(_noise(chunk_start, chunk_stop, width, height, params.noise_rate_hz, rng))
-        events = np.concatenate(parts)
-        inside = (events["x"] < width) & (events["y"] < height)
-        events = events[inside]
-        yield events[np.argsort(events["t"], kind="stable")]
+        yield _chunk_events(x, y, edges_us.astype(np.float64), ds, width, height, params, rng)
 
 
-def _slice_events(
-    x: np.ndarray, y: np.ndarray, edges_us: np.ndarray, ds: float, params: QuickLineParams, rng: np.random.Generator
-) -> np.ndarray:
-    """Events for every slice between consecutive rows of x, y (positions at ``edges_us``)."""
-    x0, y0, x1, y1 = x[:-1], y[:-1], x[1:], y[1:]
+def _chunk_events(x: np.ndarray, y: np.ndarray, edges_us: np.ndarray, ds: float, width: int, height: int,
+                  params: QuickLineParams, rng: np.random.Generator) -> np.ndarray:
+    """Line and noise events of every slice between consecutive rows of x, y (positions at ``edges_us``)."""
+    x0, y0 = x[:-1], y[:-1]
     tx, ty = np.gradient(x0, axis=1), np.gradient(y0, axis=1)
     norm = np.hypot(tx, ty) + 1e-12
-    nx, ny = -ty / norm, tx / norm
-    swept = np.abs((x1 - x0) * nx + (y1 - y0) * ny) * ds  # px^2 swept per sample, per slice
-    counts = rng.poisson(swept * params.events_per_px2 * (1.0 - params.drop_fraction))
-    slice_idx, s_idx = np.nonzero(counts)
-    reps = counts[slice_idx, s_idx]
-    slice_idx, s_idx = np.repeat(slice_idx, reps), np.repeat(s_idx, reps)
-    n = len(slice_idx)
-    frac = rng.random(n)
-    t0, t1 = edges_us[:-1][slice_idx], edges_us[1:][slice_idx]
-    along = (rng.random(n) - 0.5) * ds
-    px = x0[slice_idx, s_idx] + frac * (x1 - x0)[slice_idx, s_idx] + along * (tx / norm)[slice_idx, s_idx]
-    py = y0[slice_idx, s_idx] + frac * (y1 - y0)[slice_idx, s_idx] + along * (ty / norm)[slice_idx, s_idx]
-    moving_sign = np.sign(((x1 - x0) * nx + (y1 - y0) * ny)[slice_idx, s_idx])
-    leading = rng.random(n) < 0.5  # half the events on each edge of the lit line
-    offset = np.abs(rng.normal(0.0, params.line_width_px, n)) * np.where(leading, 1.0, -1.0) * moving_sign
-    px += offset * nx[slice_idx, s_idx]
-    py += offset * ny[slice_idx, s_idx]
-    events = np.empty(n, dtype=EVENT_DTYPE)
-    events["t"] = np.floor(t0 + frac * (t1 - t0)).astype(np.int64)
-    px_r, py_r = np.rint(px), np.rint(py)
-    ok = (px_r >= 0) & (py_r >= 0)
-    events["x"] = np.where(ok, px_r, 65535).astype(np.uint16)
-    events["y"] = np.where(ok, py_r, 65535).astype(np.uint16)
-    events["p"] = leading.astype(np.uint8)
-    return events
+    tx, ty = tx / norm, ty / norm  # unit tangent; the normal is (-ty, tx)
+    dx, dy = x[1:] - x0, y[1:] - y0
+    normal_motion = dx * -ty + dy * tx
+    counts = rng.poisson(np.abs(normal_motion) * ds * params.events_per_px2 * (1.0 - params.drop_fraction))
+    noise = rng.poisson(params.noise_rate_hz * np.diff(edges_us) * 1e-6) if params.noise_rate_hz > 0 \
+        else np.zeros(len(edges_us) - 1, dtype=np.int64)
+    n_line, n_noise = int(counts.sum()), int(noise.sum())
+    uniforms = rng.random((3, n_line))
+    spread = np.abs(rng.normal(0.0, params.line_width_px, n_line))
+    noise_uniforms = rng.random((4, n_noise))
+    events = np.empty(n_line + n_noise, dtype=EVENT_DTYPE)
+    n = _fill_events(x0, y0, dx, dy, tx, ty, normal_motion, counts, noise, edges_us, ds, width, height,
+                     uniforms, spread, noise_uniforms, events["t"], events["x"], events["y"], events["p"])
+    return events[:n]
 
 
-def _noise(t0: int, t1: int, width: int, height: int, rate_hz: float, rng: np.random.Generator) -> np.ndarray:
-    n = rng.poisson(rate_hz * (t1 - t0) * 1e-6)
-    events = np.empty(n, dtype=EVENT_DTYPE)
-    events["t"] = rng.integers(t0, t1, n)
-    events["x"] = rng.integers(0, width, n)
-    events["y"] = rng.integers(0, height, n)
-    events["p"] = rng.integers(0, 2, n)
-    return events
+@njit(cache=True)
+def _fill_events(x0, y0, dx, dy, tx, ty, normal_motion, counts, noise, edges_us, ds, width, height,  # noqa: ANN001, ANN202
+                 uniforms, spread, noise_uniforms, out_t, out_x, out_y, out_p):
+    """Fill the events slice by slice, each slice sorted by time; return how many are on the sensor.
+
+    Line events: one per count of each (slice, sample) cell, at a random time in the slice and a
+    random place along the sample's stretch of line, on the leading (ON) or trailing (OFF) edge,
+    spread across the line. Noise events: uniform in time, pixel and polarity.
+    """
+    k = 0  # next output
+    u = 0  # next line random draw
+    v = 0  # next noise random draw
+    n_slices, n_s = counts.shape
+    for i in range(n_slices):
+        t0, t1 = edges_us[i], edges_us[i + 1]
+        first = k
+        for j in range(n_s):
+            sign = 1.0 if normal_motion[i, j] >= 0 else -1.0
+            for _ in range(counts[i, j]):
+                frac, along, lead = uniforms[0, u], (uniforms[1, u] - 0.5) * ds, uniforms[2, u] < 0.5
+                offset = spread[u] * (1.0 if lead else -1.0) * sign
+                u += 1
+                rx = np.rint(x0[i, j] + frac * dx[i, j] + along * tx[i, j] - offset * ty[i, j])
+                ry = np.rint(y0[i, j] + frac * dy[i, j] + along * ty[i, j] + offset * tx[i, j])
+                if rx < 0 or ry < 0 or rx >= width or ry >= height:
+                    continue
+                out_t[k] = np.int64(np.floor(t0 + frac * (t1 - t0)))
+                out_x[k], out_y[k], out_p[k] = np.uint16(rx), np.uint16(ry), 1 if lead else 0
+                k += 1
+        for _ in range(noise[i]):
+            out_t[k] = np.int64(np.floor(t0 + noise_uniforms[0, v] * (t1 - t0)))
+            out_x[k] = np.uint16(min(int(noise_uniforms[1, v] * width), width - 1))
+            out_y[k] = np.uint16(min(int(noise_uniforms[2, v] * height), height - 1))
+            out_p[k] = 1 if noise_uniforms[3, v] < 0.5 else 0
+            v += 1
+            k += 1
+        if k - first > 1:
+            order = np.argsort(out_t[first:k], kind="mergesort")
+            t_s, x_s, y_s, p_s = out_t[first:k][order], out_x[first:k][order], out_y[first:k][order], out_p[first:k][order]
+            out_t[first:k], out_x[first:k], out_y[first:k], out_p[first:k] = t_s, x_s, y_s, p_s
+    return k

@@ -92,12 +92,15 @@ recorder: {{directory: {tmp_path / 'rec'}, path: run}}
 
 def test_sigint_stops_every_service_cleanly(tmp_path: Path) -> None:
     proc = start("up", "-c", str(sim_rig(tmp_path)))
-    time.sleep(6.0)
+    recorded = tmp_path / "rec" / "run.raw"
+    deadline = time.monotonic() + 60
+    while not (recorded.exists() and recorded.stat().st_size > 10_000) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(1.0)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
     assert "stopping" in err and "did not stop" not in err
-    recorded = tmp_path / "rec" / "run.raw"
     info = flagtrack("events", "info", str(recorded), "--json")
     assert info.returncode == 0 and '"events"' in info.stdout
     assert (tmp_path / "live.rrd").stat().st_size > 1000

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from flagtrack.drivers.camera.simulated import SimulatedCamera, SimulatedCameraConfig, fast_forward
 from flagtrack.drivers.sim.flutter import FlutterParams
@@ -48,3 +49,15 @@ def test_events_lie_on_the_twin_flag() -> None:
     distance = np.min(np.hypot(x[0][None, :] - sample["x"][:, None], y[0][None, :] - sample["y"][:, None]), axis=1)
     # the tip moves up to ~2 px in the 0.2 ms window; the line spreads events by ~1 px
     assert np.median(distance) < 1.5 and np.percentile(distance, 90) < 3.0
+
+
+def test_a_camera_that_falls_behind_skips_ahead_and_stays_in_step_with_the_wall_clock() -> None:
+    import time
+
+    camera = SimulatedCamera(SimulatedCameraConfig(flutter=FLUTTER, speed_mps=7.0, max_lag_s=0.1))
+    camera.open()
+    time.sleep(0.5)  # an overloaded machine: no reads for half a second
+    data = camera.read(0.05)
+    assert data is not None and camera.skipped_us >= 300_000
+    assert abs(data.t_until_us * 1e-6 - 0.5) < 0.15  # camera time caught up with the wall clock
+    assert camera.state.t_s == pytest.approx(data.t_until_us * 1e-6)  # the flag moved on with it

@@ -1,0 +1,65 @@
+"""``flagtrack sweep``: an unattended wind-speed sweep (whole rig in one process), or its resumption."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+COMMAND = "sweep"
+HELP = "run a wind-speed sweep with the rig of -c rig.yaml, or resume one (--resume RUN_DIR)"
+DESCRIPTION = """\
+Run the rig's services with the supervisor in sweep mode: for each point of the config's
+`supervisor.sweep` plan, set and verify the speed, settle, record events and centrelines, and
+append the point's numbers to RUN_DIR/run.jsonl; then write summary.csv and amplitude.png.
+Whatever happens, the tunnel ends ramped to zero and the stop record says why.
+
+  flagtrack sweep -c deploy/rig-sweep-sim.yaml
+  flagtrack sweep --resume runs/run-20261121-101500      # finished points are not redone
+"""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``flagtrack sweep``."""
+    parser.add_argument("-c", "--config", type=Path, help="rig config with tunnel: and supervisor: sections")
+    parser.add_argument("--resume", type=Path, metavar="RUN_DIR", help="resume this interrupted run")
+    parser.add_argument("--runs-dir", type=Path, help="where run folders go (overrides supervisor.runs_dir)")
+    parser.add_argument("--shutdown-timeout", type=float, default=90.0, help="seconds to wait for services to stop")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run or resume the sweep; print where the results are."""
+    import dataclasses
+
+    from flagtrack.daemon.commands.up import run_rig
+    from flagtrack.daemon.config import from_mapping
+    from flagtrack.daemon.errors import ConfigError
+    from flagtrack.daemon.rig import RigConfig, load_rig
+    from flagtrack.daemon.sweep.runlog import read_run
+
+    if args.config is None and args.resume is None:
+        raise ConfigError("give a rig config (-c rig.yaml) or a run to resume (--resume RUN_DIR)")
+    if args.config is not None:
+        rig = load_rig(args.config)
+    else:
+        stored = dict(read_run(args.resume).start.get("config", {}))
+        stored.pop("sweep", None)
+        stored.pop("path", None)
+        rig = from_mapping(RigConfig, stored, path=str(args.resume / "run.jsonl"), key="config")
+    supervisor = dataclasses.replace(rig.supervisor, mode="sweep", exit_when_done=True,
+                                     runs_dir=args.runs_dir or rig.supervisor.runs_dir)
+    if args.resume is None and supervisor.sweep is None:
+        raise ConfigError("needs a 'sweep:' plan", key="supervisor.sweep", path=str(args.config))
+    rig = dataclasses.replace(rig, supervisor=supervisor)
+    names = [*dict.fromkeys([*rig.services, "supervisor"])]
+    result = run_rig(rig, names, shutdown_timeout_s=args.shutdown_timeout, resume_dir=args.resume)
+    supervisor_service = result.service("supervisor")
+    if supervisor_service is not None and supervisor_service.run_dir is not None:
+        run_dir = supervisor_service.run_dir
+        print(f"flagtrack sweep: {supervisor_service.stop_reason}; run folder {run_dir}", file=sys.stderr)
+        print(f"  log {run_dir / 'run.jsonl'}\n  summary {run_dir / 'summary.csv'}\n  figure {run_dir / 'amplitude.png'}",
+              file=sys.stderr)
+        if supervisor_service.stop_reason != "finished":
+            print(f"  resume with: flagtrack sweep --resume {run_dir}", file=sys.stderr)
+            return result.code or 1
+    return result.code

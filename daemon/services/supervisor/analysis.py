@@ -1,0 +1,69 @@
+"""Per-point numbers from the centrelines of a recording: A/L, f, travelling-wave index, Delta_RMS/L."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.core.metrics import (
+    flapping_frequency_hz,
+    lateral_displacement,
+    tip_amplitude_over_l,
+    travelling_wave_index,
+)
+
+
+@dataclass(frozen=True)
+class PointMetrics:
+    """What a point's centrelines say (NaN when they cannot say it)."""
+
+    amplitude_over_l: float = math.nan
+    amplitude_std_over_l: float = math.nan
+    frequency_hz: float = math.nan
+    twi: float = math.nan
+    delta_rms_over_l: float = math.nan
+    updates: int = 0
+
+
+def point_metrics(batches: list[CentrelineBatch], length: float, root: tuple[float, float], direction_deg: float,
+                  cycles_window: int = 1) -> PointMetrics:
+    """A/L (half peak-to-peak of the tip's lateral displacement, and its spread over cycles), f, TWI, Delta_RMS/L.
+
+    Args:
+        batches: the point's centrelines, time order.
+        length: flag length L (same units as the centrelines).
+        root, direction_deg: the flag's rest frame (lateral = perpendicular to the rest direction).
+        cycles_window: cycles per amplitude estimate when computing the spread.
+    """
+    if not batches:
+        return PointMetrics()
+    batch = CentrelineBatch.concatenate(batches)
+    n = len(batch)
+    if n < 8:
+        return PointMetrics(updates=n)
+    lateral = lateral_displacement(batch.x, batch.y, root, direction_deg)
+    tip = lateral[:, -1]
+    amplitude = tip_amplitude_over_l(tip, length)
+    frequency = flapping_frequency_hz(batch.t_s, tip)
+    spread = _amplitude_spread(batch.t_s, tip, length, frequency, cycles_window)
+    twi = math.nan
+    if n >= 16 and np.all(np.isfinite(lateral)):
+        uniform_t = np.linspace(batch.t_s[0], batch.t_s[-1], n)
+        resampled = np.stack([np.interp(uniform_t, batch.t_s, lateral[:, k]) for k in range(lateral.shape[1])], axis=1)
+        twi = travelling_wave_index(resampled)
+    delta = batch.delta_rms[np.isfinite(batch.delta_rms)]
+    return PointMetrics(amplitude, spread, frequency, twi, float(delta.mean() / length) if len(delta) else math.nan, n)
+
+
+def _amplitude_spread(t_s: np.ndarray, tip: np.ndarray, length: float, frequency_hz: float, cycles: int) -> float:
+    """Standard deviation of A/L measured cycle by cycle (error bars of the paper's figure 5h)."""
+    if not np.isfinite(frequency_hz) or frequency_hz <= 0:
+        return math.nan
+    period_s = cycles / frequency_hz
+    edges = np.arange(t_s[0], t_s[-1], period_s)
+    values = [tip_amplitude_over_l(tip[(t_s >= a) & (t_s < a + period_s)], length) for a in edges[:-1]]
+    values = [v for v in values if np.isfinite(v)]
+    return float(np.std(values)) if len(values) >= 2 else math.nan

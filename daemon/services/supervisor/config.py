@@ -1,0 +1,83 @@
+"""The ``supervisor:`` section of a rig config."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from flagtrack.daemon.core.onset import OnsetParams
+from flagtrack.daemon.sweep.plan import SweepConfig
+
+
+@dataclass(frozen=True)
+class FeedbackConfig:
+    """Closed loop holding a target tip amplitude by adjusting the wind speed (PI, rate and bound limited).
+
+    Attributes:
+        target_amplitude_over_l: tip amplitude A/L to hold.
+        kp_mps: proportional gain, m/s per unit of A/L error.
+        ki_mps_per_s: integral gain, m/s per (unit A/L error x second).
+        window_s: the amplitude is measured over the last ``window_s`` of centrelines.
+        period_s: control period.
+        start_speed_mps: speed set before the loop starts.
+        min_speed_mps, max_speed_mps: bounds of the commanded speed.
+        max_step_mps: largest change per period (rate limit = max_step_mps / period_s).
+        duration_s: run this long (0: until stopped).
+    """
+
+    target_amplitude_over_l: float = 0.25
+    kp_mps: float = 2.0
+    ki_mps_per_s: float = 1.0
+    window_s: float = 1.0
+    period_s: float = 1.0
+    start_speed_mps: float = 5.5
+    min_speed_mps: float = 0.0
+    max_speed_mps: float = 10.0
+    max_step_mps: float = 0.3
+    duration_s: float = 60.0
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.min_speed_mps <= self.start_speed_mps <= self.max_speed_mps:
+            raise ValueError("need min_speed_mps <= start_speed_mps <= max_speed_mps")
+        if self.period_s <= 0 or self.window_s <= 0 or self.max_step_mps <= 0 or self.duration_s < 0:
+            raise ValueError("period_s, window_s, max_step_mps must be positive and duration_s >= 0")
+
+
+@dataclass(frozen=True)
+class SupervisorConfig:
+    """What the supervisor does and when it gives up.
+
+    Attributes:
+        mode: ``monitor`` (publish the flag state only), ``sweep`` (run ``sweep``), ``feedback``.
+        runs_dir: where run folders are made.
+        run_name: the run folder's name (default: date and time).
+        sweep: the sweep plan (mode ``sweep``).
+        onset: the onset/decay detector (docs/tunnel.md for the measured defaults).
+        feedback: the closed loop (mode ``feedback``).
+        silence_timeout_s: no event rate (or a required service gone) for this long: safe state.
+        required: services whose disappearance (liveliness) stops the run.
+        startup_timeout_s: how long the required services may take to appear.
+        publish_interval_s: period of the supervisor and tunnel state messages.
+        recorder_timeout_s: how long the recorder may take to acknowledge a command.
+        exit_when_done: end the service (and ``flagtrack up``) when the sweep or loop ends.
+    """
+
+    mode: Literal["monitor", "sweep", "feedback"] = "monitor"
+    runs_dir: Path = Path("runs")
+    run_name: str | None = None
+    sweep: SweepConfig | None = None
+    onset: OnsetParams = field(default_factory=OnsetParams)
+    feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
+    silence_timeout_s: float = 3.0
+    required: tuple[str, ...] = ("camera", "tracker", "recorder")
+    startup_timeout_s: float = 20.0
+    publish_interval_s: float = 0.2
+    recorder_timeout_s: float = 10.0
+    exit_when_done: bool = True
+
+    def __post_init__(self) -> None:
+        if self.mode == "sweep" and self.sweep is None:
+            raise ValueError("mode 'sweep' needs a 'sweep:' section")
+        if self.silence_timeout_s <= 0 or self.publish_interval_s <= 0:
+            raise ValueError("silence_timeout_s and publish_interval_s must be positive")

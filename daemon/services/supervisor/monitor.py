@@ -1,0 +1,122 @@
+"""What the supervisor watches on the bus: event rates (flag state), centrelines, liveliness, recorder."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.core.onset import FlagState, OnsetDetector, OnsetParams, OnsetReading
+from flagtrack.daemon.schema import CentrelineMessage, EventRate, RecorderStatus
+from flagtrack.daemon.transport import Bus
+
+log = logging.getLogger(__name__)
+
+SERVICE_KEYS = {"camera": "camera/{camera_id}", "tracker": "tracker", "recorder": "recorder", "viewer": "viewer"}
+
+
+@dataclass
+class Collection:
+    """Centrelines and rates gathered while a point records."""
+
+    batches: list[CentrelineBatch] = field(default_factory=list)
+    rates_hz: list[float] = field(default_factory=list)
+    units: str = "px"
+
+
+class BusMonitor:
+    """Drains the supervisor's subscriptions (call :meth:`pump` often) and keeps the flag state.
+
+    Args:
+        bus: the bus.
+        camera_id: the camera watched.
+        onset: detector parameters.
+        required: services that must stay alive (``camera``, ``tracker``, ``recorder``).
+    """
+
+    def __init__(self, bus: Bus, camera_id: str, onset: OnsetParams, required: tuple[str, ...]) -> None:
+        keys = bus.keys
+        self.rates = bus.subscribe(keys.event_rate(camera_id), EventRate, capacity=100_000)
+        self.lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=1_000_000)
+        self.recorder = bus.subscribe(keys.recorder_status(), RecorderStatus, capacity=1000)
+        self.liveliness = bus.watch_liveliness()
+        self.alive_keys = {name: keys.alive(SERVICE_KEYS[name].format(camera_id=camera_id)) for name in required}
+        self.detector = OnsetDetector(onset)
+        self.reading: OnsetReading | None = None
+        self.last_rate_s = time.monotonic()
+        self.rate_hz = float("nan")
+        self.collection: Collection | None = None
+        self.recorder_replies: dict[str, RecorderStatus] = {}
+        self.seen: set[str] = set()
+
+    @property
+    def state(self) -> FlagState:
+        """The flag state from the event rate (unknown before a baseline exists)."""
+        return FlagState.UNKNOWN if self.reading is None else self.reading.state
+
+    def pump(self) -> None:
+        """Take in everything that arrived."""
+        while (rate := self.rates.recv(timeout_s=0)) is not None:
+            self.reading = self.detector.update(rate.t_us * 1e-6, rate.rate_hz)
+            self.rate_hz = rate.rate_hz
+            self.last_rate_s = time.monotonic()
+            if self.collection is not None:
+                self.collection.rates_hz.append(rate.rate_hz)
+        while (msg := self.lines.recv(timeout_s=0)) is not None:
+            if self.collection is not None and len(msg.t_s):
+                self.collection.batches.append(msg.batch())
+                self.collection.units = msg.units
+        while (status := self.recorder.recv(timeout_s=0)) is not None:
+            if status.request_id:
+                self.recorder_replies[status.request_id] = status
+
+    def start_collecting(self) -> None:
+        """Start gathering centrelines and rates (for one point)."""
+        self.pump()
+        self.collection = Collection()
+
+    def stop_collecting(self) -> Collection:
+        """Stop gathering; return what was gathered."""
+        self.pump()
+        collection, self.collection = self.collection or Collection(), None
+        return collection
+
+    def problem(self, silence_timeout_s: float) -> str | None:
+        """Why the run cannot go on (a required service gone, or no event rate), or None."""
+        for name, key in self.alive_keys.items():
+            if self.liveliness.is_alive(key):
+                self.seen.add(name)
+            elif name in self.seen:
+                return f"the {name} service went away (liveliness lost)"
+        silent_s = time.monotonic() - self.last_rate_s
+        if silent_s > silence_timeout_s:
+            return f"no event rate from the camera for {silent_s:.1f} s (camera silent)"
+        return None
+
+    def missing(self) -> list[str]:
+        """Required services not (yet) alive."""
+        return [name for name, key in self.alive_keys.items() if not self.liveliness.is_alive(key)]
+
+    def thresholds_hz(self) -> tuple[float, float]:
+        """(on, off) event-rate thresholds in force (nan before a baseline)."""
+        if self.reading is None:
+            return float("nan"), float("nan")
+        return self.reading.on_rate_hz, self.reading.off_rate_hz
+
+
+def point_state(rates_hz: list[float], on_hz: float, off_hz: float, previous: str) -> str:
+    """The flag state over a recording from its median rate, with the detector's hysteresis band.
+
+    Above ``on_hz``: flapping; below ``off_hz``: still; in between: as the previous point.
+    """
+    if not rates_hz or not np.isfinite(on_hz):
+        return FlagState.UNKNOWN.value
+    median = float(np.median(rates_hz))
+    if median >= on_hz:
+        return FlagState.FLAPPING.value
+    if median <= off_hz:
+        return FlagState.STILL.value
+    return previous if previous in (FlagState.FLAPPING.value, FlagState.STILL.value) else FlagState.UNKNOWN.value

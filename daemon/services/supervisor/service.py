@@ -1,0 +1,323 @@
+"""The supervisor service: owns the wind tunnel, watches the flag, runs sweeps or a feedback loop.
+
+Whatever happens (a signal, an exception, a service going silent, a readback mismatch, a serial
+error) the ``finally`` ramps the tunnel to zero, stops the recording and writes the run's stop
+record with the reason. A supervisor killed outright is covered by the tunnel's own watchdog
+(deploy/tunnel-*.yaml).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+import uuid
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from flagtrack.daemon.errors import DriverError, FlagtrackError
+from flagtrack.daemon.schema import RecorderCommand, SupervisorState, TunnelState
+from flagtrack.daemon.services.supervisor.analysis import point_metrics
+from flagtrack.daemon.services.supervisor.config import SupervisorConfig
+from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step
+from flagtrack.daemon.services.supervisor.monitor import BusMonitor, point_state
+from flagtrack.daemon.sweep.plan import Action, EndPoint, Point, Record, SetSpeed, Wait, plan_points, sweep_plan
+from flagtrack.daemon.sweep.runlog import PointResult, RunLog, completed_points, read_run, stored_sweep
+from flagtrack.daemon.sweep.summary import write_summary
+from flagtrack.daemon.transport import Bus
+
+log = logging.getLogger(__name__)
+
+
+class RunStopped(FlagtrackError):
+    """The run was stopped (signal) or cannot go on (a required service is gone)."""
+
+
+@dataclass(frozen=True)
+class FlagGeometry:
+    """The flag's rest frame and length in the tracker's units (for A/L and the lateral displacement)."""
+
+    length: float
+    root: tuple[float, float]
+    direction_deg: float
+
+
+class SupervisorService:
+    """Runs the configured mode with a tunnel opened (not started) by the caller.
+
+    Args:
+        bus: the bus.
+        cfg: the supervisor section.
+        tunnel: a :class:`~flagtrack.drivers.tunnel.safe.SafeTunnel` (or any WindTunnel with start/abort/close).
+        camera_id: the camera watched.
+        flag: the flag's geometry for the metrics.
+        rig_snapshot: the whole rig config, stored in the run's start record.
+        resume_dir: resume this run instead of starting a new one.
+    """
+
+    name = "supervisor"
+
+    def __init__(self, bus: Bus, cfg: SupervisorConfig, tunnel: Any, camera_id: str, flag: FlagGeometry,
+                 rig_snapshot: dict[str, Any], resume_dir: Path | None = None) -> None:
+        self.bus, self.cfg, self.tunnel, self.flag = bus, cfg, tunnel, flag
+        self.rig_snapshot = rig_snapshot
+        self.resume_dir = resume_dir
+        self.monitor = BusMonitor(bus, camera_id, cfg.onset, cfg.required)
+        self.run_dir: Path | None = None
+        self.stop_reason = ""
+        self.points_done: list[PointResult] = []
+        self._mode, self._point, self._branch = cfg.mode, "", ""
+        self._last_publish = 0.0
+        self._stop = threading.Event()
+
+    # -- service ---------------------------------------------------------------------------
+
+    def run(self, stop: threading.Event) -> None:
+        self._stop = stop
+        keys = self.bus.keys
+        self._state_pub = self.bus.publisher(keys.supervisor_state())
+        self._tunnel_pub = self.bus.publisher(keys.tunnel_state())
+        self._recorder_pub = self.bus.publisher(keys.recorder_command())
+        self.bus.declare_alive(self.name)
+        watcher = threading.Thread(target=self._abort_on_stop, name="supervisor-abort", daemon=True)
+        watcher.start()
+        runlog: RunLog | None = None
+        reason, error = "finished", None
+        try:
+            self.tunnel.start()
+            self._wait_for_services()
+            if self.cfg.mode == "sweep":
+                runlog = self._open_run()
+                self._run_sweep(runlog)
+            elif self.cfg.mode == "feedback":
+                self._run_feedback()
+            else:
+                while not stop.is_set():
+                    self._idle(0.05)
+        except RunStopped as exc:
+            reason = str(exc)
+            log.warning("supervisor: %s", reason)
+        except BaseException as exc:
+            reason, error = "error", f"{type(exc).__name__}: {exc}"
+            log.error("supervisor: %s", error)
+            raise
+        finally:
+            self.stop_reason = reason
+            self._safe_state(runlog, reason, error)
+
+    def _abort_on_stop(self) -> None:
+        """A stop request interrupts a ramp in progress (the finally then ramps to zero)."""
+        self._stop.wait()
+        self.tunnel.abort()
+
+    def _safe_state(self, runlog: RunLog | None, reason: str, error: str | None) -> None:
+        self._mode = "safe"
+        try:
+            self._recorder(RecorderCommand("stop", request_id=uuid.uuid4().hex), wait=False)
+        except FlagtrackError as exc:
+            log.error("supervisor: could not stop the recorder: %s", exc)
+        try:
+            self.tunnel.safe_stop()
+        except DriverError as exc:
+            log.error("supervisor: %s", exc)
+            error = error or str(exc)
+        finally:
+            self._publish(force=True)
+            self.tunnel.close()
+            if runlog is not None:
+                runlog.stop(reason, error=error)
+                runlog.close()
+                try:
+                    write_summary(runlog.run_dir)
+                except Exception as exc:  # noqa: BLE001 - the run is recorded; the summary is a convenience
+                    log.error("supervisor: summary failed: %s", exc)
+            log.info("supervisor: tunnel at zero (%s)", reason)
+
+    # -- helpers ---------------------------------------------------------------------------
+
+    def _idle(self, duration_s: float) -> None:
+        """Wait ``duration_s`` watching the bus; raise RunStopped on a stop request or a silent service."""
+        deadline = time.monotonic() + duration_s
+        while True:
+            self.monitor.pump()
+            self._publish()
+            if self._stop.is_set():
+                raise RunStopped("stopped by signal")
+            if self._point or self._mode == "feedback":
+                problem = self.monitor.problem(self.cfg.silence_timeout_s)
+                if problem:
+                    raise RunStopped(problem)
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return
+            self._stop.wait(min(0.02, remaining))
+
+    def _wait_for_services(self) -> None:
+        """Wait for the required services and for the still-flag baseline of the onset detector."""
+        deadline = time.monotonic() + self.cfg.startup_timeout_s
+        while self.monitor.missing() or self.monitor.reading is None or not np.isfinite(self.monitor.thresholds_hz()[0]):
+            if time.monotonic() > deadline:
+                missing = self.monitor.missing()
+                what = f"services {', '.join(missing)} did not appear" if missing else "no event-rate baseline"
+                raise RunStopped(f"{what} within {self.cfg.startup_timeout_s:g} s")
+            self._idle(0.05)
+        self.monitor.last_rate_s = time.monotonic()
+
+    def _publish(self, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now - self._last_publish < self.cfg.publish_interval_s:
+            return
+        self._last_publish = now
+        m = self.monitor
+        self._state_pub.put(SupervisorState(m.state.value, float(m.rate_hz) if np.isfinite(m.rate_hz) else 0.0,
+                                            self._mode, self._point, self._branch, float(self.tunnel.setpoint_mps)
+                                            if np.isfinite(self.tunnel.setpoint_mps) else 0.0, self.stop_reason))
+        status = self.tunnel.status()
+        self._tunnel_pub.put(TunnelState(float(status.speed_mps) if np.isfinite(status.speed_mps) else -1.0,
+                                         float(status.setpoint_mps) if np.isfinite(status.setpoint_mps) else 0.0,
+                                         "fault" if status.fault else self._mode, status.fault or "", time.time()))
+
+    def _recorder(self, command: RecorderCommand, wait: bool = True) -> Any:
+        """Send a command to the recorder; with ``wait``, return its acknowledgement."""
+        self._recorder_pub.put(command)
+        if not wait:
+            return None
+        deadline = time.monotonic() + self.cfg.recorder_timeout_s
+        while command.request_id not in self.monitor.recorder_replies:
+            if time.monotonic() > deadline:
+                raise RunStopped(f"the recorder did not acknowledge '{command.action}' within "
+                                 f"{self.cfg.recorder_timeout_s:g} s")
+            self._idle(0.02)
+        return self.monitor.recorder_replies.pop(command.request_id)
+
+    def _set_speed(self, speed_mps: float) -> None:
+        self.monitor.pump()
+        self._publish(force=True)
+        self.tunnel.set_speed_mps(speed_mps)
+        self.monitor.pump()
+        if self._stop.is_set():
+            raise RunStopped("stopped by signal")
+
+    # -- sweep -----------------------------------------------------------------------------
+
+    def _open_run(self) -> RunLog:
+        if self.resume_dir is not None:
+            runlog, record = RunLog.resume(self.resume_dir)
+            self.run_dir = runlog.run_dir
+            self._sweep = stored_sweep(record)
+            self._done = completed_points(self.run_dir)
+            log.info("supervisor: resuming %s (%d points done)", self.run_dir, len(self._done))
+            return runlog
+        name = self.cfg.run_name or datetime.now().strftime("run-%Y%m%d-%H%M%S")
+        self.run_dir = Path(self.cfg.runs_dir).expanduser() / name
+        assert self.cfg.sweep is not None
+        self._sweep, self._done = self.cfg.sweep, set()
+        config = {**self.rig_snapshot, "sweep": _mapping(self.cfg.sweep)}
+        return RunLog.create(self.run_dir, run_id=name, config=config, plan=plan_points(self.cfg.sweep))
+
+    def _run_sweep(self, runlog: RunLog) -> None:
+        point: Point | None = None
+        result: PointResult | None = None
+        for step in sweep_plan(self._sweep, self._done):
+            if isinstance(step, Point):
+                point, result = step, None
+                self._point, self._branch = step.point_id, step.branch.value
+                log.info("supervisor: point %s", step.point_id)
+            elif isinstance(step, SetSpeed):
+                self._set_speed(step.speed_mps)
+            elif isinstance(step, Wait):
+                self._idle(step.duration_s)
+            elif isinstance(step, Record):
+                assert point is not None
+                result = self._record_point(point, step)
+            elif isinstance(step, Action):
+                log.info("supervisor: action %s for %s (no built-in meaning; logged)", step.name, step.point_id)
+            elif isinstance(step, EndPoint) and result is not None:
+                runlog.point(result)
+                self.points_done.append(result)
+                self._point = ""
+        self._mode = "done"
+
+    def _record_point(self, point: Point, step: Record) -> PointResult:
+        base = self.run_dir / "points" / point.point_id  # type: ignore[operator]
+        t_start = time.time()
+        self._recorder(RecorderCommand("start", path=str(base.resolve()), centrelines=True,
+                                       request_id=uuid.uuid4().hex))
+        self.monitor.start_collecting()
+        readbacks = []
+        end = time.monotonic() + step.duration_s
+        while time.monotonic() < end:
+            self._idle(min(0.5, max(0.0, end - time.monotonic())))
+            readbacks.append(self.tunnel.status().speed_mps)
+        collection = self.monitor.stop_collecting()
+        stopped = self._recorder(RecorderCommand("stop", request_id=uuid.uuid4().hex))
+        on_hz, off_hz = self.monitor.thresholds_hz()
+        previous = self.points_done[-1].state if self.points_done else "still"
+        state = point_state(collection.rates_hz, on_hz, off_hz, previous)
+        metrics = point_metrics(collection.batches, self.flag.length, self.flag.root, self.flag.direction_deg)
+        if state != "flapping":  # a still flag has no amplitude or frequency worth a number
+            metrics = type(metrics)(amplitude_over_l=metrics.amplitude_over_l, delta_rms_over_l=metrics.delta_rms_over_l,
+                                    updates=metrics.updates)
+        raw = base.with_name(base.name + ".raw")
+        lines = base.with_name(base.name + "_centrelines.h5")
+        readback = [v for v in readbacks if np.isfinite(v)]
+        return PointResult.planned(
+            point, state=state, speed_readback_mps=float(np.mean(readback)) if readback else math.nan,
+            amplitude_over_l=metrics.amplitude_over_l, amplitude_std_over_l=metrics.amplitude_std_over_l,
+            frequency_hz=metrics.frequency_hz, twi=metrics.twi, delta_rms_over_l=metrics.delta_rms_over_l,
+            event_rate_mev_s=float(np.mean(collection.rates_hz)) / 1e6 if collection.rates_hz else math.nan,
+            raw_bytes=raw.stat().st_size if raw.exists() else int(stopped.bytes),
+            raw_file=str(raw.relative_to(self.run_dir)), centreline_file=str(lines.relative_to(self.run_dir))
+            if lines.exists() else None, t_start_unix=t_start, t_stop_unix=time.time(),
+        )
+
+    # -- feedback --------------------------------------------------------------------------
+
+    def _run_feedback(self) -> None:
+        fb = self.cfg.feedback
+        self._mode = "feedback"
+        self._set_speed(fb.start_speed_mps)
+        state = ControllerState(0.0, fb.start_speed_mps)
+        started = time.monotonic()
+        self.feedback_trace: list[tuple[float, float, float]] = []
+        self.monitor.start_collecting()
+        while fb.duration_s == 0 or time.monotonic() - started < fb.duration_s:
+            self._idle(fb.period_s)
+            collection = self.monitor.stop_collecting()
+            recent = _last_seconds(collection.batches, fb.window_s)
+            self.monitor.start_collecting()
+            self.monitor.collection.batches.extend(recent)  # type: ignore[union-attr]
+            amplitude = point_metrics(recent, self.flag.length, self.flag.root, self.flag.direction_deg).amplitude_over_l
+            if self.monitor.state.value == "still":
+                amplitude = 0.0
+            state = control_step(state, amplitude, fb.period_s, fb)
+            self.feedback_trace.append((time.monotonic() - started, amplitude, state.speed_mps))
+            log.info("feedback: A/L %.3f -> %.2f m/s", amplitude, state.speed_mps)
+            if abs(state.speed_mps - self.tunnel.setpoint_mps) > 1e-9:
+                self._set_speed(state.speed_mps)
+        self.monitor.stop_collecting()
+        self._mode = "done"
+
+
+def _last_seconds(batches: list, window_s: float) -> list:
+    """The batches (trimmed) covering the last ``window_s`` of camera time."""
+    if not batches:
+        return []
+    t_end = batches[-1].t_s[-1]
+    kept = []
+    for batch in reversed(batches):
+        if batch.t_s[-1] < t_end - window_s:
+            break
+        kept.append(batch.select(batch.t_s >= t_end - window_s))
+    return kept[::-1]
+
+
+def _mapping(obj: Any) -> Any:
+    from flagtrack.daemon.config import to_mapping
+
+    return to_mapping(obj)
