@@ -108,8 +108,18 @@ def sector_rho_range(px: float, py: float, c: float, s: float, r_in: float, r_ou
     """Smallest and largest distance to the root of the points of a search area.
 
     The area is the annular sector around (px, py) of radii [r_in, r_out] and directions within
-    ``half_angle`` (radians) of (c, s).
+    ``half_angle`` (radians) of (c, s). The range is widened by a few single-precision roundings of
+    the coordinates, so that no event the (single-precision) area test takes falls outside it.
     """
+    lo, hi = _sector_rho_range(px, py, c, s, r_in, r_out, half_angle, root_x, root_y)
+    slack = 1e-6 * (max(abs(px), abs(py), abs(root_x), abs(root_y)) + r_out)
+    return max(lo - slack, 0.0), hi + slack
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _sector_rho_range(px: float, py: float, c: float, s: float, r_in: float, r_out: float, half_angle: float,
+                      root_x: float, root_y: float) -> tuple[float, float]:
+    """:func:`sector_rho_range` without the slack."""
     rx, ry = root_x - px, root_y - py
     d_root = math.hypot(rx, ry)
     d_p = d_root
