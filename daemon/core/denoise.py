@@ -157,6 +157,12 @@ class BackgroundActivityFilter:
         """
         if len(events) == 0:
             return start, True, latest_us
+        span = int(events["t"][-1]) - int(events["t"][0])
+        if self.params is not None and len(events) > 1 and abs(span) >= _REBASE_US:
+            half = len(events) // 2  # a chunk across a long gap: keep the times within int32 of the base
+            end, ordered, latest = self.filter_into(events[:half], out_t, out_x, out_y, start, latest_us)
+            end, ordered_2, latest = self.filter_into(events[half:], out_t, out_x, out_y, end, latest)
+            return end, ordered and ordered_2, latest
         ordered, latest = self._prepare(events, latest_us)
         t, x, y = events["t"], events["x"], events["y"]
         if self.params is None:
@@ -170,6 +176,9 @@ class BackgroundActivityFilter:
         mask = np.ones(len(events), dtype=bool)
         if self.params is None or len(events) == 0:
             return mask
+        if len(events) > 1 and abs(int(events["t"][-1]) - int(events["t"][0])) >= _REBASE_US:
+            half = len(events) // 2  # see filter_into
+            return np.concatenate([self.keep_mask(events[:half]), self.keep_mask(events[half:])])
         self._prepare(events, -(1 << 62))
         index = np.empty(len(events), dtype=np.int64)
         end = filter_indices(events["t"], events["x"], events["y"], self._last, self._width + 2, self._base_us,

@@ -79,3 +79,17 @@ def test_line_events_pass_and_background_does_not() -> None:
 def test_window_must_be_positive(window_us: int) -> None:
     with pytest.raises(ValueError, match="window_us"):
         DenoiseParams(window_us)
+
+
+def test_hours_long_recordings_and_gaps_keep_working() -> None:
+    hour = 3_600_000_000
+    rows = [(0, 5, 5), (50, 6, 5), (hour, 5, 5), (hour + 40, 6, 5), (3 * hour, 7, 7), (3 * hour + 10, 8, 7)]
+    expected = [False, True, False, True, False, True]
+    assert BackgroundActivityFilter(DenoiseParams(100), 10, 10).keep_mask(_ev(rows)).tolist() == expected
+    f = BackgroundActivityFilter(DenoiseParams(100), 10, 10)
+    n = 3
+    out_t, out_x, out_y = np.empty(6, np.int64), np.empty(6, np.float32), np.empty(6, np.float32)
+    end, ordered, latest = f.filter_into(_ev(rows[:n]), out_t, out_x, out_y, 0)
+    end, ordered, latest = f.filter_into(_ev(rows[n:]), out_t, out_x, out_y, end, latest)
+    assert end == 3 and ordered and latest == 3 * hour + 10
+    assert out_t[:end].tolist() == [50, hour + 40, 3 * hour + 10]
