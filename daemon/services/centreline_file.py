@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
+from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.schema import CentrelineMessage
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.formats.centreline import CentrelineWriter
@@ -31,25 +33,32 @@ class CentrelineFileService:
         self.path = Path(path)
         self.attrs = attrs
         self.exit_after_final = exit_after_final
+        self.write_interval_s = 0.5  # appends are batched: one HDF5 append per interval
         self.updates = 0
         self.subscription = bus.subscribe(bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000)
 
     def run(self, stop: threading.Event) -> None:
         writer: CentrelineWriter | None = None
+        pending: list = []
+        last_write = time.monotonic()
         try:
             while not stop.is_set():
                 msg = self.subscription.recv(timeout_s=0.05)
-                if msg is None:
-                    continue
-                if writer is None:
-                    self.path.parent.mkdir(parents=True, exist_ok=True)
-                    writer = CentrelineWriter(self.path, msg.s, msg.joints_x.shape[1] - 1,
-                                              {**self.attrs, "units": msg.units})
-                writer.append(msg.batch())
-                self.updates += len(msg.t_s)
-                if msg.final and self.exit_after_final:
+                if msg is not None:
+                    if writer is None:
+                        self.path.parent.mkdir(parents=True, exist_ok=True)
+                        writer = CentrelineWriter(self.path, msg.s, msg.joints_x.shape[1] - 1,
+                                                  {**self.attrs, "units": msg.units})
+                    pending.append(msg.batch())
+                    self.updates += len(msg.t_s)
+                if pending and (time.monotonic() - last_write > self.write_interval_s or (msg is not None and msg.final)):
+                    writer.append(CentrelineBatch.concatenate(pending))  # type: ignore[union-attr]
+                    pending, last_write = [], time.monotonic()
+                if msg is not None and msg.final and self.exit_after_final:
                     break
         finally:
             if writer is not None:
+                if pending:
+                    writer.append(CentrelineBatch.concatenate(pending))
                 writer.close()
                 log.info("centrelines: %d updates written to %s", self.updates, self.path)

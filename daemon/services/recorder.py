@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 from flagtrack.daemon import __version__
+from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import SchemaError
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, RecorderCommand, RecorderStatus, decode
 from flagtrack.daemon.transport import Bus
@@ -74,6 +75,7 @@ class Recording:
     geometry: dict[str, Any] = field(default_factory=dict)
     _last_flush: float = field(default_factory=time.monotonic)
     _last_fsync: float = field(default_factory=time.monotonic)
+    _pending_lines: list[CentrelineBatch] = field(default_factory=list)
 
     @property
     def raw_path(self) -> Path:
@@ -108,18 +110,25 @@ class Recording:
         self.last_t_us = packet.t_last_us
 
     def write_centrelines(self, msg: CentrelineMessage) -> None:
-        """Append a batch of centrelines (opening the HDF5 file at the first one)."""
-        if not self.want_centrelines:
+        """Queue a batch of centrelines (written to HDF5 at the next sync, in one append)."""
+        if not self.want_centrelines or len(msg.t_s) == 0:
             return
         if self.centrelines is None:
             self.centrelines = CentrelineWriter(self.centrelines_path, msg.s, msg.joints_x.shape[1] - 1,
                                                 {"units": msg.units, "input_file": str(self.raw_path),
                                                  "source": msg.source})
-        self.centrelines.append(msg.batch())
+        self._pending_lines.append(msg.batch())
+
+    def _flush_centrelines(self) -> None:
+        if self._pending_lines and self.centrelines is not None:
+            self.centrelines.append(CentrelineBatch.concatenate(self._pending_lines))
+        self._pending_lines = []
 
     def sync(self, cfg: RecorderConfig, force: bool = False) -> None:
         """Flush (and fsync) when due."""
         now = time.monotonic()
+        if force or now - self._last_flush >= cfg.flush_interval_s:
+            self._flush_centrelines()
         if self.raw is not None and (force or now - self._last_flush >= cfg.flush_interval_s):
             self.raw.flush()
             self._last_flush = now
@@ -150,6 +159,7 @@ class Recording:
             os.fsync(self.raw.fileno())
             self.raw.close()
         if self.centrelines is not None:
+            self._flush_centrelines()
             self.centrelines.close()
         self.write_sidecar(stopped=True)
 
@@ -195,9 +205,10 @@ class RecorderService:
                         self._write_raw_packet(*item)
                 if self._stream_ended and self.exit_at_end_of_stream:
                     break
+                if self.current is None or not self.current.want_centrelines:
+                    lines.channel.drain()  # not recording them: no need to decode
                 while (msg := lines.recv(timeout_s=0)) is not None:
-                    if self.current is not None:
-                        self.current.write_centrelines(msg)
+                    self.current.write_centrelines(msg)  # type: ignore[union-attr]
                 self.lost_packets = packets.channel.dropped
                 if self.current is not None:
                     self.current.sync(self.cfg)
