@@ -11,6 +11,7 @@ imported only when corners are detected):
 
 - ``load_mapping(path) -> PolynomialMapping``: what the tracker applies to every event
   (``map(x_px, y_px) -> (x_m, y_m)``, ``units = "m"``, ``to_pixels`` for drawing);
+- ``calibration_attrs(path) -> dict``: flat attributes (residuals, degree, the file's text) for outputs;
 - ``calibrate_events``, ``BoardSpec``, ``GridFrame``, ``Direction``, ``BlinkSearch``,
   ``save_calibration``, ``load_calibration_data``, ``CalibrationError``.
 """
@@ -23,12 +24,12 @@ if TYPE_CHECKING:
     from flagtrack.calibration.mapping import PolynomialMapping
 
 __all__ = ["BlinkSearch", "BoardSpec", "CalibrationError", "Direction", "GridFrame", "PolynomialMapping",
-           "calibrate_events", "load_calibration_data", "load_mapping", "save_calibration"]
+           "calibrate_events", "calibration_attrs", "load_calibration_data", "load_mapping", "save_calibration"]
 
 _WHERE = {
     "BlinkSearch": "pseudo_image", "BoardSpec": "fit", "CalibrationError": "errors", "Direction": "frame",
     "GridFrame": "frame", "PolynomialMapping": "mapping", "calibrate_events": "fit",
-    "save_calibration": "calfile", "load_calibration_data": "calfile",
+    "save_calibration": "calfile", "load_calibration_data": "calfile", "calibration_attrs": "calfile",
 }
 
 

@@ -132,3 +132,23 @@ def load_mapping(path: str | Path) -> PolynomialMapping:
         raise FormatError(f"units {data.get('units')!r} not supported (m)", path=str(path))
     return PolynomialMapping(_polynomial(data, "forward", str(path)), _polynomial(data, "inverse", str(path)),
                              (size[0], size[1]))
+
+
+def calibration_attrs(path: str | Path) -> dict[str, Any]:
+    """Flat output attributes describing a calibration file: summary numbers and the whole file's text.
+
+    For centreline files (``reconstruct``) so that an output in metres carries its calibration.
+
+    Raises:
+        ConfigError, FormatError: as :func:`load_mapping`.
+    """
+    data = read_calibration_file(path)
+    res = data.get("residuals") or {}
+    attrs: dict[str, Any] = {
+        "calibration_degree": data.get("degree"), "calibration_created": str(data.get("created")),
+        "calibration_source": str(data.get("source")), "calibration_yaml": Path(path).read_text(),
+    }
+    for key in ("mean_mm", "max_mm", "mean_px", "max_px", "loo_max_px", "pixel_size_mm"):
+        if key in res:
+            attrs[f"calibration_{key}"] = res[key]
+    return attrs

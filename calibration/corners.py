@@ -54,7 +54,7 @@ def _cv2() -> Any:
     try:
         import cv2
     except ImportError as exc:  # pragma: no cover - depends on the installation
-        raise CalibrationError("corner detection needs OpenCV: pip install 'opencv-python-headless>=4.8'") from exc
+        raise CalibrationError("corner detection needs OpenCV: pip install 'opencv-python-headless>=4.10'") from exc
     return cv2
 
 

@@ -194,3 +194,14 @@ def test_bad_calibration_files_are_clear_errors(tmp_path: Path, name: str, conte
 def test_a_missing_calibration_file_is_a_config_error(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="cannot read calibration file"):
         load_mapping(tmp_path / "nope.yaml")
+
+
+def test_calibration_attrs_summarise_the_file(tmp_path: Path) -> None:
+    from flagtrack.calibration import calibration_attrs
+
+    cal, _ = _tilted_calibration()
+    path = save_calibration(cal, tmp_path / "cal.yaml")
+    attrs = calibration_attrs(path)
+    assert attrs["calibration_degree"] == 3
+    assert attrs["calibration_max_px"] == pytest.approx(cal.residuals.max_px, abs=1e-6)
+    assert yaml.safe_load(attrs["calibration_yaml"])["format"] == "flagtrack-calibration"
