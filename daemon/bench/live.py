@@ -1,0 +1,152 @@
+"""``flagtrack bench live``: replay a recording through camera -> Zenoh -> tracker, as separate processes.
+
+Three processes on this machine, joined by Zenoh over loopback TCP (multicast scouting off): a
+``flagtrack tracker`` (listening), a ``flagtrack camera`` replaying a flapping-line recording
+(``drivers/sim/quickline``, about 6 Mev/s of camera data) and this process, which subscribes to the
+centrelines and the tracker status.
+
+1. Throughput: the file is replayed as fast as possible; the sustained rate is the events of the
+   file over the time from the first packet to the tracker's last centreline, and the tracker must
+   report no missing packet.
+2. Latency: the file is replayed in real time scaled to ``--latency-rate`` (5 Mev/s by default);
+   each update's latency runs from the adapter's reception of the packet that completed its window
+   (``sent_ns``) to the centreline's arrival here (so it includes the bus hop back), p50 and p99.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+COMMAND = "live"
+HELP = "sustained event rate and latency of camera -> Zenoh -> tracker on a replayed recording"
+DESCRIPTION = __doc__
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of the live benchmark."""
+    parser.add_argument("--seconds", type=float, default=2.0, help="recording length, s (~6 Mev/s: 2 s ~ 12 M events)")
+    parser.add_argument("--latency-rate", type=float, default=5.0, help="event rate of the latency run, Mev/s")
+    parser.add_argument("--latency-seconds", type=float, default=4.0, help="wall time of the latency run, s")
+    parser.add_argument("--tau", type=float, default=2.5e-4, help="tracker update interval, s")
+    parser.add_argument("--cache", type=Path, default=None, help="folder for the recording")
+    parser.add_argument("--json", action="store_true", help="print the results as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run both measurements and print them."""
+    from flagtrack.daemon.bench.reconstruct import LENGTH, ROOT, make_recording
+    from flagtrack.drivers.formats import open_events
+
+    cache = args.cache or Path(tempfile.gettempdir()) / "flagtrack-bench"
+    cache.mkdir(parents=True, exist_ok=True)
+    recording = cache / f"live-{args.seconds:g}s.raw"
+    if not recording.exists():
+        print(f"bench live: making {recording} ...", file=sys.stderr)
+        make_recording(recording, args.seconds)
+    with open_events(recording) as reader:
+        n_events = sum(len(chunk.events) for chunk in reader)
+    file_rate = n_events / args.seconds
+    tracker = {"root": list(ROOT), "length": LENGTH, "tau_s": args.tau}
+    throughput = _measure(recording, tracker, speed=0.0, loop=False, wall_s=None)
+    speed = args.latency_rate * 1e6 / file_rate
+    latency = _measure(recording, tracker, speed=speed, loop=True, wall_s=args.latency_seconds)
+    results = {
+        "events": n_events, "file_rate_mev_s": file_rate / 1e6,
+        "sustained_mev_s": n_events / throughput["elapsed_s"] / 1e6 if throughput["complete"] else None,
+        "throughput_missing_packets": throughput["missing_packets"], "throughput_updates": throughput["updates"],
+        "latency_rate_mev_s": args.latency_rate, "latency_updates": latency["updates"],
+        "latency_p50_ms": latency["p50_ms"], "latency_p99_ms": latency["p99_ms"],
+        "latency_missing_packets": latency["missing_packets"],
+    }
+    if args.json:
+        print(json.dumps(results))
+    else:
+        print(f"camera -> Zenoh -> tracker, separate processes, {n_events / 1e6:.1f} M events "
+              f"({file_rate / 1e6:.1f} Mev/s of camera data), tau = {args.tau * 1e6:g} us")
+        sustained = results["sustained_mev_s"]
+        print(f"  throughput: {sustained:.1f} Mev/s sustained, {throughput['missing_packets']} packets lost"
+              if sustained else "  throughput: the tracker did not finish the stream")
+        print(f"  latency at {args.latency_rate:g} Mev/s: p50 {latency['p50_ms']:.2f} ms, p99 {latency['p99_ms']:.2f} ms "
+              f"over {latency['updates']} updates, {latency['missing_packets']} packets lost")
+    return 0
+
+
+def _measure(recording: Path, tracker: dict[str, Any], *, speed: float, loop: bool, wall_s: float | None) -> dict[str, Any]:
+    import numpy as np
+
+    from flagtrack.daemon.schema import CentrelineMessage, TrackerStatus
+    from flagtrack.daemon.transport import Bus, BusConfig
+
+    port = _free_port()
+    rig = f"bench{os.getpid()}{int(time.time() * 1000) % 100000}"
+    with tempfile.TemporaryDirectory() as tmp:
+        tracker_cfg, camera_cfg = Path(tmp) / "tracker.yaml", Path(tmp) / "camera.yaml"
+        common = {"rig": rig, "tracker": tracker, "tracker_service": {"batch_updates": 64, "max_batch_delay_s": 0.001}}
+        tracker_cfg.write_text(json.dumps({**common, "bus": {"listen": [f"tcp/127.0.0.1:{port}"]}}))
+        camera_cfg.write_text(json.dumps({**common, "bus": {"connect": [f"tcp/127.0.0.1:{port}"]},
+                                          "camera": {"adapter": "replay",
+                                                     "replay": {"path": str(recording), "speed": speed, "loop": loop}}}))
+        procs = [_start("tracker", tracker_cfg)]
+        try:
+            with Bus(BusConfig(namespace=f"flagtrack/{rig}", connect=(f"tcp/127.0.0.1:{port}",))) as bus:
+                lines = bus.subscribe(bus.keys.centrelines(), CentrelineMessage, capacity=10_000_000)
+                status = bus.subscribe(bus.keys.tracker_status(), TrackerStatus, capacity=10_000, ring=True)
+                if status.recv(timeout_s=60) is None:  # the tracker is up (it reports once a second)
+                    raise RuntimeError("the tracker process did not start")
+                procs.append(_start("camera", camera_cfg))
+                latencies, updates, first_ns, last_ns, complete = [], 0, None, None, False
+                deadline = time.monotonic() + (wall_s if wall_s else 600)
+                while time.monotonic() < deadline:
+                    msg = lines.recv(timeout_s=0.5)
+                    if msg is None:
+                        continue
+                    now = time.time_ns()
+                    if first_ns is None and len(msg.source_ns):
+                        first_ns = int(msg.source_ns.min())
+                    last_ns = now
+                    updates += len(msg.t_s)
+                    latencies.append((now - msg.source_ns) * 1e-6)
+                    if msg.final:
+                        complete = True
+                        break
+                procs[-1].send_signal(signal.SIGINT)
+                procs[-1].communicate(timeout=30)
+                time.sleep(1.2)
+                missing = 0
+                while (s := status.recv(timeout_s=0.1)) is not None:
+                    missing = s.missing_packets
+        finally:
+            for proc in procs:
+                if proc.poll() is None:
+                    proc.send_signal(signal.SIGINT)
+            for proc in procs:
+                proc.communicate(timeout=30)
+    lat = np.concatenate(latencies) if latencies else np.zeros(0)
+    return {
+        "complete": complete, "updates": updates, "missing_packets": missing,
+        "elapsed_s": ((last_ns or 0) - (first_ns or 0)) * 1e-9,
+        "p50_ms": float(np.percentile(lat, 50)) if len(lat) else float("nan"),
+        "p99_ms": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
+    }
+
+
+def _start(service: str, config: Path) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "flagtrack.daemon", service, "-c", str(config)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
