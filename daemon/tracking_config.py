@@ -66,6 +66,8 @@ class TrackingConfig:
         denoise: robust method: background-activity filter.
         t_start_s: first update time (default: first event + tau/2).
         t_stop_s: last update time (default: end of the events).
+        max_gap_s: windows without events starting more than this after the last event are not
+            written (null: every window).
         calibration: file of a pixel -> metre mapping (flagtrack.calibration); None: pixels.
     """
 
@@ -86,6 +88,7 @@ class TrackingConfig:
     denoise: DenoiseConfig = field(default_factory=DenoiseConfig)
     t_start_s: float | None = None
     t_stop_s: float | None = None
+    max_gap_s: float | None = 1.0
     calibration: Path | None = None
 
     def with_overrides(self, **values: Any) -> TrackingConfig:
@@ -122,7 +125,9 @@ class TrackingConfig:
             denoise = _build(DenoiseParams, path, "denoise", window_us=self.denoise.window_us)
         if self.ds is not None and not self.ds > 0:
             raise ConfigError(f"must be positive, got {self.ds}", key=f"{SECTION}.ds", path=path)
-        return TrackerParams(chain=chain, schedule=schedule, ds=self.ds, denoise=denoise)
+        if self.max_gap_s is not None and not self.max_gap_s > 0:
+            raise ConfigError(f"must be positive, got {self.max_gap_s}", key=f"{SECTION}.max_gap_s", path=path)
+        return TrackerParams(chain=chain, schedule=schedule, ds=self.ds, denoise=denoise, max_gap_s=self.max_gap_s)
 
     def attrs(self) -> dict[str, Any]:
         """Every processing parameter as flat HDF5-friendly attributes (effective values)."""

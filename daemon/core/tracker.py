@@ -39,6 +39,9 @@ class TrackerParams:
         schedule: update times and window lengths.
         ds: step of the smoothed centreline; ``None``: L / 50 (the paper).
         denoise: background-activity filter, ``None`` to use every event (the paper).
+        max_gap_s: a window without events that starts more than this after the last event is
+            not emitted (the chain would not move; keeps a long pause from making millions of
+            identical updates); ``None``: emit every window.
         rel_tol: tolerance of the smoothed length, relative to L.
     """
 
@@ -46,6 +49,7 @@ class TrackerParams:
     schedule: WindowSchedule
     ds: float | None = None
     denoise: DenoiseParams | None = None
+    max_gap_s: float | None = 1.0
     rel_tol: float = REL_TOL
 
     @property
@@ -79,6 +83,7 @@ class _Buffer:
     x: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.float32))
     y: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.float32))
     n: int = 0
+    last_dropped_t: int = np.iinfo(np.int64).min  # time of the latest event dropped from the front
 
     def reserve(self, extra: int) -> None:
         need = self.n + extra
@@ -93,6 +98,7 @@ class _Buffer:
     def drop_before(self, t_us: float) -> None:
         cut = int(np.searchsorted(self.t[:self.n], np.int64(math.ceil(t_us)), side="left"))
         if cut:
+            self.last_dropped_t = int(self.t[cut - 1])
             keep = self.n - cut
             for arr in (self.t, self.x, self.y):
                 arr[:keep] = arr[cut:self.n]
@@ -186,7 +192,9 @@ class Tracker:
             t_us, lo_us, hi_us = clock.take(complete_before_us, started_before_us, _BATCH_UPDATES)
             if len(t_us) == 0:
                 break
-            batches.append(self._updates(t_us, lo_us, hi_us))
+            batch = self._updates(t_us, lo_us, hi_us)
+            if len(batch):
+                batches.append(batch)
         self._buffer.drop_before(clock.next_window_start_us())
         if not batches:
             return self._empty()
@@ -197,6 +205,12 @@ class Tracker:
         times = buf.t[:buf.n]
         lo_idx = np.searchsorted(times, lo_us, side="left")
         hi_idx = np.searchsorted(times, hi_us, side="left")
+        if self.params.max_gap_s is not None:
+            previous = np.where(lo_idx > 0, times[np.maximum(lo_idx - 1, 0)], buf.last_dropped_t)
+            gap = (hi_idx == lo_idx) & (lo_us - previous > self.params.max_gap_s * 1e6)
+            if gap.any():
+                keep = ~gap
+                t_us, lo_idx, hi_idx = t_us[keep], lo_idx[keep], hi_idx[keep]
         k, n_j, n_s = len(t_us), chain.n_joints, len(self.s)
         jx, jy = np.empty((k, n_j + 1)), np.empty((k, n_j + 1))
         sx, sy = np.empty((k, n_s)), np.empty((k, n_s))

@@ -173,3 +173,23 @@ def test_no_events_no_updates() -> None:
     tracker = Tracker(_params())
     assert len(tracker.feed(np.zeros(0, dtype=[("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")]))) == 0
     assert len(tracker.finish()) == 0
+
+
+def test_a_long_pause_gives_no_flood_of_empty_updates(events: np.ndarray) -> None:
+    pause_us = 3_600_000_000  # an hour without a single event
+    later = events.copy()
+    later["t"] += pause_us
+    both = np.concatenate([events, later])
+    params = _params()
+    batch = track(both, params)
+    n_one = len(track(events, params))
+    # the windows within 1 s (max_gap_s) after the last event are kept, the rest of the hour is not
+    assert 2 * n_one <= len(batch) <= 2 * n_one + 1.0 / 2.5e-4 + 2
+    gap = np.diff(batch.t_s)
+    assert gap.max() > 3500 and np.sum(gap > 1e-3) == 1
+    rng = np.random.default_rng(9)
+    _assert_same(batch, _feed_in_chunks(both, params, np.sort(rng.integers(0, len(both), 30))))
+    # without the rule every window of a (shorter) pause is written
+    everything = TrackerParams(chain=params.chain, schedule=params.schedule, denoise=params.denoise, max_gap_s=None)
+    later["t"] = events["t"] + 5_000_000
+    assert len(track(np.concatenate([events, later]), everything)) >= 2 * n_one + 19_000
