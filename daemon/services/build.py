@@ -56,7 +56,7 @@ def load_calibration(path: Any, rig_path: str | None) -> Any:
     return load_mapping(path)
 
 
-def open_camera(cfg: CameraConfig, speed_source: Callable[[], float] | None = None) -> Camera:
+def open_camera(cfg: CameraConfig, speed_source: Callable[[], float] | None = None, rig_path: str | None = None) -> Camera:
     """The camera adapter the ``camera:`` section names (hardware SDKs are imported only here)."""
     if cfg.adapter == "replay":
         from flagtrack.drivers.camera.replay import ReplayCamera
@@ -70,7 +70,12 @@ def open_camera(cfg: CameraConfig, speed_source: Callable[[], float] | None = No
     import importlib
 
     module = importlib.import_module(f"flagtrack.drivers.camera.{cfg.adapter}")
-    return module.open_from_config(cfg.hardware)
+    try:
+        return module.open_from_config(cfg.hardware)
+    except ConfigError as exc:
+        if exc.path is None and rig_path is not None:
+            raise ConfigError(str(exc), path=rig_path) from exc
+        raise
 
 
 class BusSpeedSource:
@@ -132,5 +137,5 @@ def build_services(
         stream = CameraStreamConfig(id=rig.camera.id, packet_us=rig.camera.packet_us,
                                     max_packet_events=rig.camera.max_packet_events,
                                     rate_interval_s=rig.camera.rate_interval_s)
-        services.append(CameraService(bus, stream, open_camera(rig.camera, speed_source)))
+        services.append(CameraService(bus, stream, open_camera(rig.camera, speed_source, rig.path)))
     return services
