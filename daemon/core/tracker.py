@@ -206,7 +206,10 @@ class Tracker:
         lo_idx = np.searchsorted(times, lo_us, side="left")
         hi_idx = np.searchsorted(times, hi_us, side="left")
         if self.params.max_gap_s is not None:
-            previous = np.where(lo_idx > 0, times[np.maximum(lo_idx - 1, 0)], buf.last_dropped_t)
+            if len(times):
+                previous = np.where(lo_idx > 0, times[np.maximum(lo_idx - 1, 0)], buf.last_dropped_t)
+            else:  # every event so far was filtered out (a still flag and sensor noise)
+                previous = np.full(len(lo_us), buf.last_dropped_t, dtype=np.float64)
             gap = (hi_idx == lo_idx) & (lo_us - previous > self.params.max_gap_s * 1e6)
             if gap.any():
                 keep = ~gap
