@@ -31,6 +31,20 @@ class Service(Protocol):
         ...
 
 
+class StopEvent(threading.Event):
+    """The stop request shared by a group's services, with why it was made (``reason``)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.reason = ""
+
+    def request(self, reason: str) -> None:
+        """Ask every service to stop, keeping the first reason given."""
+        if not self.is_set():
+            self.reason = reason
+        self.set()
+
+
 @dataclass
 class RunReport:
     """How a group of services ended: ``errors`` by service name, ``abandoned`` still running at timeout."""
@@ -52,7 +66,7 @@ class ServiceGroup:
 
     def __init__(self, services: Sequence[Service], stop_when_any_finishes: Sequence[str] = ()) -> None:
         self.services = list(services)
-        self.stop = threading.Event()
+        self.stop = StopEvent()
         self.report = RunReport()
         self._finishers = set(stop_when_any_finishes)
         self._threads: dict[str, threading.Thread] = {}
@@ -65,13 +79,13 @@ class ServiceGroup:
             log.error("service %s failed: %s", service.name, exc, exc_info=log.isEnabledFor(logging.DEBUG))
             with self._lock:
                 self.report.errors[service.name] = exc
-            self.stop.set()
+            self.stop.request(f"the {service.name} service failed: {exc}")
             return
         with self._lock:
             self.report.finished.append(service.name)
         if service.name in self._finishers:
             log.info("service %s finished; stopping the others", service.name)
-            self.stop.set()
+            self.stop.request(f"the {service.name} service finished")
 
     def start(self) -> None:
         """Start every service in its own thread (in the given order)."""
@@ -94,7 +108,7 @@ class ServiceGroup:
 
     def shutdown(self, timeout_s: float = 10.0) -> RunReport:
         """Ask every service to stop and join them; list those still running after ``timeout_s``."""
-        self.stop.set()
+        self.stop.request("shutdown")
         deadline = time.monotonic() + timeout_s
         for name, thread in self._threads.items():
             thread.join(max(0.0, deadline - time.monotonic()))
@@ -113,7 +127,7 @@ def install_signal_handlers(group: ServiceGroup, on_force: Callable[[], None] | 
         name = signal.Signals(signum).name
         if group.report.signal_count == 1:
             print(f"flagtrack: {name} received, stopping (again to force)", file=sys.stderr)
-            group.stop.set()
+            group.stop.request(f"stopped by {name}")
             return
         print(f"flagtrack: second {name}, forcing exit", file=sys.stderr)
         if on_force is not None:

@@ -47,15 +47,28 @@ def point_metrics(batches: list[CentrelineBatch], length: float, root: tuple[flo
     lateral = lateral_displacement(batch.x, batch.y, root, direction_deg)
     tip = lateral[:, -1]
     amplitude = tip_amplitude_over_l(tip, length)
-    frequency = flapping_frequency_hz(batch.t_s, tip)
+    run = _longest_run(batch.t_s)  # spectra and modes need evenly sampled time: no gaps
+    t_run, lateral_run = batch.t_s[run], lateral[run]
+    frequency = flapping_frequency_hz(t_run, lateral_run[:, -1])
     spread = _amplitude_spread(batch.t_s, tip, length, frequency, cycles_window)
     twi = math.nan
-    if n >= 16 and np.all(np.isfinite(lateral)):
-        uniform_t = np.linspace(batch.t_s[0], batch.t_s[-1], n)
-        resampled = np.stack([np.interp(uniform_t, batch.t_s, lateral[:, k]) for k in range(lateral.shape[1])], axis=1)
+    if len(t_run) >= 16 and np.all(np.isfinite(lateral_run)):
+        uniform_t = np.linspace(t_run[0], t_run[-1], len(t_run))
+        resampled = np.stack([np.interp(uniform_t, t_run, lateral_run[:, k]) for k in range(lateral.shape[1])], axis=1)
         twi = travelling_wave_index(resampled)
     delta = batch.delta_rms[np.isfinite(batch.delta_rms)]
     return PointMetrics(amplitude, spread, frequency, twi, float(delta.mean() / length) if len(delta) else math.nan, n)
+
+
+def _longest_run(t_s: np.ndarray, gap_factor: float = 5.0) -> slice:
+    """The longest stretch of updates without a gap (a step over ``gap_factor`` times the median step)."""
+    steps = np.diff(t_s)
+    if len(steps) == 0:
+        return slice(0, len(t_s))
+    breaks = np.flatnonzero(steps > gap_factor * np.median(steps)) + 1
+    edges = np.concatenate([[0], breaks, [len(t_s)]])
+    k = int(np.argmax(np.diff(edges)))
+    return slice(int(edges[k]), int(edges[k + 1]))
 
 
 def _amplitude_spread(t_s: np.ndarray, tip: np.ndarray, length: float, frequency_hz: float, cycles: int) -> float:

@@ -21,6 +21,7 @@ class FeedbackConfig:
         window_s: the amplitude is measured over the last ``window_s`` of centrelines.
         period_s: control period.
         start_speed_mps: speed set before the loop starts.
+        settle_s: wait after the start speed is reached before the loop starts.
         min_speed_mps, max_speed_mps: bounds of the commanded speed.
         max_step_mps: largest change per period (rate limit = max_step_mps / period_s).
         duration_s: run this long (0: until stopped).
@@ -32,6 +33,7 @@ class FeedbackConfig:
     window_s: float = 1.0
     period_s: float = 1.0
     start_speed_mps: float = 5.5
+    settle_s: float = 2.0
     min_speed_mps: float = 0.0
     max_speed_mps: float = 10.0
     max_step_mps: float = 0.3

@@ -102,6 +102,12 @@ class SupervisorService:
         except RunStopped as exc:
             reason = str(exc)
             log.warning("supervisor: %s", reason)
+        except DriverError as exc:
+            if stop.is_set():  # a ramp interrupted by the stop request: the request is the reason
+                reason = self._stop_reason()
+            else:
+                reason, error = "error", f"{type(exc).__name__}: {exc}"
+                log.error("supervisor: %s", error)
         except BaseException as exc:
             reason, error = "error", f"{type(exc).__name__}: {exc}"
             log.error("supervisor: %s", error)
@@ -109,6 +115,10 @@ class SupervisorService:
         finally:
             self.stop_reason = reason
             self._safe_state(runlog, reason, error)
+
+    def _stop_reason(self) -> str:
+        """Why the stop was requested (a signal, another service failing), as the stop record says it."""
+        return getattr(self._stop, "reason", "") or "stopped"
 
     def _abort_on_stop(self) -> None:
         """A stop request interrupts a ramp in progress (the finally then ramps to zero)."""
@@ -147,7 +157,7 @@ class SupervisorService:
             self.monitor.pump()
             self._publish()
             if self._stop.is_set():
-                raise RunStopped("stopped by signal")
+                raise RunStopped(self._stop_reason())
             if self._point or self._mode == "feedback":
                 problem = self.monitor.problem(self.cfg.silence_timeout_s)
                 if problem:
@@ -201,7 +211,7 @@ class SupervisorService:
         self.tunnel.set_speed_mps(speed_mps)
         self.monitor.pump()
         if self._stop.is_set():
-            raise RunStopped("stopped by signal")
+            raise RunStopped(self._stop_reason())
 
     # -- sweep -----------------------------------------------------------------------------
 
@@ -282,6 +292,7 @@ class SupervisorService:
         fb = self.cfg.feedback
         self._mode = "feedback"
         self._set_speed(fb.start_speed_mps)
+        self._idle(fb.settle_s)
         state = ControllerState(0.0, fb.start_speed_mps)
         started = time.monotonic()
         self.feedback_trace: list[tuple[float, float, float]] = []
@@ -293,8 +304,6 @@ class SupervisorService:
             self.monitor.start_collecting()
             self.monitor.collection.batches.extend(recent)  # type: ignore[union-attr]
             amplitude = point_metrics(recent, self.flag.length, self.flag.root, self.flag.direction_deg).amplitude_over_l
-            if self.monitor.state.value == "still":
-                amplitude = 0.0
             state = control_step(state, amplitude, fb.period_s, fb)
             self.feedback_trace.append((time.monotonic() - started, amplitude, state.speed_mps))
             log.info("feedback: A/L %.3f -> %.2f m/s", amplitude, state.speed_mps)
