@@ -83,7 +83,7 @@ class _Buffer:
     x: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.float32))
     y: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.float32))
     n: int = 0
-    last_dropped_t: int = np.iinfo(np.int64).min  # time of the latest event dropped from the front
+    last_dropped_t: int = np.iinfo(np.int64).min  # latest event dropped from the front (or the stream start)
 
     def reserve(self, extra: int) -> None:
         need = self.n + extra
@@ -157,6 +157,7 @@ class Tracker:
         if self._clock is None:
             self._clock = UpdateClock(self.params.schedule, int(events["t"][0]))
             stats.first_t_us = int(events["t"][0])
+            self._buffer.last_dropped_t = stats.first_t_us  # pauses count from the stream's start
         buf = self._buffer
         buf.reserve(n_in)
         start = buf.n

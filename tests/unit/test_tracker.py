@@ -193,3 +193,16 @@ def test_a_long_pause_gives_no_flood_of_empty_updates(events: np.ndarray) -> Non
     everything = TrackerParams(chain=params.chain, schedule=params.schedule, denoise=params.denoise, max_gap_s=None)
     later["t"] = events["t"] + 5_000_000
     assert len(track(np.concatenate([events, later]), everything)) >= 2 * n_one + 19_000
+
+
+def test_a_still_start_gives_updates_for_max_gap_then_none() -> None:
+    from flagtrack.daemon.core.events import make_events
+
+    params = _params(tau=1e-3)
+    lonely = make_events(np.array([0, 400_000]), np.array([10, 600]), np.array([10, 400]), np.array([1, 0]))
+    later = make_events(np.array([3_000_000]), np.array([300]), np.array([100]), np.array([1]))
+    tracker = Tracker(params)
+    batch = CentrelineBatch.concatenate([tracker.feed(lonely), tracker.feed(later), tracker.finish()])
+    # filtered noise only: the rest chain is reported during the first second, then nothing
+    assert 990 <= len(batch) <= 1002 and batch.t_s[-1] < 1.002
+    np.testing.assert_allclose(batch.y, FLAG.root[1])
