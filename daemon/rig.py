@@ -14,6 +14,7 @@ Example (see ``deploy/rig-*.yaml``)::
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -110,4 +111,7 @@ def load_rig(path: str | Path) -> RigConfig:
     if isinstance(bus, dict) and "namespace" not in bus:
         rig_name = data.get("rig", "default")
         data = {**data, "bus": {**bus, "namespace": f"flagtrack/{rig_name}"}}
-    return from_mapping(RigConfig, {**data, "path": str(path)}, path=str(path))
+    rig = from_mapping(RigConfig, {**data, "path": str(path)}, path=str(path))
+    from flagtrack.daemon.commands._tracking_args import resolve_calibration
+
+    return dataclasses.replace(rig, tracker=resolve_calibration(rig.tracker, Path(path).parent))

@@ -44,3 +44,17 @@ def apply_tracking_arguments(config: TrackingConfig, args: argparse.Namespace) -
         log.warning("--tau/--dt given: the config's schedule is ignored")
         config = config.with_overrides(schedule=())
     return config
+
+
+def load_tracking_config_file(path: Path) -> TrackingConfig:
+    """The ``tracker:`` section of ``path``; a relative calibration file is taken from the config's folder."""
+    from flagtrack.daemon.tracking_config import load_tracking_config
+
+    return resolve_calibration(load_tracking_config(path), Path(path).parent)
+
+
+def resolve_calibration(config: TrackingConfig, base: Path) -> TrackingConfig:
+    """``config`` with a relative ``calibration`` path made relative to ``base`` (the config's folder)."""
+    if config.calibration is not None and not Path(config.calibration).is_absolute():
+        return config.with_overrides(calibration=Path(base) / config.calibration)
+    return config

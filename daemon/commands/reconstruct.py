@@ -9,6 +9,12 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from flagtrack.daemon.commands._tracking_args import (
+    add_tracking_arguments,
+    apply_tracking_arguments,
+    load_tracking_config_file,
+)
+
 if TYPE_CHECKING:
     from flagtrack.daemon.core.mapping import PointMapping
     from flagtrack.daemon.tracking_config import TrackingConfig
@@ -37,33 +43,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", type=Path, help="event file (.raw, .dat, .aedat4, .npy, .csv)")
     parser.add_argument("-o", "--output", type=Path, required=True, help="output HDF5 file")
     parser.add_argument("-c", "--config", type=Path, help="YAML config with a `tracker:` section")
-    parser.add_argument("--root", type=float, nargs=2, metavar=("X", "Y"), help="root of the flag")
-    parser.add_argument("--length", type=float, metavar="L", help="flag length L")
-    parser.add_argument("--direction", type=float, metavar="DEG", help="rest direction, degrees (default 0)")
-    parser.add_argument("--joints", type=int, metavar="N", help="number of links N_j (default 10)")
-    parser.add_argument("--alpha", type=float, metavar="A", help="search radius parameter (default 0.6)")
-    parser.add_argument("--tau", type=float, metavar="S", help="update interval tau, s (default 0.00025)")
-    parser.add_argument("--dt", type=float, metavar="S", help="time increment dt, s (default tau)")
-    parser.add_argument("--ds", type=float, metavar="S", help="centreline step (default L/50)")
-    parser.add_argument("--t-start", type=float, metavar="S", help="first update time, s")
-    parser.add_argument("--t-stop", type=float, metavar="S", help="last update time, s")
-    parser.add_argument("--method", choices=("robust", "paper"), help="robust (default) or the paper's update")
+    add_tracking_arguments(parser)
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
     """Reconstruct ``args.file`` into ``args.output``."""
-    from flagtrack.daemon.tracking_config import Method, TrackingConfig, load_tracking_config
+    from flagtrack.daemon.tracking_config import TrackingConfig
 
-    config = load_tracking_config(args.config) if args.config else TrackingConfig()
-    config = config.with_overrides(
-        root=tuple(args.root) if args.root else None, length=args.length, direction_deg=args.direction,
-        joints=args.joints, alpha=args.alpha, tau_s=args.tau, dt_s=args.dt, ds=args.ds,
-        t_start_s=args.t_start, t_stop_s=args.t_stop, method=Method(args.method) if args.method else None,
-    )
-    if (args.tau is not None or args.dt is not None) and config.schedule:
-        log.warning("--tau/--dt given: the config's schedule is ignored")
-        config = config.with_overrides(schedule=())
+    config = load_tracking_config_file(args.config) if args.config else TrackingConfig()
+    config = apply_tracking_arguments(config, args)
     started = time.perf_counter()
     summary = reconstruct_file(args.file, args.output, config, config_path=str(args.config) if args.config else None,
                                progress=not args.no_progress and sys.stderr.isatty())
@@ -97,6 +86,10 @@ def reconstruct_file(path: Path, output: Path, config: TrackingConfig, *, config
         size = (info.width or 0, info.height or 0)
         tracker = Tracker(params, mapping=mapping, sensor_size=size)
         attrs = {**config.attrs(), "units": units, "input_file": str(path), "input_format": info.format}
+        if config.calibration is not None:
+            from flagtrack.calibration import calibration_attrs
+
+            attrs.update(calibration_attrs(config.calibration))
         with CentrelineWriter(output, tracker.s, params.chain.n_joints, attrs) as writer, \
                 _progress_bar(path, progress) as bar:
             pending: list[CentrelineBatch] = []

@@ -1,0 +1,70 @@
+"""`reconstruct --calibration` and `up --replay --calibration`: events mapped to metres before tracking."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+
+from flagtrack.drivers.formats import write_events
+from flagtrack.drivers.sim.quickline import WavyFlag, line_events
+
+M_PER_PX = 0.0005
+CALIBRATION = {
+    "format": "flagtrack-calibration", "version": 1, "units": "m", "image_size": [640, 480], "degree": 1,
+    "forward": {"degree": 1, "centre": [0.0, 0.0], "scale": 1.0, "exponents": [[0, 0], [1, 0], [0, 1]],
+                "x": [0.0, M_PER_PX, 0.0], "y": [0.0, 0.0, M_PER_PX]},
+    "inverse": {"degree": 1, "centre": [0.0, 0.0], "scale": 1.0, "exponents": [[0, 0], [1, 0], [0, 1]],
+                "x": [0.0, 1 / M_PER_PX, 0.0], "y": [0.0, 0.0, 1 / M_PER_PX]},
+}
+
+
+def flagtrack(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "flagtrack.daemon", *args], capture_output=True, text=True, timeout=120)
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("cal")
+    events = np.concatenate(list(line_events(WavyFlag(length=200.0, root=(100.0, 240.0)), 0, 100_000, 640, 480)))
+    write_events(folder / "flag.raw", events, width=640, height=480, encoding="evt3")
+    (folder / "cal.yaml").write_text(yaml.safe_dump(CALIBRATION))
+    return folder / "flag.raw"
+
+
+def test_calibrated_reconstruction_is_the_pixel_one_in_metres(recording: Path, tmp_path: Path) -> None:
+    px, m = tmp_path / "px.h5", tmp_path / "m.h5"
+    assert flagtrack("reconstruct", str(recording), "-o", str(px), "--root", "100", "240", "--length", "200").returncode == 0
+    result = flagtrack("reconstruct", str(recording), "-o", str(m), "--calibration", str(recording.parent / "cal.yaml"),
+                       "--root", str(100 * M_PER_PX), str(240 * M_PER_PX), "--length", str(200 * M_PER_PX))
+    assert result.returncode == 0, result.stderr
+    with h5py.File(px) as a, h5py.File(m) as b:
+        assert a.attrs["units"] == "px" and b.attrs["units"] == "m" and b.attrs["calibration_degree"] == 1
+        assert "flagtrack-calibration" in b.attrs["calibration_yaml"]
+        np.testing.assert_allclose(b["x"][()], a["x"][()] * M_PER_PX, atol=2e-3 * 200 * M_PER_PX)
+        np.testing.assert_allclose(b["y"][()], a["y"][()] * M_PER_PX, atol=2e-3 * 200 * M_PER_PX)
+
+
+def test_relative_calibration_path_in_a_config_is_taken_from_the_config_folder(recording: Path, tmp_path: Path) -> None:
+    config = recording.parent / "track.yaml"
+    config.write_text(yaml.safe_dump({"tracker": {"calibration": "cal.yaml", "root": [0.05, 0.12], "length": 0.1}}))
+    out = tmp_path / "m.h5"
+    result = subprocess.run([sys.executable, "-m", "flagtrack.daemon", "reconstruct", str(recording), "-o", str(out),
+                             "-c", str(config)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    with h5py.File(out) as f:
+        assert f.attrs["units"] == "m"
+
+
+def test_a_broken_calibration_file_is_one_clear_line(recording: Path, tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("format: something-else\n")
+    result = flagtrack("reconstruct", str(recording), "-o", str(tmp_path / "x.h5"), "--calibration", str(bad),
+                       "--root", "0", "0", "--length", "0.1")
+    assert result.returncode == 2 and str(bad) in result.stderr and "not a calibration file" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
