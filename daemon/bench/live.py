@@ -104,12 +104,14 @@ def _measure(recording: Path, tracker: dict[str, Any], *, speed: float, loop: bo
                     raise RuntimeError("the tracker process did not start")
                 procs.append(_start("camera", camera_cfg))
                 latencies, updates, first_ns, last_ns, complete = [], 0, None, None, False
-                deadline = time.monotonic() + (wall_s if wall_s else 600)
+                deadline = time.monotonic() + 600
                 while time.monotonic() < deadline:
                     msg = lines.recv(timeout_s=0.5)
                     if msg is None:
                         continue
                     now = time.time_ns()
+                    if first_ns is None and wall_s:  # measure wall_s from the first centreline on
+                        deadline = time.monotonic() + wall_s
                     if first_ns is None and len(msg.source_ns):
                         first_ns = int(msg.source_ns.min())
                     last_ns = now

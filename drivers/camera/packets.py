@@ -51,7 +51,8 @@ class Packetizer:
     says its stream is complete past the slot end (``t_until_us``, e.g. a still flag: no events,
     but time goes on). Each packet's ``t_last_us`` is its completeness horizon: every event with
     ``t <= t_last_us`` is in it or in an earlier packet. When only time passes, an empty packet
-    carries the horizon forward.
+    carries the horizon forward. Events are held as contiguous columns (the encoder runs about
+    twice as fast on them as on the fields of an event array).
 
     Args:
         encoding: ``evt3`` or ``evt2``.
@@ -63,7 +64,8 @@ class Packetizer:
         self.encoding = encoding
         self.width, self.height = width, height
         self.params = params
-        self._events = empty_events()
+        self._cols = _Columns.empty()
+        self._t_max = np.zeros(0, dtype=np.int64)  # running maximum of t (small steps back stay put)
         self._triggers = empty_triggers()
         self._horizon_us: int | None = None  # t_last_us of the last packet emitted
 
@@ -76,14 +78,19 @@ class Packetizer:
              ) -> list[Packet]:
         """Add data (and, optionally, "complete before ``t_until_us``"); return the packets it closes."""
         if len(events):
-            self._events = np.concatenate([self._events, events]) if len(self._events) else events
+            new = _Columns.of(events)
+            t_max = np.maximum.accumulate(new.t)
+            if len(self._t_max):
+                np.maximum(t_max, self._t_max[-1], out=t_max)
+            self._cols = self._cols.append(new)
+            self._t_max = np.concatenate([self._t_max, t_max]) if len(self._t_max) else t_max
         if triggers is not None and len(triggers):
             self._triggers = np.concatenate([self._triggers, triggers])
         packet_us = self.params.packet_us
-        t_max = np.maximum.accumulate(self._events["t"]) if len(self._events) else np.zeros(0, np.int64)
-        known_until = max(int(t_max[-1]) if len(t_max) else -1, -1 if t_until_us is None else int(t_until_us))
+        known_until = max(int(self._t_max[-1]) if len(self._t_max) else -1,
+                          -1 if t_until_us is None else int(t_until_us))
         closed_until = (known_until // packet_us) * packet_us  # slots ending at or before this are closed
-        slots = t_max // packet_us
+        slots = self._t_max // packet_us
         n_closed = int(np.searchsorted(slots, closed_until // packet_us, side="left"))
         packets = []
         start = 0
@@ -91,47 +98,84 @@ class Packetizer:
             slot_end = (int(slots[start]) + 1) * packet_us
             packets += self._slot_packets(start, cut, slot_end - 1)
             start = cut
-        self._events = self._events[start:].copy()
-        if not packets and t_until_us is not None and closed_until - 1 > (self._horizon_us or -1) and not len(self._events):
-            packets.append(self._packet(self._events[:0], closed_until - 1))
+        self._cols = self._cols.tail(start)
+        self._t_max = self._t_max[start:]
+        if not packets and t_until_us is not None and closed_until - 1 > (self._horizon_us or -1) \
+                and not len(self._t_max):
+            packets.append(self._packet(self._cols, closed_until - 1))
         return packets
 
     def flush(self) -> list[Packet]:
         """Emit everything held (end of stream)."""
-        if len(self._events) == 0 and len(self._triggers) == 0:
+        if len(self._t_max) == 0 and len(self._triggers) == 0:
             return []
-        t_last = max(int(self._events["t"].max()) if len(self._events) else -1,
+        t_last = max(int(self._t_max[-1]) if len(self._t_max) else -1,
                      int(self._triggers["t"].max()) if len(self._triggers) else -1)
-        packets = self._slot_packets(0, len(self._events), t_last)
-        self._events = self._events[:0].copy()
+        packets = self._slot_packets(0, len(self._t_max), t_last)
+        self._cols, self._t_max = _Columns.empty(), self._t_max[:0]
         return packets
 
     def _slot_packets(self, start: int, stop: int, horizon_us: int) -> list[Packet]:
-        """Packets of events[start:stop] (one slot), split at ``max_events``."""
+        """Packets of the held events [start:stop] (one slot), split at ``max_events``."""
         packets = []
         while stop - start > self.params.max_events:
-            part = self._events[start:start + self.params.max_events]
-            packets.append(self._packet(part, int(part["t"].max()) - 1))
+            part = self._cols.slice(start, start + self.params.max_events)
+            packets.append(self._packet(part, int(part.t.max()) - 1))
             start += self.params.max_events
-        packets.append(self._packet(self._events[start:stop], horizon_us))
+        packets.append(self._packet(self._cols.slice(start, stop), horizon_us))
         return packets
 
-    def _packet(self, events: np.ndarray, horizon_us: int) -> Packet:
+    def _packet(self, cols: _Columns, horizon_us: int) -> Packet:
         take = self._triggers["t"] <= horizon_us
         triggers, self._triggers = self._triggers[take], self._triggers[~take]
-        times = np.concatenate([events["t"], triggers["t"]])
-        t_first = int(times.min()) if len(times) else horizon_us
+        n = len(cols.t)
+        t_first = min(int(cols.t.min()) if n else horizon_us, int(triggers["t"].min()) if len(triggers) else horizon_us)
         loop = LOOP_US[self.encoding]
         t_offset = (max(t_first, 0) // loop) * loop
         data = b""
-        if len(times):
+        if n or len(triggers):
             encoder = Encoder(self.encoding, t_offset_us=t_offset, width=self.width, height=self.height)
-            data = encoder.encode(events, triggers)
+            data = encoder.encode_columns(cols.t, cols.x, cols.y, cols.p, triggers)
         self._horizon_us = horizon_us
+        first = int(cols.t[0]) if n else t_first
         return Packet(
-            data=data, t_first_us=t_first, t_last_us=horizon_us, n_events=len(events),
-            n_on=int(np.count_nonzero(events["p"])), n_triggers=len(triggers), t_offset_us=t_offset,
+            data=data, t_first_us=first if n else t_first, t_last_us=horizon_us, n_events=n,
+            n_on=int(np.count_nonzero(cols.p)), n_triggers=len(triggers), t_offset_us=t_offset,
         )
+
+
+@dataclass(frozen=True)
+class _Columns:
+    """Events as contiguous columns."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    p: np.ndarray
+
+    @staticmethod
+    def empty() -> _Columns:
+        return _Columns(np.zeros(0, np.int64), np.zeros(0, np.uint16), np.zeros(0, np.uint16), np.zeros(0, np.uint8))
+
+    @staticmethod
+    def of(events: np.ndarray) -> _Columns:
+        c = np.ascontiguousarray
+        return _Columns(c(events["t"], dtype=np.int64), c(events["x"], dtype=np.uint16),
+                        c(events["y"], dtype=np.uint16), c(events["p"], dtype=np.uint8))
+
+    def append(self, other: _Columns) -> _Columns:
+        if len(self.t) == 0:
+            return other
+        return _Columns(*(np.concatenate([a, b]) for a, b in zip(self.columns(), other.columns())))
+
+    def slice(self, start: int, stop: int) -> _Columns:
+        return _Columns(self.t[start:stop], self.x[start:stop], self.y[start:stop], self.p[start:stop])
+
+    def tail(self, start: int) -> _Columns:
+        return _Columns(*(a[start:].copy() for a in self.columns()))
+
+    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        return self.t, self.x, self.y, self.p
 
 
 def decode_packet(encoding: str, data: bytes, t_offset_us: int, *, source: str = "packet"

@@ -115,8 +115,28 @@ class ReplayCamera:
             shift += t_last - t_first + 2 * self.cfg.slice_us
             log.info("replay: loop %d of %s", self.loops, path)
 
+    @staticmethod
+    def _file_chunks(path: Path) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
+        """(events, triggers, t_until_us) per chunk of the file: complete before its last event's time."""
+        with open_events(path) as reader:
+            t_until = None
+            for chunk in reader:
+                times = [int(a["t"].max()) for a in (chunk.events, chunk.triggers) if len(a)]
+                if times:
+                    t_until = max(times) if t_until is None else max(t_until, *times)
+                    yield chunk.events, chunk.triggers, t_until
+            if t_until is not None:
+                yield empty_events(), empty_triggers(), t_until + 1
+
     def _file_slices(self, path: Path) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
-        """(events, triggers, t_until_us) per ``slice_us`` of camera time, from the file's chunks."""
+        """(events, triggers, t_until_us) per ``slice_us`` of camera time, from the file's chunks.
+
+        As fast as possible (speed 0) there is nothing to pace: the file's chunks are handed over
+        as they are (the camera service cuts packets of its own size).
+        """
+        if self.cfg.speed == 0:
+            yield from self._file_chunks(path)
+            return
         slice_us = self.cfg.slice_us
         held, held_tr = empty_events(), empty_triggers()
         with open_events(path) as reader:

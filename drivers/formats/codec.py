@@ -58,6 +58,9 @@ def event_views(events: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return tt, xyp
 
 
+_SMALL_BUFFER = 1 << 16  # events: a piece of a buffer this small is kept as it is (no copy to trim it)
+
+
 class Decoder:
     """Incremental decoder of one EVT byte stream.
 
@@ -141,7 +144,7 @@ class Decoder:
             events = np.empty(capacity + 1, dtype=EVENT_DTYPE)
             i_next, n, nt, status = run(i, *event_views(events))
             if n or nt:
-                piece = events[:n] if 2 * n >= capacity else events[:n].copy()
+                piece = events[:n] if 2 * n >= capacity or capacity <= _SMALL_BUFFER else events[:n].copy()
                 yield piece, self._triggers[:nt].copy(), start_offset + i * self._word
             if status in (tb.BAD_WORD, tb.OUT_OF_SENSOR):
                 self._fault(status, buf, i_next, start_offset + i_next * self._word)
@@ -238,6 +241,15 @@ class Encoder:
     def encode(self, events: np.ndarray, triggers: np.ndarray | None = None) -> bytes:
         """Return the stream bytes for ``events`` (EVENT_DTYPE) and ``triggers`` (TRIGGER_DTYPE)."""
         ev = _columns(events, ("t", "x", "y", "p"), EVENT_DTYPE)
+        return self.encode_columns(*ev, triggers=triggers)
+
+    def encode_columns(self, t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray,
+                       triggers: np.ndarray | None = None) -> bytes:
+        """:meth:`encode` for events given as columns (t int64, x/y uint16, p uint8).
+
+        Contiguous columns encode about twice as fast as the strided fields of an event array.
+        """
+        ev = (t, x, y, p)
         tr = _columns(triggers if triggers is not None else empty_triggers(), ("t", "channel", "edge"), TRIGGER_DTYPE)
         n_ev, n_tr = len(ev[0]), len(tr[0])
         if n_ev + n_tr == 0:
