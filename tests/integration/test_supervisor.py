@@ -30,10 +30,10 @@ SPEEDS = [4.0, 5.5]
 def rig(tmp_path: Path, **supervisor: Any) -> RigConfig:
     return from_mapping(RigConfig, {
         "rig": f"sup{time.monotonic_ns() % 10**9}",
-        "camera": {"adapter": "simulated", "packet_us": 2000,
-                   "simulated": {"events_per_px2": 1.0, "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4,
-                                                                    "tau_amp_s": 0.15}}},
-        "tracker": {"root": [150, 240], "length": 300, "tau_s": 0.001},
+        "camera": {"adapter": "simulated", "packet_us": 4000,  # a light twin: the rig shares 2 cores with the tests
+                   "simulated": {"events_per_px2": 0.5, "noise_rate_hz": 5000, "max_lag_s": 1.0,
+                                 "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4, "tau_amp_s": 0.15}}},
+        "tracker": {"root": [150, 240], "length": 300, "tau_s": 0.002},
         "recorder": {"directory": str(tmp_path / "rec")},
         "tunnel": {"driver": "simulated",
                    "safety": {"max_speed_mps": 8, "max_ramp_mps2": 4.0, "ramp_period_s": 0.05, "tolerance_mps": 0.15,
