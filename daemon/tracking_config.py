@@ -29,10 +29,19 @@ class Method(enum.Enum):
 
 @dataclass(frozen=True)
 class DenoiseConfig:
-    """Background-activity filter of the robust method (see docs/tracking.md)."""
+    """Background-activity filter of the robust method (docs/tracking.md, docs/benchmark.md).
+
+    An event passes when ``k`` of its 8 neighbouring pixels fired within ``window_us`` before it;
+    ``k`` adapts between ``min_neighbours`` and ``max_neighbours`` to the measured background noise
+    (``noise_pass``: the largest chance a noise event passes). ``max_neighbours: 1`` is the classic
+    filter (the robust method before the accuracy benchmark).
+    """
 
     enabled: bool = True
     window_us: int = 500
+    min_neighbours: int = 1
+    max_neighbours: int = 3
+    noise_pass: float = 0.03
 
 
 @dataclass(frozen=True)
@@ -122,7 +131,9 @@ class TrackingConfig:
                           t_start_s=self.t_start_s, t_stop_s=self.t_stop_s)
         denoise = None
         if not paper and self.denoise.enabled:
-            denoise = _build(DenoiseParams, path, "denoise", window_us=self.denoise.window_us)
+            d = self.denoise
+            denoise = _build(DenoiseParams, path, "denoise", window_us=d.window_us, min_neighbours=d.min_neighbours,
+                             max_neighbours=d.max_neighbours, noise_pass=d.noise_pass)
         if self.ds is not None and not self.ds > 0:
             raise ConfigError(f"must be positive, got {self.ds}", key=f"{SECTION}.ds", path=path)
         if self.max_gap_s is not None and not self.max_gap_s > 0:

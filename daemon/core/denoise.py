@@ -1,18 +1,29 @@
-"""Background-activity filter: keep an event only if a neighbouring pixel fired shortly before.
+"""Background-activity filter: keep an event only if neighbouring pixels fired shortly before.
 
 The filter that event-camera libraries use against background activity (jAER's
 ``BackgroundActivityFilter``, tonic's ``denoise``): each pixel remembers the time of its last event;
 an event passes when one of the 8 pixels around it (its 3x3 neighbourhood *without its own pixel*)
 fired within the last ``window_us``. A moving line lights its neighbours within microseconds,
 so its events pass; uniform background events rarely have a neighbour that fired within the window,
-and a hot pixel firing on its own never does (its own past events are not counted). The filter runs
-on sensor pixels, before any calibration mapping, and its state (the time map) carries across
-chunks, so the result does not depend on how a stream is cut.
+and a hot pixel firing on its own never does (its own past events are not counted).
+
+**Adaptive support** (``max_neighbours > min_neighbours``): with dense background noise (shot noise,
+v2e-style leak events) one neighbour within the window is often there by chance (about
+``8 r w`` for a noise rate ``r`` per pixel), while a lit line lights several neighbours at once.
+The filter estimates ``r`` over blocks of ``block_us`` from the events none of whose neighbours
+fired within the window (isolated: noise, not line), and for the next block asks for the fewest
+neighbours ``k`` in ``[min_neighbours, max_neighbours]`` such that a noise event passes with
+probability ``C(8, k) (r w)^k <= noise_pass``. Sparse clean recordings keep ``k = 1``.
+
+The filter runs on sensor pixels, before any calibration mapping, and its state (the time map, the
+block statistics) advances event by event, so the result does not depend on how a stream is cut.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+import math
 
 import numpy as np
 from numba import njit
@@ -26,29 +37,110 @@ class DenoiseParams:
     """Background-activity filter settings.
 
     Attributes:
-        window_us: an event passes if one of its 8 neighbouring pixels fired within this many µs
-            before it (the 3x3 neighbourhood; a 5x5 one let more noise through, docs/tracking.md).
+        window_us: a neighbour supports an event if it fired within this many µs before it (the
+            3x3 neighbourhood; a 5x5 one let more noise through, docs/tracking.md).
+        min_neighbours: fewest supporting neighbours an event needs (1: the classic filter).
+        max_neighbours: most supporting neighbours the adaptive filter may ask for; equal to
+            ``min_neighbours``: a fixed requirement (the classic filter by default).
+        noise_pass: adaptive: largest chance that a background event passes, ``C(8, k) (r w)^k``.
+        block_us: adaptive: the noise rate is measured over blocks of this many µs (absolute
+            event time) and sets the requirement of the next block.
     """
 
     window_us: int = 500
+    min_neighbours: int = 1
+    max_neighbours: int = 1
+    noise_pass: float = 0.03
+    block_us: int = 2_000
 
     def __post_init__(self) -> None:
         if self.window_us <= 0:
             raise ValueError(f"window_us must be positive, got {self.window_us}")
+        if not 1 <= self.min_neighbours <= self.max_neighbours <= 8:
+            raise ValueError(f"need 1 <= min_neighbours <= max_neighbours <= 8, got "
+                             f"{self.min_neighbours}, {self.max_neighbours}")
+        if not 0 < self.noise_pass < 1:
+            raise ValueError(f"noise_pass must be in (0, 1), got {self.noise_pass}")
+        if self.block_us <= 0:
+            raise ValueError(f"block_us must be positive, got {self.block_us}")
+
+    def thresholds(self) -> np.ndarray:
+        """(9,) float64: ``C(8, k)`` for k = 0..8 (the adaptive rule's binomial factors)."""
+        return np.array([math.comb(8, k) for k in range(9)], dtype=np.float64)
+
+
+# state vector of the adaptive rule (int64): block index, isolated events in it, current k,
+# largest x and y seen so far (the sensor area, grown event by event so chunking cannot matter)
+_BLOCK, _ISOLATED, _K, _MAX_X, _MAX_Y = range(5)
+
+
+def initial_state(min_neighbours: int) -> np.ndarray:
+    """A fresh (5,) int64 state of the adaptive rule."""
+    return np.array([np.iinfo(np.int64).min, 0, min_neighbours, 0, 0], dtype=np.int64)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _fired_recently(last: np.ndarray, stride: int, x: int, y: int, t_rel: np.int32, window_us: np.int32) -> bool:
-    """Whether a neighbour of pixel (x, y) fired within ``window_us`` before ``t_rel``; records ``t_rel``."""
+def _support(last: np.ndarray, stride: int, x: int, y: int, t_rel: np.int32, window_us: np.int32) -> int:
+    """How many of the 8 neighbours of pixel (x, y) fired within ``window_us`` before ``t_rel``;
+    records ``t_rel`` as the pixel's last event."""
     row = np.uint64(stride)
     one = np.uint64(1)
     c = (np.uint64(y) + one) * row + np.uint64(x) + one
     up = c - row
     dn = c + row
-    recent = max(max(max(last[up - one], last[up]), max(last[up + one], last[c - one])),
-                 max(max(last[c + one], last[dn - one]), max(last[dn], last[dn + one])))
+    since = t_rel - window_us
+    count = ((last[up - one] >= since) + (last[up] >= since) + (last[up + one] >= since)
+             + (last[c - one] >= since) + (last[c + one] >= since) + (last[dn - one] >= since)
+             + (last[dn] >= since) + (last[dn + one] >= since))
     last[c] = t_rel
-    return recent >= t_rel - window_us
+    return count
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _next_k(isolated: int, area_px: float, block_us: int, window_us: int, k_min: int, k_max: int,
+            noise_pass: float, comb: np.ndarray) -> int:
+    """Fewest neighbours for the next block, from the isolated events of the last one."""
+    p = isolated / (area_px * block_us) * window_us  # chance a given neighbour fired in the window
+    p = min(p * math.exp(min(8.0 * p, 8.0)), 1.0)  # isolated events are the noise with no neighbour
+    k = k_min
+    while k < k_max and comb[k] * p ** k > noise_pass:
+        k += 1
+    return k
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _required(state: np.ndarray, t: np.int64, x: int, y: int, block_us: int, window_us: int, k_min: int,
+              k_max: int, noise_pass: float, comb: np.ndarray) -> int:
+    """Neighbours an event at (t, x, y) needs; advances the block statistics to its block."""
+    if k_max <= k_min:
+        return k_min
+    state[_MAX_X] = max(state[_MAX_X], x)
+    state[_MAX_Y] = max(state[_MAX_Y], y)
+    block = t // block_us
+    if block != state[_BLOCK]:
+        area_px = float((state[_MAX_X] + 1) * (state[_MAX_Y] + 1))
+        if block == state[_BLOCK] + 1:
+            state[_K] = _next_k(state[_ISOLATED], area_px, block_us, window_us, k_min, k_max, noise_pass, comb)
+        else:  # first block, or blocks without events: no evidence of noise
+            state[_K] = k_min
+        state[_BLOCK] = block
+        state[_ISOLATED] = 0
+    return state[_K]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _filter_mask(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, stride: int, base_us: int,
+                 window_us: int, state: np.ndarray, block_us: int, k_min: int, k_max: int, noise_pass: float,
+                 comb: np.ndarray, keep: np.ndarray) -> None:
+    """Write in ``keep`` (n,) whether each event passes; the map and state advance."""
+    window = np.int32(window_us)
+    for i in range(len(t)):
+        ti = np.int64(t[i])
+        need = _required(state, ti, np.int64(x[i]), np.int64(y[i]), block_us, window_us, k_min, k_max,
+                         noise_pass, comb)
+        n = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
+        state[_ISOLATED] += 1 if n == 0 else 0
+        keep[i] = n >= need
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -66,44 +158,15 @@ def scan_chunk(t: np.ndarray, x: np.ndarray, y: np.ndarray, latest: int) -> tupl
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def filter_and_convert(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, stride: int, base_us: int,
-                       window_us: int, out_t: np.ndarray, out_x: np.ndarray, out_y: np.ndarray, start: int) -> int:
-    """Filter events through the time map ``last`` and append the kept ones as float coordinates.
-
-    Args:
-        t, x, y: the events (may be strided views of an event array), inside the map.
-        last: flat ((height + 2) * stride,) int32 time (µs after ``base_us``) of each pixel's last
-            event, updated; pixel (x, y) is ``last[(y + 1) * stride + x + 1]`` (a one-pixel border
-            that never fires). Times must stay within 2^31 µs of the base.
-        stride: width + 2.
-        base_us: time origin of the map.
-        window_us: the filter window, µs.
-        out_t, out_x, out_y: output buffers, written from index ``start``.
-
-    Returns:
-        The index after the last written event.
-    """
+def _compact(t: np.ndarray, x: np.ndarray, y: np.ndarray, keep: np.ndarray, out_t: np.ndarray, out_x: np.ndarray,
+             out_y: np.ndarray, start: int) -> int:
+    """Append the kept events as int64 times and float coordinates; return the index after the last."""
     j = start
-    window = np.int32(window_us)
     for i in range(len(t)):
-        ti = np.int64(t[i])
-        keep = _fired_recently(last, stride, x[i], y[i], np.int32(ti - base_us), window)
-        out_t[j] = ti  # written always, kept by advancing j: no branch
+        out_t[j] = t[i]  # written always, kept by advancing j: no branch
         out_x[j] = x[i]
         out_y[j] = y[i]
-        j += 1 if keep else 0
-    return j
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def filter_indices(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, stride: int, base_us: int,
-                   window_us: int, out_index: np.ndarray) -> int:
-    """Like :func:`filter_and_convert`, writing the indices of the kept events; returns their number."""
-    j = 0
-    window = np.int32(window_us)
-    for i in range(len(t)):
-        out_index[j] = i
-        j += 1 if _fired_recently(last, stride, x[i], y[i], np.int32(np.int64(t[i]) - base_us), window) else 0
+        j += 1 if keep[i] else 0
     return j
 
 
@@ -120,6 +183,23 @@ class BackgroundActivityFilter:
         self._width, self._height = (width, height) if params else (0, 0)
         self._last = np.full((self._height + 2) * (self._width + 2), _NEVER, dtype=np.int32)
         self._base_us: int | None = None
+        self._state = initial_state(params.min_neighbours if params else 1)
+        self._comb = params.thresholds() if params else np.ones(9)
+
+    @property
+    def required_neighbours(self) -> int:
+        """Neighbours the current block asks for (adaptive rule; ``min_neighbours`` when fixed)."""
+        return int(self._state[_K])
+
+    def _mask(self, events: np.ndarray) -> np.ndarray:
+        """(n,) bool: the events of a prepared chunk that pass (the map and block state advance)."""
+        p, base_us = self.params, self._base_us
+        if p is None or base_us is None:
+            raise RuntimeError("_mask() before _prepare()")
+        keep = np.empty(len(events), dtype=np.bool_)
+        _filter_mask(events["t"], events["x"], events["y"], self._last, self._width + 2, base_us, p.window_us,
+                     self._state, p.block_us, p.min_neighbours, p.max_neighbours, p.noise_pass, self._comb, keep)
+        return keep
 
     def _fit(self, max_x: int, max_y: int) -> None:
         """Grow the time map so that pixel (max_x, max_y) fits (kept times are preserved)."""
@@ -167,8 +247,7 @@ class BackgroundActivityFilter:
         t, x, y = events["t"], events["x"], events["y"]
         if self.params is None:
             return _copy_into(t, x, y, out_t, out_x, out_y, start), ordered, latest
-        end = filter_and_convert(t, x, y, self._last, self._width + 2, self._base_us, self.params.window_us,
-                                 out_t, out_x, out_y, start)
+        end = _compact(t, x, y, self._mask(events), out_t, out_x, out_y, start)
         return end, ordered, latest
 
     def keep_mask(self, events: np.ndarray) -> np.ndarray:
@@ -180,12 +259,7 @@ class BackgroundActivityFilter:
             half = len(events) // 2  # see filter_into
             return np.concatenate([self.keep_mask(events[:half]), self.keep_mask(events[half:])])
         self._prepare(events, -(1 << 62))
-        index = np.empty(len(events), dtype=np.int64)
-        end = filter_indices(events["t"], events["x"], events["y"], self._last, self._width + 2, self._base_us,
-                             self.params.window_us, index)
-        mask[:] = False
-        mask[index[:end]] = True
-        return mask
+        return self._mask(events)
 
     def apply(self, events: np.ndarray) -> np.ndarray:
         """Return the kept events (a new array; the filter state advances)."""
