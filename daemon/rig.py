@@ -1,5 +1,5 @@
 """The rig config: one YAML file describing the bus, the camera, the tracker, the recorder, the viewer,
-the tunnel and the supervisor, read once and checked before anything opens.
+the tunnel, the supervisor and the point sensor, read once and checked before anything opens.
 
 Example (see ``deploy/rig-*.yaml``)::
 
@@ -29,9 +29,10 @@ from flagtrack.daemon.tracking_config import TrackingConfig
 from flagtrack.daemon.transport import BusConfig
 from flagtrack.drivers.camera.replay import ReplayConfig
 from flagtrack.drivers.camera.simulated import SimulatedCameraConfig
+from flagtrack.drivers.sensor.config import SensorConfig
 from flagtrack.drivers.tunnel.config import TunnelConfig
 
-SERVICE_NAMES = ("camera", "tracker", "recorder", "viewer", "supervisor")
+SERVICE_NAMES = ("camera", "tracker", "recorder", "viewer", "supervisor", "sensor")
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,7 @@ class RigConfig:
     viewer: ViewerConfig = field(default_factory=ViewerConfig)
     tunnel: TunnelConfig | None = None
     supervisor: SupervisorConfig = field(default_factory=SupervisorConfig)
+    sensor: SensorConfig | None = None
     services: tuple[str, ...] = ("camera", "tracker", "recorder", "viewer")
     path: str | None = None
 
@@ -85,6 +87,8 @@ class RigConfig:
             raise ValueError(f"unknown service {unknown[0]!r} in services (known: {', '.join(SERVICE_NAMES)})")
         if "supervisor" in self.services and self.tunnel is None:
             raise ValueError("the supervisor needs a 'tunnel:' section (driver: simulated for no hardware)")
+        if "sensor" in self.services and self.sensor is None:
+            raise ValueError("the sensor service needs a 'sensor:' section (driver: simulated for no hardware)")
 
     @property
     def bus_config(self) -> BusConfig:

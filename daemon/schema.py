@@ -288,9 +288,21 @@ class RecorderStatus:
     message: str = ""
 
 
+def _no_pulses() -> np.ndarray:
+    return np.zeros(0, dtype=np.int64)
+
+
 @dataclass(frozen=True)
 class SensorSamples:
-    """Point-sensor samples: times on the sensor clock (µs), values (sensor units), NaN = missing."""
+    """Point-sensor samples: times on the sensor clock (µs), values (sensor units), NaN = missing.
+
+    ``t_us`` (n,) int64 and ``value`` (n,) float64. Fields after ``value`` were added later with
+    defaults, so messages without them still decode: ``trigger_t_us`` (m,) int64 the trigger pulses
+    the sensor drove or recorded, on its clock; ``missing`` samples lost in this message's span (its
+    NaN values included); ``clock`` ``sensor`` (the device's own clock) or ``host`` (stamped by the
+    host on arrival, wall-clock µs); ``wall_ns`` the wall time the newest sample arrived (with
+    ``t_us[-1]``, a rough link to the camera clock).
+    """
 
     TYPE: ClassVar[MessageType] = MessageType.SENSOR_SAMPLES
     sensor_id: str
@@ -298,6 +310,10 @@ class SensorSamples:
     units: str
     t_us: np.ndarray
     value: np.ndarray
+    trigger_t_us: np.ndarray = field(default_factory=_no_pulses)
+    missing: int = 0
+    clock: str = "sensor"
+    wall_ns: int = 0
 
 
 MESSAGE_TYPES: dict[MessageType, type] = {

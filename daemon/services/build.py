@@ -105,7 +105,8 @@ def build_services(
     """Instantiate the named services of ``rig`` on ``bus`` (subscribers before the camera).
 
     A simulated camera reads the wind speed from the simulated tunnel when the supervisor runs in
-    this process, else from the tunnel state on the bus.
+    this process, else from the tunnel state on the bus. A simulated point sensor reads the
+    simulated camera's flag, so both must run in this process.
     """
     setup = tracker_setup(rig) if "tracker" in names else None
     services: list[Service] = []
@@ -133,9 +134,30 @@ def build_services(
     if "viewer" in names:
         services.append(ViewerService(bus, replace(rig.viewer, camera_id=rig.camera.id),
                                       exit_after_final=exit_at_end_of_stream))
-    if "camera" in names:
+    camera = open_camera(rig.camera, speed_source, rig.path) if "camera" in names else None
+    if "sensor" in names:
+        services.append(sensor_service(rig, bus, camera))
+    if camera is not None:
         stream = CameraStreamConfig(id=rig.camera.id, packet_us=rig.camera.packet_us,
                                     max_packet_events=rig.camera.max_packet_events,
                                     rate_interval_s=rig.camera.rate_interval_s)
-        services.append(CameraService(bus, stream, open_camera(rig.camera, speed_source, rig.path)))
+        services.append(CameraService(bus, stream, camera))
     return services
+
+
+def sensor_service(rig: RigConfig, bus: Bus, camera: Camera | None) -> Service:
+    """The point-sensor service of the ``sensor:`` section (a simulated one reads ``camera``'s twin).
+
+    Raises:
+        ConfigError: a simulated sensor without the simulated camera in this process.
+    """
+    from flagtrack.daemon.services.sensor import SensorService
+    from flagtrack.drivers.sensor.config import open_sensor
+
+    cfg = rig.sensor
+    if cfg is None:
+        raise ConfigError("the sensor service needs a 'sensor:' section", key="sensor", path=rig.path)
+    if cfg.driver == "simulated" and not hasattr(camera, "truth"):
+        raise ConfigError("the simulated sensor reads the simulated camera's flag: run the camera (adapter "
+                          "'simulated') in the same process", key="sensor.driver", path=rig.path)
+    return SensorService(bus, cfg, lambda: open_sensor(cfg, camera, rig.path))

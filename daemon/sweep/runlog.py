@@ -59,6 +59,18 @@ class PointResult:
         raw_file, centreline_file: paths relative to the run folder, or ``None``.
         t_start_unix, t_stop_unix: recording start and stop, Unix time s.
         error: what went wrong, for a failed point.
+        delta_rms_std_over_l: standard deviation of Delta_RMS / L over the updates.
+        sensor_status: the point-sensor comparison: ``ok``, or why there is none (``None``: no sensor).
+        sensor_error_rms_over_l, sensor_error_max_over_l: RMS and maximum of |e| / L, e = camera - sensor
+            lateral displacement at the sensor's x.
+        sensor_error_mean_over_l, sensor_error_std_over_l: time mean and std of |e| / L (paper fig. 5g).
+        sensor_sync: clock sync used (``trigger``, ``xcorr``, ``coarse``, ``none``).
+        sensor_offset_us, sensor_offset_unc_us, sensor_drift_ppm: sensor minus camera clock, its
+            uncertainty, and the sensor clock's drift.
+        sensor_xcorr_offset_us, sensor_xcorr_unc_us: the cross-correlation estimate (also holds the
+            reconstruction's delay).
+        sensor_samples, sensor_missing: samples received and lost.
+        sensor_file, sensor_figure: the point's sensor record and figure, relative to the run folder.
     """
 
     point_id: str
@@ -80,6 +92,22 @@ class PointResult:
     t_start_unix: float = math.nan
     t_stop_unix: float = math.nan
     error: str | None = None
+    delta_rms_std_over_l: float = math.nan
+    sensor_status: str | None = None
+    sensor_error_rms_over_l: float = math.nan
+    sensor_error_max_over_l: float = math.nan
+    sensor_error_mean_over_l: float = math.nan
+    sensor_error_std_over_l: float = math.nan
+    sensor_sync: str | None = None
+    sensor_offset_us: float = math.nan
+    sensor_offset_unc_us: float = math.nan
+    sensor_drift_ppm: float = math.nan
+    sensor_xcorr_offset_us: float = math.nan
+    sensor_xcorr_unc_us: float = math.nan
+    sensor_samples: int = 0
+    sensor_missing: int = 0
+    sensor_file: str | None = None
+    sensor_figure: str | None = None
 
     @classmethod
     def planned(cls, point: Point, **values: Any) -> PointResult:

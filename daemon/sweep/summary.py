@@ -21,10 +21,15 @@ from flagtrack.daemon.sweep.runlog import PointResult, RunRecord, read_run
 
 SUMMARY_CSV = "summary.csv"
 AMPLITUDE_FIGURE = "amplitude.png"
+VALIDATION_FIGURE = "validation.png"
 SUMMARY_COLUMNS = (
     "speed_mps", "branch", "state", "amplitude_over_l", "frequency_hz", "twi", "delta_rms_over_l",
-    "event_rate_mev_s", "raw_bytes", "point_id", "index", "status", "speed_readback_mps",
-    "amplitude_std_over_l", "raw_file", "centreline_file", "t_start_unix", "t_stop_unix", "error",
+    "event_rate_mev_s", "raw_bytes", "sensor_error_rms_over_l", "sensor_error_max_over_l", "point_id", "index",
+    "status", "speed_readback_mps", "amplitude_std_over_l", "raw_file", "centreline_file", "t_start_unix",
+    "t_stop_unix", "error", "delta_rms_std_over_l", "sensor_status", "sensor_error_mean_over_l",
+    "sensor_error_std_over_l", "sensor_sync", "sensor_offset_us", "sensor_offset_unc_us", "sensor_drift_ppm",
+    "sensor_xcorr_offset_us", "sensor_xcorr_unc_us", "sensor_samples", "sensor_missing", "sensor_file",
+    "sensor_figure",
 )  # fmt: skip
 
 
@@ -115,10 +120,15 @@ def _zero_nan(value: float) -> float:
 
 
 def write_summary(run_dir: str | Path) -> tuple[Path, Path]:
-    """Read the run log of ``run_dir`` and write ``summary.csv`` and ``amplitude.png`` there."""
+    """Read the run log of ``run_dir`` and write ``summary.csv`` and ``amplitude.png`` there (and
+    ``validation.png``, the point-sensor comparison against the speed, when a point has one)."""
     record = read_run(run_dir)
     points = summary_points(record)
     csv_path = write_summary_csv(points, Path(run_dir) / SUMMARY_CSV)
     title = f"run {record.start.get('run_id', '?')}"
     fig_path = plot_amplitude(points, Path(run_dir) / AMPLITUDE_FIGURE, title)
+    if any(p.sensor_status is not None for p in points):
+        from flagtrack.daemon.validation.figures import plot_sweep
+
+        plot_sweep(points, Path(run_dir) / VALIDATION_FIGURE, f"{title}: point sensor and cloud distance")
     return csv_path, fig_path

@@ -5,18 +5,25 @@ onset, flapping above, with hysteresis) driven by a speed source (the simulated 
 when the rig has one, else a fixed speed). Events are drawn where the laser line sweeps across
 pixels (:mod:`flagtrack.drivers.sim.quickline`: ON on the leading edge, OFF on the trailing one)
 plus uniform background activity, in real time (or at ``time_scale`` times real time).
+
+Sync generator: with ``trigger_period_ms`` > 0 the camera's trigger input sees a pulse every period
+(rising edge at ``k * period``, falling ``trigger_pulse_us`` later, camera time), as if a sync
+generator (or a point sensor) drove it. The twin's true flag over the last seconds is kept in
+:attr:`SimulatedCamera.truth` (:class:`TwinTruth`) for a simulated point sensor.
 """
 
 from __future__ import annotations
 
+import collections
 import logging
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from flagtrack.daemon.core.events import empty_triggers
+from flagtrack.daemon.core.events import TRIGGER_DTYPE, empty_triggers
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.camera.base import CameraData, CameraInfo
 from flagtrack.drivers.sim.flutter import FlutterModel, FlutterParams, FlutterState
@@ -47,6 +54,10 @@ class SimulatedCameraConfig:
         max_lag_s: when the machine cannot generate events in real time and falls this far behind,
             the twin skips ahead (the flag moves on, no events for the skipped time), as a real
             camera's event-rate controller drops events, so the flag stays in step with the tunnel.
+        trigger_period_ms: sync generator period on the camera's trigger input (0: no pulses).
+        trigger_pulse_us: width of each pulse.
+        trigger_channel: trigger input channel of the pulses.
+        truth_keep_s: camera time of true flag positions kept for a simulated point sensor.
         seed: random seed of the twin.
     """
 
@@ -66,11 +77,18 @@ class SimulatedCameraConfig:
     slice_us: int = 4000
     time_scale: float = 1.0
     max_lag_s: float = 0.25
+    trigger_period_ms: float = 0.0
+    trigger_pulse_us: int = 100
+    trigger_channel: int = 0
+    truth_keep_s: float = 5.0
     seed: int = 0
 
     def __post_init__(self) -> None:
         if self.slice_us < 50 or self.time_scale <= 0:
             raise ValueError("slice_us must be >= 50 and time_scale > 0")
+        if self.trigger_period_ms < 0 or (self.trigger_period_ms > 0 and
+                                          not 0 < self.trigger_pulse_us < self.trigger_period_ms * 1000):
+            raise ValueError("trigger_period_ms must be >= 0 and trigger_pulse_us within (0, period)")
 
 
 @dataclass(frozen=True)
@@ -93,6 +111,64 @@ class _TwinSlice:
         phase = self.start.phase_rad + frac * (self.end.phase_rad - self.start.phase_rad)
         amp = max(0.5 * (self.start.amp_over_l + self.end.amp_over_l), self.still_amp_over_l)  # slow: one per slice
         return self.kinematics.positions_at_phase(phase, s, amp_scale=amp / _REFERENCE_AMP_OVER_L, n_fine=64)
+
+
+class TwinTruth:
+    """The twin's true flag over the last ``keep_s`` of camera time (thread-safe: the camera adds,
+    a simulated sensor reads from another thread)."""
+
+    def __init__(self, keep_s: float = 5.0) -> None:
+        self.keep_us = int(keep_s * 1e6)
+        self._slices: collections.deque[_TwinSlice] = collections.deque()
+        self._lock = threading.Lock()
+        self._horizon_us = 0
+
+    @property
+    def horizon_us(self) -> int:
+        """Camera time up to which the flag's motion is known (the camera has generated it), µs."""
+        with self._lock:
+            return self._horizon_us
+
+    def add(self, twin: _TwinSlice) -> None:
+        """Append the next slice of the flag's motion (camera time order)."""
+        with self._lock:
+            self._slices.append(twin)
+            self._horizon_us = round(twin.t1_s * 1e6)
+            while self._slices and (self._horizon_us - self._slices[0].t1_s * 1e6) > self.keep_us:
+                self._slices.popleft()
+
+    def positions(self, t_us: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """True x, y (len(t_us), len(s)) in pixels at camera times ``t_us``; NaN where not kept."""
+        t_s = np.asarray(t_us, dtype=np.float64) * 1e-6
+        x = np.full((len(t_s), len(s)), np.nan)
+        y = np.full((len(t_s), len(s)), np.nan)
+        with self._lock:
+            slices = list(self._slices)
+        if not slices:
+            return x, y
+        starts = np.array([sl.t0_s for sl in slices])
+        k = np.searchsorted(starts, t_s, side="right") - 1
+        inside = (k >= 0) & (t_s <= slices[-1].t1_s)
+        for index in np.unique(k[inside]):
+            rows = np.flatnonzero(inside & (k == index))
+            x[rows], y[rows] = slices[index].positions(t_s[rows], s)
+        return x, y
+
+
+def trigger_edges(cfg: SimulatedCameraConfig, t0_us: int, t1_us: int) -> np.ndarray:
+    """Sync-generator edges in camera time ``[t0_us, t1_us)`` (TRIGGER_DTYPE, time order)."""
+    if cfg.trigger_period_ms <= 0 or t1_us <= t0_us:
+        return empty_triggers()
+    period_us = round(cfg.trigger_period_ms * 1000)
+    first = -(-(t0_us - cfg.trigger_pulse_us) // period_us)
+    starts = np.arange(first, (t1_us - 1) // period_us + 1, dtype=np.int64) * period_us
+    times = np.concatenate([starts, starts + cfg.trigger_pulse_us])
+    edges = np.concatenate([np.ones(len(starts), np.uint8), np.zeros(len(starts), np.uint8)])
+    keep = (times >= t0_us) & (times < t1_us)
+    order = np.argsort(times[keep], kind="stable")
+    out = np.empty(int(keep.sum()), dtype=TRIGGER_DTYPE)
+    out["t"], out["edge"], out["channel"] = times[keep][order], edges[keep][order], cfg.trigger_channel
+    return out
 
 
 class SimulatedCamera:
@@ -120,6 +196,8 @@ class SimulatedCamera:
         self._wall0: float | None = None
         self._slice = 0
         self.skipped_us = 0
+        self.truth = TwinTruth(cfg.truth_keep_s)
+        self._pending_triggers = empty_triggers()
 
     @property
     def state(self) -> FlutterState:
@@ -155,12 +233,16 @@ class SimulatedCamera:
         start = self.flutter.state
         end = self.flutter.advance(float(self.speed_source()), (t1_us - t0_us) * 1e-6)
         twin = _TwinSlice(self.kinematics, t0_us * 1e-6, t1_us * 1e-6, start, end, self.cfg.still_amp_over_l)
+        self.truth.add(twin)
         chunks = list(line_events(twin, t0_us, t1_us, self.cfg.width, self.cfg.height, self.line,
                                   seed=self.cfg.seed * 1_000_003 + self._slice, chunk_us=t1_us - t0_us))
         self._slice += 1
         self._t_us = t1_us
         events = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
-        return CameraData(events, empty_triggers(), time.time_ns(), t_until_us=t1_us)
+        triggers = trigger_edges(self.cfg, t0_us, t1_us)
+        if len(self._pending_triggers):  # pulses of skipped time: a camera keeps its trigger events
+            triggers, self._pending_triggers = np.concatenate([self._pending_triggers, triggers]), empty_triggers()
+        return CameraData(events, triggers, time.time_ns(), t_until_us=t1_us)
 
     def close(self) -> None:
         self._wall0 = None
@@ -171,7 +253,12 @@ class SimulatedCamera:
             return
         if self.skipped_us == 0:
             log.warning("simulated camera: cannot keep up with real time; skipping ahead (events dropped)")
-        self.flutter.advance(float(self.speed_source()), skip_us * 1e-6)
+        start = self.flutter.state
+        end = self.flutter.advance(float(self.speed_source()), skip_us * 1e-6)
+        self.truth.add(_TwinSlice(self.kinematics, self._t_us * 1e-6, (self._t_us + skip_us) * 1e-6, start, end,
+                                  self.cfg.still_amp_over_l))
+        self._pending_triggers = np.concatenate([self._pending_triggers,
+                                                 trigger_edges(self.cfg, self._t_us, self._t_us + skip_us)])
         self._t_us += skip_us
         self.skipped_us += skip_us
 
@@ -187,4 +274,4 @@ def fast_forward(camera: SimulatedCamera, duration_s: float) -> list[np.ndarray]
     return out
 
 
-__all__ = ["SimulatedCamera", "SimulatedCameraConfig", "fast_forward", "replace"]
+__all__ = ["SimulatedCamera", "SimulatedCameraConfig", "TwinTruth", "fast_forward", "replace", "trigger_edges"]

@@ -223,3 +223,25 @@ def test_stored_plan_mismatch_is_refused(tmp_path: Path) -> None:
         stored_sweep(read_run(tmp_path))
     with pytest.raises(FormatError, match="no 'tunnel' config"):
         stored_sweep(read_run(tmp_path), section="tunnel")
+
+
+def test_sensor_fields_round_trip_and_older_records_load(tmp_path: Path) -> None:
+    points = plan_points(CFG)
+    with RunLog.create(tmp_path, run_id="s", config={}, plan=points, t_unix=1.0) as log:
+        log.point(measured(points[0], sensor_status="ok", sensor_error_rms_over_l=0.004, sensor_error_max_over_l=0.012,
+                           sensor_error_mean_over_l=0.003, sensor_error_std_over_l=0.002, sensor_sync="trigger",
+                           sensor_offset_us=3000.2, sensor_offset_unc_us=0.2, sensor_samples=1000, sensor_missing=2,
+                           sensor_file="points/x_sensor.h5", delta_rms_std_over_l=0.001))
+        log.point(measured(points[1]))  # no sensor
+    with open(tmp_path / RUN_LOG, "a") as handle:  # a record written before the sensor fields existed
+        old = {k: v for k, v in json.loads((tmp_path / RUN_LOG).read_text().splitlines()[2]).items()
+               if not k.startswith("sensor") and k != "delta_rms_std_over_l"}
+        handle.write(json.dumps({**old, "point_id": points[2].point_id, "index": points[2].index}) + "\n")
+    got = read_run(tmp_path).points
+    assert got[0].sensor_error_rms_over_l == 0.004 and got[0].sensor_sync == "trigger" and got[0].sensor_missing == 2
+    assert got[1].sensor_status is None and math.isnan(got[1].sensor_error_rms_over_l)
+    assert got[2].sensor_status is None and got[2].sensor_samples == 0
+    csv_path, _ = write_summary(tmp_path)
+    rows = list(csv.DictReader(open(csv_path, newline="")))
+    assert rows[0]["sensor_error_rms_over_l"] == "0.004" and rows[1]["sensor_error_max_over_l"] == "NaN"
+    assert (tmp_path / "validation.png").stat().st_size > 5000  # the sweep figure, as a point has sensor data

@@ -105,3 +105,22 @@ def test_keys_are_lowercase_slash_words_under_namespace() -> None:
     assert len(set(names)) == len(names)
     for name in names:
         assert name.startswith("flagtrack/rig1/") and name == name.lower() and "//" not in name
+
+
+def test_sensor_samples_carry_pulses_missing_counts_and_clock() -> None:
+    msg = SensorSamples("om70", 4, "mm", np.array([10, 20, 30], dtype=np.int64), np.array([1.5, np.nan, 2.5]),
+                        trigger_t_us=np.array([15, 65], dtype=np.int64), missing=3, clock="host", wall_ns=1_700_000_000_123)
+    got = decode(encode(msg), SensorSamples)
+    np.testing.assert_array_equal(got.value, msg.value)  # NaN = a missing sample, kept
+    np.testing.assert_array_equal(got.trigger_t_us, [15, 65])
+    assert (got.missing, got.clock, got.wall_ns) == (3, "host", 1_700_000_000_123)
+
+
+def test_sensor_samples_of_the_first_layout_still_decode() -> None:
+    t_us, value = np.arange(3, dtype=np.int64), np.ones(3)
+    meta = {"sensor_id": "om70", "seq": 1, "units": "mm",
+            "_blobs": [["t_us", t_us.dtype.str, [3]], ["value", value.dtype.str, [3]]]}
+    got = decode(with_meta(meta, schema.MessageType.SENSOR_SAMPLES, t_us.tobytes() + value.tobytes()), SensorSamples)
+    assert got.missing == 0 and got.clock == "sensor" and len(got.trigger_t_us) == 0
+    with pytest.raises(SchemaError, match="missing"):
+        decode(with_meta({**meta, "missing": "many"}, schema.MessageType.SENSOR_SAMPLES, t_us.tobytes() + value.tobytes()))

@@ -14,4 +14,5 @@ def build_supervisor(rig: Any, bus: Any, tunnel: Any, resume_dir: Any = None) ->
     """The supervisor of a rig config, with its (opened, not started) tunnel."""
     tracker = rig.tracker
     flag = FlagGeometry(float(tracker.length or 1.0), tuple(tracker.root or (0.0, 0.0)), float(tracker.direction_deg))
-    return SupervisorService(bus, rig.supervisor, tunnel, rig.camera.id, flag, rig.snapshot(), resume_dir)
+    return SupervisorService(bus, rig.supervisor, tunnel, rig.camera.id, flag, rig.snapshot(), resume_dir,
+                             getattr(rig, "sensor", None))

@@ -26,11 +26,13 @@ class PointMetrics:
     twi: float = math.nan
     delta_rms_over_l: float = math.nan
     updates: int = 0
+    delta_rms_std_over_l: float = math.nan
 
 
 def point_metrics(batches: list[CentrelineBatch], length: float, root: tuple[float, float], direction_deg: float,
                   cycles_window: int = 1) -> PointMetrics:
-    """A/L (half peak-to-peak of the tip's lateral displacement, and its spread over cycles), f, TWI, Delta_RMS/L.
+    """A/L (half peak-to-peak of the tip's lateral displacement, and its spread over cycles), f, TWI, Delta_RMS/L
+    (time mean and standard deviation).
 
     Args:
         batches: the point's centrelines, time order.
@@ -56,8 +58,9 @@ def point_metrics(batches: list[CentrelineBatch], length: float, root: tuple[flo
         uniform_t = np.linspace(t_run[0], t_run[-1], len(t_run))
         resampled = np.stack([np.interp(uniform_t, t_run, lateral_run[:, k]) for k in range(lateral.shape[1])], axis=1)
         twi = travelling_wave_index(resampled)
-    delta = batch.delta_rms[np.isfinite(batch.delta_rms)]
-    return PointMetrics(amplitude, spread, frequency, twi, float(delta.mean() / length) if len(delta) else math.nan, n)
+    delta = batch.delta_rms[np.isfinite(batch.delta_rms)] / length
+    return PointMetrics(amplitude, spread, frequency, twi, float(delta.mean()) if len(delta) else math.nan, n,
+                        float(delta.std()) if len(delta) else math.nan)
 
 
 def _longest_run(t_s: np.ndarray, gap_factor: float = 5.0) -> slice:

@@ -10,7 +10,7 @@ import numpy as np
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.onset import FlagState, OnsetDetector, OnsetParams, OnsetReading
-from flagtrack.daemon.schema import CentrelineMessage, EventRate, RecorderStatus
+from flagtrack.daemon.schema import CentrelineMessage, EventRate, RecorderStatus, SensorSamples
 from flagtrack.daemon.transport import Bus
 
 log = logging.getLogger(__name__)
@@ -20,11 +20,17 @@ SERVICE_KEYS = {"camera": "camera/{camera_id}", "tracker": "tracker", "recorder"
 
 @dataclass
 class Collection:
-    """Centrelines and rates gathered while a point records."""
+    """Centrelines, rates and point-sensor samples gathered while a point records.
+
+    ``camera_wall`` holds (camera time µs, wall time ns) of the newest update of each centreline
+    message: with the sensor messages' own wall stamps, a rough link between the two clocks.
+    """
 
     batches: list[CentrelineBatch] = field(default_factory=list)
     rates_hz: list[float] = field(default_factory=list)
     units: str = "px"
+    sensor: list[SensorSamples] = field(default_factory=list)
+    camera_wall: list[tuple[int, int]] = field(default_factory=list)
 
 
 class BusMonitor:
@@ -35,13 +41,17 @@ class BusMonitor:
         camera_id: the camera watched.
         onset: detector parameters.
         required: services that must stay alive (``camera``, ``tracker``, ``recorder``).
+        sensor_id: a point sensor whose samples are gathered with each point (None: no sensor).
     """
 
-    def __init__(self, bus: Bus, camera_id: str, onset: OnsetParams, required: tuple[str, ...]) -> None:
+    def __init__(self, bus: Bus, camera_id: str, onset: OnsetParams, required: tuple[str, ...],
+                 sensor_id: str | None = None) -> None:
         keys = bus.keys
         self.rates = bus.subscribe(keys.event_rate(camera_id), EventRate, capacity=100_000)
         self.lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=1_000_000)
         self.recorder = bus.subscribe(keys.recorder_status(), RecorderStatus, capacity=1000)
+        self.sensor = None if sensor_id is None else bus.subscribe(keys.sensor_samples(sensor_id), SensorSamples,
+                                                                   capacity=100_000)
         self.liveliness = bus.watch_liveliness()
         self.alive_keys = {name: keys.alive(SERVICE_KEYS[name].format(camera_id=camera_id)) for name in required}
         self.detector = OnsetDetector(onset)
@@ -69,6 +79,11 @@ class BusMonitor:
             if self.collection is not None and len(msg.t_s):
                 self.collection.batches.append(msg.batch())
                 self.collection.units = msg.units
+                if len(msg.source_ns) and msg.source_ns[-1] > 0:
+                    self.collection.camera_wall.append((round(float(msg.t_s[-1]) * 1e6), int(msg.source_ns[-1])))
+        while self.sensor is not None and (samples := self.sensor.recv(timeout_s=0)) is not None:
+            if self.collection is not None:
+                self.collection.sensor.append(samples)
         while (status := self.recorder.recv(timeout_s=0)) is not None:
             if status.request_id:
                 self.recorder_replies[status.request_id] = status

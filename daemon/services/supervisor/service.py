@@ -58,16 +58,18 @@ class SupervisorService:
         flag: the flag's geometry for the metrics.
         rig_snapshot: the whole rig config, stored in the run's start record.
         resume_dir: resume this run instead of starting a new one.
+        sensor: a point sensor (``SensorConfig``) compared with each point's reconstruction, or None.
     """
 
     name = "supervisor"
 
     def __init__(self, bus: Bus, cfg: SupervisorConfig, tunnel: Any, camera_id: str, flag: FlagGeometry,
-                 rig_snapshot: dict[str, Any], resume_dir: Path | None = None) -> None:
+                 rig_snapshot: dict[str, Any], resume_dir: Path | None = None, sensor: Any = None) -> None:
         self.bus, self.cfg, self.tunnel, self.flag = bus, cfg, tunnel, flag
         self.rig_snapshot = rig_snapshot
         self.resume_dir = resume_dir
-        self.monitor = BusMonitor(bus, camera_id, cfg.onset, cfg.required)
+        self.sensor = sensor
+        self.monitor = BusMonitor(bus, camera_id, cfg.onset, cfg.required, None if sensor is None else sensor.id)
         self.run_dir: Path | None = None
         self.stop_reason = ""
         self.points_done: list[PointResult] = []
@@ -272,10 +274,11 @@ class SupervisorService:
         metrics = point_metrics(collection.batches, self.flag.length, self.flag.root, self.flag.direction_deg)
         if state != "flapping":  # a still flag has no amplitude or frequency worth a number
             metrics = type(metrics)(amplitude_over_l=metrics.amplitude_over_l, delta_rms_over_l=metrics.delta_rms_over_l,
-                                    updates=metrics.updates)
+                                    updates=metrics.updates, delta_rms_std_over_l=metrics.delta_rms_std_over_l)
         raw = base.with_name(base.name + ".raw")
         lines = base.with_name(base.name + "_centrelines.h5")
         readback = [v for v in readbacks if np.isfinite(v)]
+        sensor_fields = self._check_sensor(point, base, collection, raw, state)
         return PointResult.planned(
             point, state=state, speed_readback_mps=float(np.mean(readback)) if readback else math.nan,
             amplitude_over_l=metrics.amplitude_over_l, amplitude_std_over_l=metrics.amplitude_std_over_l,
@@ -284,7 +287,19 @@ class SupervisorService:
             raw_bytes=raw.stat().st_size if raw.exists() else int(stopped.bytes),
             raw_file=str(raw.relative_to(self.run_dir)), centreline_file=str(lines.relative_to(self.run_dir))
             if lines.exists() else None, t_start_unix=t_start, t_stop_unix=time.time(),
+            delta_rms_std_over_l=metrics.delta_rms_std_over_l, **sensor_fields,
         )
+
+    def _check_sensor(self, point: Point, base: Path, collection: Any, raw: Path, state: str) -> dict[str, Any]:
+        """The point-sensor fields of the point (empty without a sensor); never raises."""
+        if self.sensor is None:
+            return {}
+        from flagtrack.daemon.services.supervisor.sensor_check import check_point
+        from flagtrack.daemon.validation.point import FlagFrame
+
+        frame = FlagFrame(self.flag.length, self.flag.root, self.flag.direction_deg)
+        title = f"{point.point_id}: {point.speed_mps:.2f} m/s, {state}"
+        return check_point(base, self.run_dir, collection, raw, frame, self.sensor, title)  # type: ignore[arg-type]
 
     # -- feedback --------------------------------------------------------------------------
 

@@ -1,0 +1,121 @@
+"""A sweep of the simulated rig with the simulated point sensor (pty tunnel, twin camera with its sync
+generator, tracker, recorder, sensor, supervisor, real Zenoh in one process): every point carries the
+sensor comparison; a sensor that goes silent only marks its samples missing; ``flagtrack validate``
+recomputes the comparison from the run's files, by trigger pulses and by cross-correlation."""
+
+from __future__ import annotations
+
+import csv
+import json
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from flagtrack.daemon.cli import main
+from flagtrack.daemon.config import from_mapping
+from flagtrack.daemon.rig import RigConfig
+from flagtrack.daemon.services.build import build_services
+from flagtrack.daemon.services.runner import ServiceGroup
+from flagtrack.daemon.sweep.runlog import read_run
+from flagtrack.daemon.transport import Bus
+from flagtrack.daemon.validation.run import validate_run
+
+OFFSET_US = 3000.0  # the sensor clock runs 3 ms ahead of the camera's
+TAU_S = 0.001
+
+
+def rig(tmp_path: Path) -> RigConfig:
+    return from_mapping(RigConfig, {
+        "rig": f"val{time.monotonic_ns() % 10**9}",
+        # a light twin at half real time: the rig shares 2 cores with other tests
+        "camera": {"adapter": "simulated", "packet_us": 4000,
+                   "simulated": {"events_per_px2": 0.5, "noise_rate_hz": 5000, "max_lag_s": 1.0, "time_scale": 0.5,
+                                 "trigger_period_ms": 50,
+                                 "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4, "tau_amp_s": 0.15}}},
+        "tracker": {"root": [150, 240], "length": 300, "tau_s": TAU_S},
+        "recorder": {"directory": str(tmp_path / "rec")},
+        "tunnel": {"driver": "simulated",
+                   "safety": {"max_speed_mps": 8, "max_ramp_mps2": 4.0, "ramp_period_s": 0.05, "tolerance_mps": 0.15,
+                              "settle_timeout_s": 3.0, "poll_period_s": 0.05, "keepalive_s": 0.25, "watchdog_s": 1.0},
+                   "sim": {"tau_s": 0.1, "ramp_mps2": 6.0, "watchdog_s": 1.0}},
+        "supervisor": {"mode": "sweep", "runs_dir": str(tmp_path / "runs"), "run_name": "run",
+                       "onset": {"learn_s": 0.5}, "silence_timeout_s": 3.0,
+                       "sweep": {"speeds": [4.0, 5.5], "branches": ["up", "down"], "settle_s": 0.5, "record_s": 1.2}},
+        "sensor": {"id": "om70", "driver": "simulated", "units": "mm",
+                   "simulated": {"rate_hz": 1000, "noise_over_l": 0.002, "latency_ms": 2.0,
+                                 "clock_offset_ms": OFFSET_US / 1000},
+                   "beam": {"x_over_l": 0.73, "units_per_reading": 1 / 0.6, "zero_reading": 100.0, "direction": -1}},
+        "services": ["camera", "tracker", "recorder", "supervisor", "sensor"],
+    })
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
+    tmp_path = tmp_path_factory.mktemp("validate")
+    config = rig(tmp_path)
+    with Bus(config.bus_config) as bus:
+        services = build_services(config, bus, list(config.services))
+        supervisor = services[0]
+        sensor = next(s for s in services if s.name == "sensor/om70")
+        group = ServiceGroup(services, stop_when_any_finishes=["supervisor"])
+
+        def mute_during_the_last_point() -> None:
+            deadline = time.monotonic() + 90
+            while len(supervisor.points_done) < 2 and time.monotonic() < deadline:
+                time.sleep(0.02)
+            sensor.driver.muted = True  # the sensor stops answering
+
+        threading.Thread(target=mute_during_the_last_point, daemon=True).start()
+        group.start()
+        group.wait(120)
+        report = group.shutdown(30)
+    return tmp_path / "runs" / "run", (supervisor, report)
+
+
+@pytest.mark.slow
+def test_every_point_carries_the_sensor_comparison(sweep: tuple[Path, object]) -> None:
+    run_dir, (supervisor, report) = sweep
+    assert supervisor.stop_reason == "finished" and not report.errors  # the silent sensor stopped nothing
+    record = read_run(run_dir)
+    still, flapping, muted = record.latest_points().values()
+    assert (still.state, flapping.state) == ("still", "flapping")
+    for point in (still, flapping):
+        assert point.sensor_status == "ok" and point.sensor_sync == "trigger"
+        assert abs(point.sensor_offset_us - OFFSET_US) < 5.0 and point.sensor_offset_unc_us < 5.0
+        assert point.sensor_samples > 300 and point.sensor_missing == 0
+        assert (run_dir / point.sensor_file).stat().st_size > 0
+        assert (run_dir / point.sensor_figure).read_bytes()[:4] == b"\x89PNG"
+    assert flapping.sensor_error_rms_over_l < 0.01 and flapping.sensor_error_max_over_l < 0.05
+    assert abs(flapping.sensor_xcorr_offset_us - OFFSET_US) < TAU_S * 1e6
+    assert muted.sensor_status == "sensor samples all missing" and muted.sensor_missing > 300
+    with open(run_dir / "summary.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert float(rows[1]["sensor_error_rms_over_l"]) == pytest.approx(flapping.sensor_error_rms_over_l)
+    assert rows[2]["sensor_error_max_over_l"] == "NaN"
+    assert (run_dir / "validation.png").stat().st_size > 5000
+
+
+@pytest.mark.slow
+def test_validate_recomputes_from_the_files_by_both_paths(sweep: tuple[Path, object],
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    run_dir, _ = sweep
+    live = list(read_run(run_dir).latest_points().values())
+    log_before = (run_dir / "run.jsonl").read_bytes()
+    again = validate_run(run_dir)
+    flapping = again.points[1]
+    assert flapping.sensor_sync == "trigger" and abs(flapping.sensor_offset_us - OFFSET_US) < 5.0
+    assert flapping.sensor_error_rms_over_l == pytest.approx(live[1].sensor_error_rms_over_l, rel=0.25)
+    assert set(again.point_figures) == {p.point_id for p in live}
+    out = run_dir.parent / "xcorr"
+    code = main(["validate", str(run_dir), "--sync", "xcorr", "-o", str(out), "--json"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    rows = {r["point_id"]: r for r in json.loads(captured.out)["points"]}
+    flapping = rows["001-up-5.50"]
+    assert flapping["sensor_sync"] == "xcorr" and abs(flapping["sensor_offset_us"] - OFFSET_US) < TAU_S * 1e6
+    assert flapping["sensor_error_rms_over_l"] < 0.01
+    assert rows["000-up-4.00"]["sensor_sync"] == "coarse"  # a still flag has nothing to correlate
+    assert (out / "validation.csv").exists() and (out / "001-up-5.50.png").exists()
+    assert (run_dir / "run.jsonl").read_bytes() == log_before  # the run log is never rewritten

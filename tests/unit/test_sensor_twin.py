@@ -1,0 +1,131 @@
+"""The simulated point sensor on the digital twin, through the real tracker: e/L and both clock syncs.
+
+The twin is generated as fast as possible (no bus, no real time), so the numbers do not depend on
+the machine's load: twin -> events -> core tracker, and the twin-reading sensor sampling the
+true flag at x/L = 0.73 with 0.2 % L noise, 2 ms latency and an injected clock offset.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from flagtrack.daemon.config import from_mapping
+from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.core.pointsensor import BeamParams, beam_lateral, reading_to_lateral
+from flagtrack.daemon.core.sync import SyncParams
+from flagtrack.daemon.core.tracker import Tracker
+from flagtrack.daemon.tracking_config import TrackingConfig
+from flagtrack.daemon.validation.point import FlagFrame, PointValidation, validate_point
+from flagtrack.drivers.camera.simulated import SimulatedCamera, SimulatedCameraConfig, fast_forward, trigger_edges
+from flagtrack.drivers.sensor.base import SensorReading
+from flagtrack.drivers.sensor.record import SensorRecord
+from flagtrack.drivers.sensor.twin import TwinSensor, TwinSensorParams
+
+L = 300.0
+FRAME = FlagFrame(L, (150.0, 240.0), 0.0)
+BEAM = BeamParams(x_over_l=0.73, units_per_reading=1 / 0.6, zero_reading=100.0, direction=-1)  # mm, on the +y side
+TAU_S = 0.001
+WARM_S, RECORD_S = 0.3, 1.0
+
+
+@dataclass
+class Run:
+    camera: SimulatedCamera
+    sensor: TwinSensor
+    lines: CentrelineBatch
+    record: SensorRecord
+    triggers: np.ndarray
+    validation: PointValidation
+
+
+def twin_run(speed_mps: float, offset_ms: float, drift_ppm: float = 0.0, record_s: float = RECORD_S) -> Run:
+    camera = SimulatedCamera(from_mapping(SimulatedCameraConfig, {
+        "speed_mps": speed_mps, "events_per_px2": 1.0, "trigger_period_ms": 50, "seed": 3,
+        "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4, "tau_amp_s": 0.1}}))
+    camera.open()
+    sensor = TwinSensor(TwinSensorParams(rate_hz=1000, noise_over_l=0.002, latency_ms=2.0, clock_offset_ms=offset_ms,
+                                         drift_ppm=drift_ppm), BEAM, camera, "mm")
+    sensor.open()
+    readings: list[SensorReading] = []
+    events = []
+    for _ in range(round((WARM_S + record_s) / 0.004)):  # slice by slice, the sensor reading as it goes
+        events += fast_forward(camera, 0.004)
+        while len(got := sensor.read(0.0)):
+            readings.append(got)
+    tracker = Tracker(from_mapping(TrackingConfig, {"root": [150, 240], "length": L, "tau_s": TAU_S}).tracker_params())
+    lines = CentrelineBatch.concatenate([tracker.feed(np.concatenate(events)), tracker.finish()])
+    lines = lines.select(lines.t_s >= WARM_S)  # the chain starts straight
+    t_us = np.concatenate([r.t_us for r in readings])
+    keep = sensor.camera_us(t_us) >= WARM_S * 1e6
+    pulses = np.concatenate([r.trigger_t_us for r in readings])
+    record = SensorRecord("twin", "mm", "sensor", t_us[keep], np.concatenate([r.value for r in readings])[keep],
+                          pulses[sensor.camera_us(pulses) >= WARM_S * 1e6], sum(r.missing for r in readings))
+    end_us = round((WARM_S + record_s) * 1e6)
+    triggers = trigger_edges(camera.cfg, round(WARM_S * 1e6), end_us)
+    validation = validate_point(lines, record, triggers, FRAME, BEAM, SyncParams(), "px")
+    return Run(camera, sensor, lines, record, triggers, validation)
+
+
+@pytest.fixture(scope="module")
+def flapping() -> Run:
+    return twin_run(5.5, offset_ms=3.0)
+
+
+def test_the_sensor_reads_the_true_flag_with_its_noise_and_clock(flapping: Run) -> None:
+    run = flapping
+    t_cam_us = run.sensor.camera_us(run.record.t_us)
+    x, y = run.camera.truth.positions(t_cam_us, np.linspace(0, L, 257))
+    truth = beam_lateral(x, y, FRAME.root, 0.0, 0.73 * L, BEAM.side)
+    measured = reading_to_lateral(run.record.value, BEAM)
+    ok = np.isfinite(truth)
+    assert ok.mean() > 0.99 and run.record.missing == 0
+    noise = measured[ok] - truth[ok]
+    assert abs(noise.mean()) < 0.1 and 0.0018 * L < noise.std() < 0.0022 * L
+    assert np.ptp(truth[ok]) > 0.3 * L  # it flaps at the beam
+    np.testing.assert_array_equal(np.diff(run.record.t_us), 1000)  # 1 kHz on its own clock
+    rising = np.sort(run.triggers["t"][run.triggers["edge"] == 1])
+    pulses = run.record.trigger_t_us
+    assert len(pulses) >= len(rising) - 1
+    nearest = rising[np.argmin(np.abs(pulses[:, None] - 3000 - rising[None, :]), axis=1)]
+    assert np.all(np.abs(pulses - nearest - 3000) <= 5)  # the pulses on the sensor clock: +3 ms, ~1 us jitter
+
+
+def test_flapping_error_is_under_one_percent_and_both_syncs_recover_the_offset(flapping: Run) -> None:
+    v, f = flapping.validation, flapping.validation.fields()
+    assert v.status == "ok" and v.sync.method == "trigger"
+    assert f["sensor_error_rms_over_l"] < 0.01  # the paper: e/L within 0-1.5 %
+    assert v.comparison is not None and v.comparison.n_compared > 0.9 * len(flapping.record.t_us)
+    update_us = TAU_S * 1e6
+    assert abs(f["sensor_offset_us"] - 3000.0) < 5.0 and f["sensor_offset_unc_us"] < 2.0
+    assert abs(f["sensor_xcorr_offset_us"] - 3000.0) < update_us
+    assert f["sensor_xcorr_unc_us"] < 0.2 * update_us
+    assert v.xcorr.quality > 0.99 and v.trigger.n >= 20
+
+
+def test_a_negative_offset_and_drift_are_recovered_too() -> None:
+    run = twin_run(6.0, offset_ms=-4.5, drift_ppm=150.0, record_s=0.8)
+    v = run.validation
+    assert v.sync.method == "trigger" and v.sync.drift_ppm == pytest.approx(150.0, abs=30.0)
+    t_mid = v.sync.t_ref_us
+    true_offset_at_mid = -4500.0 + 150e-6 * t_mid  # sensor minus camera at the reference time
+    assert abs(v.sync.offset_us - true_offset_at_mid) < 5.0
+    assert abs(v.xcorr.offset_us - true_offset_at_mid) < TAU_S * 1e6
+    assert v.fields()["sensor_error_rms_over_l"] < 0.01
+
+
+def test_xcorr_takes_over_without_trigger_pulses(flapping: Run) -> None:
+    no_pulses = SensorRecord(**{**flapping.record.__dict__, "trigger_t_us": np.zeros(0, dtype=np.int64)})
+    v = validate_point(flapping.lines, no_pulses, flapping.triggers, FRAME, BEAM, SyncParams(), "px")
+    assert v.sync.method == "xcorr" and v.trigger.method == "none"
+    assert abs(v.sync.offset_us - 3000.0) < TAU_S * 1e6
+    assert v.fields()["sensor_error_rms_over_l"] < 0.01
+
+
+def test_a_still_flag_is_compared_without_a_correlation() -> None:
+    run = twin_run(4.0, offset_ms=3.0, record_s=0.5)
+    v = run.validation
+    assert v.status == "ok" and v.sync.method == "trigger" and v.xcorr.method == "none"
+    assert v.fields()["sensor_error_rms_over_l"] < 0.01
