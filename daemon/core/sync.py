@@ -27,6 +27,7 @@ from typing import Literal
 import numpy as np
 
 _STAMP_RMS_US = 1.0 / math.sqrt(6.0)  # two timestamps rounded to 1 µs
+_COARSE_POINTS = 2000
 
 
 @dataclass(frozen=True)
@@ -286,10 +287,15 @@ def _correlation(signal: _Signal, tr: np.ndarray, yr: np.ndarray, lag_us: float)
 
 def _search(signal: _Signal, tr: np.ndarray, yr: np.ndarray, lo_us: float, hi_us: float, step_us: float
             ) -> tuple[float, float]:
-    """Best lag on a grid, then twice a parabola-refined finer grid; returns (lag, correlation)."""
-    for _ in range(3):
+    """Best lag on a grid, then twice a parabola-refined finer grid; returns (lag, correlation).
+
+    The first (widest) grid looks at no more than ``_COARSE_POINTS`` updates, evenly spread.
+    """
+    stride = max(1, len(tr) // _COARSE_POINTS)
+    for i in range(3):
+        t_use, y_use = (tr[::stride], yr[::stride]) if i == 0 else (tr, yr)
         lags = np.arange(lo_us, hi_us + 0.5 * step_us, step_us)
-        scores = np.array([_correlation(signal, tr, yr, float(lag)) for lag in lags])
+        scores = np.array([_correlation(signal, t_use, y_use, float(lag)) for lag in lags])
         if not np.any(np.isfinite(scores)):
             return math.nan, math.nan
         k = int(np.nanargmax(scores))
