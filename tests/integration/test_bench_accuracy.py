@@ -1,0 +1,50 @@
+"""``flagtrack bench accuracy`` end to end on a tiny preset: simulated files, tracking, the results folder."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+
+from flagtrack.daemon.benchmark.tables import COLUMNS, SWEEP_COLUMNS
+from flagtrack.daemon.cli import main
+
+
+@pytest.mark.slow
+def test_tiny_run_writes_tables_figures_and_report(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "bench"
+    code = main(["bench", "accuracy", "-o", str(out), "--quick", "--n", "2", "--sweep-kinematics", "1",
+                 "--cycles", "1.5", "--size", "320x240", "--jobs", "1", "--no-progress"])
+    assert code == 0
+    assert "family           paper" in capsys.readouterr().out
+    names = {p.name for p in out.iterdir()}
+    assert {"family.csv", "leak.csv", "shot_noise.csv", "params_joints.csv", "params_tau.csv", "summary_family.csv",
+            "fig4_family.png", "fig5_defects.png", "fig6_params.png", "report.md", "run.json"} <= names
+    assert "recordings" not in names  # simulated files are removed
+    for name in names - {"report.md", "run.json"}:
+        if name.endswith(".png"):
+            assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and (out / name).stat().st_size > 10_000
+    with open(out / "family.csv") as handle:
+        family = list(csv.DictReader(handle))
+    assert list(family[0]) == list(COLUMNS)
+    assert sorted(r["method"] for r in family) == ["paper", "paper", "robust", "robust", "robust-classic",
+                                                   "robust-classic"]
+    assert all(0 < float(r["delta_rms_over_l"]) < 0.05 for r in family if r["method"] != "paper")
+    with open(out / "shot_noise.csv") as handle:
+        shot = list(csv.DictReader(handle))
+    assert list(shot[0]) == list(SWEEP_COLUMNS)
+    ratios = {float(r["level"]): float(r["n_over_n0"]) for r in shot}
+    assert ratios[0.0] == 1.0 and ratios[70.0] == pytest.approx(1 + 70 / 37, rel=0.1)
+    with open(out / "params_tau.csv") as handle:
+        assert {r["condition"] for r in csv.DictReader(handle)} == {"clean", "shot 20"}
+    report = (out / "report.md").read_text()
+    for heading in ("(a) Kinematics family", "(b) Leak rate", "(c) Shot noise", "(d) Processing parameters",
+                    "Beyond the paper"):
+        assert heading in report
+    assert "![family](fig4_family.png)" in report and "0.36-1.00" in report  # the paper's figures beside ours
+
+
+def test_unknown_parts_are_refused(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["bench", "accuracy", "-o", str(tmp_path / "x"), "--parts", "family,nope", "--no-progress"]) == 2
+    assert "nope" in capsys.readouterr().err
