@@ -25,10 +25,12 @@ def demo_rig(out: Path, headless: bool) -> dict[str, Any]:
     """The demo's rig config (the same sections a user writes in YAML)."""
     return {
         "rig": f"demo{int(time.time() * 1000) % 100000}",
-        "camera": {"id": "cam0", "adapter": "simulated",
-                   "simulated": {"flutter": {"onset_speed_mps": ONSET_MPS, "decay_speed_mps": DECAY_MPS,
+        # a light twin (~0.5 Mev/s flapping): the whole rig shares one Python process on a small machine
+        "camera": {"id": "cam0", "adapter": "simulated", "packet_us": 2000,
+                   "simulated": {"events_per_px2": 0.6, "noise_rate_hz": 5000, "max_lag_s": 1.0,
+                                 "flutter": {"onset_speed_mps": ONSET_MPS, "decay_speed_mps": DECAY_MPS,
                                              "tau_amp_s": 0.3}}},
-        "tracker": {"root": [150, 240], "length": 300, "direction_deg": 0, "tau_s": 0.0005},
+        "tracker": {"root": [150, 240], "length": 300, "direction_deg": 0, "tau_s": 0.001},
         "tracker_service": {"batch_updates": 128, "max_batch_delay_s": 0.01},
         "recorder": {"directory": str(out / "recordings")},
         "viewer": {"sink": "rrd" if headless else "auto", "rrd_path": str(out / "demo.rrd"), "geometry_rate_hz": 10},
