@@ -72,7 +72,8 @@ def twin_point(speed_mps: float, *, tau_s: float = 0.001, offset_ms: float = 3.0
         events += fast_forward(camera, 0.004)
         while len(got := sensor.read(0.0)):
             readings.append(got)
-    tracker = Tracker(from_mapping(TrackingConfig, {"root": [150, 240], "length": L_PX, "tau_s": tau_s}).tracker_params())
+    tracking = from_mapping(TrackingConfig, {"root": [150, 240], "length": L_PX, "tau_s": tau_s})
+    tracker = Tracker(tracking.tracker_params())
     lines = CentrelineBatch.concatenate([tracker.feed(np.concatenate(events)), tracker.finish()])
     lines = lines.select(lines.t_s >= warm_s)  # the chain starts straight
     t_us = np.concatenate([r.t_us for r in readings])

@@ -34,8 +34,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="use DIR/<point>_centrelines.h5 (or DIR/<point>.h5) instead of the run's centrelines")
     parser.add_argument("--reconstruct", action="store_true",
                         help="reconstruct each raw file first, with the run's tracker section and the flags below")
-    parser.add_argument("-c", "--config", type=Path, help="with --reconstruct: a YAML file whose tracker: section is used")
-    parser.add_argument("--sync", choices=("auto", "trigger", "xcorr", "none"), help="clock sync mode (default: the run's)")
+    parser.add_argument("-c", "--config", type=Path,
+                        help="with --reconstruct: a YAML file whose tracker: section is used")
+    parser.add_argument("--sync", choices=("auto", "trigger", "xcorr", "none"),
+                        help="clock sync mode (default: the run's)")
     parser.add_argument("--x-over-l", type=float, metavar="F", help="beam position x/L (default: the run's)")
     parser.add_argument("--max-lag-ms", type=float, metavar="MS", help="cross-correlation search half-width")
     parser.add_argument("--window", type=float, default=0.3, metavar="S", help="time shown per point figure, s")

@@ -121,7 +121,8 @@ def trigger_sync(camera_us: np.ndarray, sensor_us: np.ndarray, *, prior_offset_u
     period = float(np.median(np.diff(cam))) if len(cam) > 1 else math.nan
     note = ""
     if math.isfinite(period) and abs(float(np.median(diff)) - prior_offset_us) > 0.25 * period:
-        note = f"offset {np.median(diff):.0f} us is far from the prior {prior_offset_us:.0f} us (pulse period {period:.0f} us)"
+        note = (f"offset {np.median(diff):.0f} us is far from the prior {prior_offset_us:.0f} us "
+                f"(pulse period {period:.0f} us)")
     t_ref = float(np.mean(c))
     if len(c) >= 3 and np.ptp(c) > 0:
         slope, intercept = np.polyfit(c - t_ref, s - c, 1)

@@ -69,7 +69,8 @@ class PointResult:
             uncertainty, and the sensor clock's drift.
         sensor_xcorr_offset_us, sensor_xcorr_unc_us: the cross-correlation estimate (also holds the
             reconstruction's delay).
-        sensor_samples, sensor_missing: samples received and lost.
+        sensor_samples, sensor_missing, sensor_compared: samples received, lost, and compared (a sample
+            is compared when the reconstruction has updates around it).
         sensor_file, sensor_figure: the point's sensor record and figure, relative to the run folder.
     """
 
@@ -106,6 +107,7 @@ class PointResult:
     sensor_xcorr_unc_us: float = math.nan
     sensor_samples: int = 0
     sensor_missing: int = 0
+    sensor_compared: int = 0
     sensor_file: str | None = None
     sensor_figure: str | None = None
 

@@ -39,7 +39,7 @@ def plot_point(v: PointValidation, path: str | Path, title: str = "", window_s: 
     Only ``window_s`` of the record (its middle) is drawn, so flapping cycles stay visible; the
     statistics in the title are over the whole record.
     """
-    fig = _figure((7.0, 6.5))
+    fig = _figure((7.5, 6.8))
     ax_y, ax_e, ax_d = fig.subplots(3, 1, sharex=True, height_ratios=(2, 1, 1))
     length = v.frame.length
     c = v.comparison
@@ -49,7 +49,11 @@ def plot_point(v: PointValidation, path: str | Path, title: str = "", window_s: 
     else:
         lo, hi = _window(span, window_s)
         rec = (v.t_recon_s >= lo) & (v.t_recon_s <= hi)
-        ax_y.plot(v.t_recon_s[rec], v.y_recon[rec] / length, color="C0", linewidth=1.0, label="event-based camera")
+        if v.n_stale:  # updates without events (lost camera data), drawn but not compared
+            ax_y.plot(v.t_recon_s[rec], v.y_recon[rec] / length, color="0.7", linewidth=0.8,
+                      label="camera, updates without events")
+        y_used = np.where(v.stale, np.nan, v.y_recon)
+        ax_y.plot(v.t_recon_s[rec], y_used[rec] / length, color="C0", linewidth=1.0, label="event-based camera")
         ax_d.plot(v.t_recon_s[rec], v.delta_rms[rec] / length, color="C2", linewidth=0.8)
         if c is not None:
             sen = (c.t_s >= lo) & (c.t_s <= hi)
@@ -74,7 +78,8 @@ def _stats(v: PointValidation) -> str:
     sync_text = (f"sync {sync.method} {sync.offset_us / 1e3:+.3f} ms ± {sync.uncertainty_us:.1f} µs"
                  if sync.ok and math.isfinite(sync.uncertainty_us) else f"sync {sync.method}")
     return (f"{v.status}; e/L RMS {_pct(f['sensor_error_rms_over_l'])}, max {_pct(f['sensor_error_max_over_l'])}; "
-            f"ΔRMS/L {_pct(d_mean)} ± {_pct(d_std)}\n{sync_text}; {v.n_samples} samples, {v.n_missing} missing")
+            f"ΔRMS/L {_pct(d_mean)} ± {_pct(d_std)}\n{sync_text}; {v.n_samples} samples, {v.n_missing} missing"
+            + (f"\n{v.n_stale} updates without events (lost camera data) not compared" if v.n_stale else ""))
 
 
 def _pct(value: Any) -> str:

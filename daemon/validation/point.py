@@ -40,10 +40,11 @@ class PointValidation:
         status: ``ok``, or why there is no comparison (``no sensor samples``, ``no centrelines``, ...).
         sync: the clock mapping used; trigger, xcorr, coarse: each estimate (method ``none`` if unavailable).
         comparison: e(t) at the sensor samples (None without a comparison).
-        t_recon_s, y_recon: the reconstruction at the beam (camera clock, tracker units).
+        t_recon_s, y_recon: the reconstruction at the beam (camera clock, tracker units), every update.
         delta_rms: (n_t,) Delta_RMS of each update.
         frame: the flag's frame; units: tracker units; x_over_l: the beam's position.
         n_samples, n_missing: sensor samples received and lost.
+        stale: (n_t,) bool, updates made without events that were left out of the comparison.
     """
 
     status: str
@@ -60,6 +61,12 @@ class PointValidation:
     x_over_l: float
     n_samples: int
     n_missing: int
+    stale: np.ndarray
+
+    @property
+    def n_stale(self) -> int:
+        """Updates left out of the comparison (made without events, flag flapping)."""
+        return int(self.stale.sum())
 
     @property
     def delta_rms_over_l(self) -> tuple[float, float]:
@@ -85,6 +92,7 @@ class PointValidation:
             "sensor_xcorr_unc_us": _num(self.xcorr.uncertainty_us),
             "sensor_samples": int(self.n_samples),
             "sensor_missing": int(self.n_missing),
+            "sensor_compared": int(c.n_compared) if c else 0,
         }
 
 
@@ -120,8 +128,14 @@ def synchronise(t_recon_s: np.ndarray, y_recon: np.ndarray, record: SensorRecord
 
 
 def validate_point(lines: CentrelineBatch | None, record: SensorRecord, triggers: np.ndarray, frame: FlagFrame,
-                   beam: BeamParams, params: SyncParams, units: str = "px") -> PointValidation:
+                   beam: BeamParams, params: SyncParams, units: str = "px", *,
+                   compare_without_events: bool = True) -> PointValidation:
     """Synchronise the sensor with the camera and compare it with the reconstruction at the beam.
+
+    An update made without events carries the previous shape: right for a still flag, but during
+    lost camera data (a flapping flag always gives events) it is no reconstruction at all. With
+    ``compare_without_events`` False (the supervisor's choice for a flapping point) such updates
+    are left out of e(t) and of the cross-correlation, and counted in ``n_stale``.
 
     Args:
         lines: the point's centrelines (camera clock), or None.
@@ -131,23 +145,26 @@ def validate_point(lines: CentrelineBatch | None, record: SensorRecord, triggers
         beam: beam position and reading mapping.
         params: sync settings.
         units: tracker units (for figures).
+        compare_without_events: compare the updates made without events too.
     """
     empty = np.zeros(0)
     none = ClockSync("none", note="not attempted")
     n_missing = int(max(record.missing, np.isnan(record.value).sum()))
     if lines is None or len(lines) == 0:
         return PointValidation("no centrelines", none, none, none, none, None, empty, empty, empty, frame, units,
-                               beam.x_over_l, len(record.t_us), n_missing)
+                               beam.x_over_l, len(record.t_us), n_missing, np.zeros(0, dtype=bool))
     y_recon = beam_lateral(lines.x, lines.y, frame.root, frame.direction_deg, beam.x_over_l * frame.length, beam.side)
-    base = (lines.t_s, y_recon, lines.delta_rms, frame, units, beam.x_over_l, len(record.t_us), n_missing)
+    stale = np.zeros(len(lines), dtype=bool) if compare_without_events else (lines.n_events == 0)
+    y_used = np.where(stale, np.nan, y_recon)
+    base = (lines.t_s, y_recon, lines.delta_rms, frame, units, beam.x_over_l, len(record.t_us), n_missing, stale)
     if record.n_valid == 0:
         status = "no sensor samples" if len(record.t_us) == 0 and n_missing == 0 else "sensor samples all missing"
         return PointValidation(status, none, none, none, none, None, *base)
     y_sensor = reading_to_lateral(record.value, beam)
-    used, trigger, xcorr, coarse = synchronise(lines.t_s, y_recon, record, y_sensor, camera_pulses(triggers, params),
+    used, trigger, xcorr, coarse = synchronise(lines.t_s, y_used, record, y_sensor, camera_pulses(triggers, params),
                                                params)
     t_cam_s = used.to_camera_us(record.t_us) * 1e-6
-    comparison = compare_signals(lines.t_s, y_recon, t_cam_s, y_sensor, frame.length,
+    comparison = compare_signals(lines.t_s, y_used, t_cam_s, y_sensor, frame.length,
                                  match_means=beam.zero_reading is None)
     if comparison.n_compared == 0:
         status = "no overlap" if np.any(np.isfinite(y_recon)) else "the centrelines do not reach the beam"

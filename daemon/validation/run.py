@@ -94,12 +94,14 @@ def validate_run(run_dir: str | Path, *, out_dir: str | Path | None = None, cent
         if figure is not None:
             figures[point.point_id] = figure
     csv = write_summary_csv(points, out / "validation.csv")
-    figure = plot_sweep(points, out / "validation.png", f"run {record.start.get('run_id', '?')}: point sensor (recomputed)")
+    title = f"run {record.start.get('run_id', '?')}: point sensor (recomputed)"
+    figure = plot_sweep(points, out / "validation.png", title)
     return RunValidation(points, csv, figure, figures)
 
 
 def _validate_one(run_dir: Path, point: PointResult, out: Path, frame: FlagFrame, sensor: SensorConfig,
-                  centrelines_dir: str | Path | None, reconstruct: Any, window_s: float) -> tuple[PointResult, Path | None]:
+                  centrelines_dir: str | Path | None, reconstruct: Any, window_s: float
+                  ) -> tuple[PointResult, Path | None]:
     from flagtrack.drivers.formats.centreline import read_centrelines
 
     raw = run_dir / point.raw_file if point.raw_file else None
@@ -112,7 +114,7 @@ def _validate_one(run_dir: Path, point: PointResult, out: Path, frame: FlagFrame
     if sensor.sync.mode in ("auto", "trigger") and raw is not None and raw.exists() and len(record.trigger_t_us):
         triggers = raw_triggers(raw)
     validation = validate_point(lines if len(lines) else None, record, triggers, frame, sensor.beam, sensor.sync,
-                                str(attrs.get("units", "px")))
+                                str(attrs.get("units", "px")), compare_without_events=point.state != "flapping")
     figure = plot_point(validation, out / f"{point.point_id}.png",
                         f"{point.point_id}: {point.speed_mps:.2f} m/s, {point.state} (recomputed)", window_s)
     d_mean, d_std = validation.delta_rms_over_l

@@ -12,7 +12,8 @@ Default protocol (the simulated device speaks it; docs/sensor.md)::
 Replies are regular expressions matched against the whole line: ``reply`` needs a group ``value``
 and may have a group ``t`` (sensor clock, ``time_us_per_count`` µs per count). ``clock`` says
 which time the samples carry: ``sensor`` (the ``t`` group; a line without it is a missing sample)
-or ``host`` (stamped on arrival); ``auto`` is ``sensor`` in stream mode, ``host`` in poll mode. ``trigger_reply`` (group ``t``) reports sync pulses;
+or ``host`` (stamped on arrival); ``auto`` is ``sensor`` in stream mode, ``host`` in poll mode.
+``trigger_reply`` (group ``t``) reports sync pulses;
 ``invalid_reply`` marks a line as a missing sample; ``error_reply`` (group ``text``) a refusal.
 """
 

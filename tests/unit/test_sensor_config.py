@@ -102,3 +102,10 @@ def test_truth_is_what_the_events_were_drawn_from() -> None:
     x, y = camera.truth.positions(events["t"].astype(np.float64), np.linspace(0, 300, 301))
     distance = np.min(np.hypot(x - events["x"][:, None], y - events["y"][:, None]), axis=1)
     assert np.median(distance) < 1.0  # events lie on the true line (pixel centres, line width ~1 px)
+
+
+def test_the_sensor_section_survives_the_run_logs_snapshot() -> None:
+    rig = load_rig(REPO / "deploy" / "rig-sensor-modbus.yaml")
+    stored = {k: v for k, v in rig.snapshot().items() if k != "path"}
+    again = from_mapping(RigConfig, stored)  # what `flagtrack sweep --resume` and `flagtrack validate` read
+    assert again.sensor == rig.sensor and again.sensor.beam.zero_reading is None

@@ -107,3 +107,18 @@ def test_a_still_flag_is_compared_without_a_correlation() -> None:
     v = run.validation
     assert v.status == "ok" and v.sync.method == "trigger" and v.xcorr.method == "none"
     assert v.fields()["sensor_error_rms_over_l"] < 0.01
+
+
+def test_updates_without_events_of_a_flapping_flag_are_not_compared(flapping: Run) -> None:
+    lines = flapping.lines
+    frozen = slice(300, 500)  # 0.2 s of lost camera data: the tracker repeats its last shape
+    x, y, n_events = lines.x.copy(), lines.y.copy(), lines.n_events.copy()
+    x[frozen], y[frozen], n_events[frozen] = x[frozen.start - 1], y[frozen.start - 1], 0
+    lost = CentrelineBatch(lines.t_s, lines.s, x, y, lines.joints_x, lines.joints_y, lines.delta_rms, n_events)
+    kept = validate_point(lost, flapping.record, flapping.triggers, FRAME, BEAM, SyncParams(), "px")
+    assert kept.fields()["sensor_error_rms_over_l"] > 0.03  # the stale shape is far from the flapping flag
+    skipped = validate_point(lost, flapping.record, flapping.triggers, FRAME, BEAM, SyncParams(), "px",
+                             compare_without_events=False)
+    f = skipped.fields()
+    assert skipped.n_stale == 200 and f["sensor_error_rms_over_l"] < 0.01
+    assert f["sensor_compared"] < flapping.validation.fields()["sensor_compared"] - 150

@@ -29,7 +29,7 @@ def sensor_paths(base: Path) -> tuple[Path, Path]:
 
 
 def check_point(base: Path, run_dir: Path, collection: Collection, raw: Path, frame: FlagFrame, cfg: SensorConfig,
-                title: str = "") -> dict[str, Any]:
+                state: str, title: str = "") -> dict[str, Any]:
     """Write ``<base>_sensor.h5`` and ``<base>_sensor.png``; return the point's sensor fields.
 
     Args:
@@ -39,6 +39,8 @@ def check_point(base: Path, run_dir: Path, collection: Collection, raw: Path, fr
         raw: the point's raw event file (its trigger events synchronise the clocks).
         frame: the flag's rest frame and length (tracker units).
         cfg: the ``sensor:`` section.
+        state: the flag's state; for a flapping flag, updates made without events (lost camera
+            data) are not compared.
         title: figure title.
     """
     record_path, figure_path = sensor_paths(base)
@@ -51,7 +53,8 @@ def check_point(base: Path, run_dir: Path, collection: Collection, raw: Path, fr
         if cfg.sync.mode in ("auto", "trigger") and raw.exists() and len(record.trigger_t_us):
             triggers = raw_triggers(raw)
         lines = CentrelineBatch.concatenate(collection.batches) if collection.batches else None
-        validation = validate_point(lines, record, triggers, frame, cfg.beam, cfg.sync, collection.units)
+        validation = validate_point(lines, record, triggers, frame, cfg.beam, cfg.sync, collection.units,
+                                    compare_without_events=state != "flapping")
         fields.update(validation.fields())
         plot_point(validation, figure_path, title)
         fields["sensor_figure"] = str(figure_path.relative_to(run_dir))

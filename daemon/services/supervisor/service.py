@@ -299,7 +299,7 @@ class SupervisorService:
 
         frame = FlagFrame(self.flag.length, self.flag.root, self.flag.direction_deg)
         title = f"{point.point_id}: {point.speed_mps:.2f} m/s, {state}"
-        return check_point(base, self.run_dir, collection, raw, frame, self.sensor, title)  # type: ignore[arg-type]
+        return check_point(base, self.run_dir, collection, raw, frame, self.sensor, state, title)  # type: ignore[arg-type]
 
     # -- feedback --------------------------------------------------------------------------
 
