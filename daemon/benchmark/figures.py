@@ -72,8 +72,9 @@ def family_figure(rows: Sequence[dict[str, Any]], path: Path) -> None:
     ax[1, 0].set(xscale="log", xlabel="|I - I_ref| / I_ref (%)", ylabel="recordings",
                  title="(d) travelling-wave index error")
     ax[1, 0].legend(fontsize=8)
-    ax[1, 1].plot([0, 1], [0, 1], color="k", lw=0.8)
-    ax[1, 1].set(xlabel="I_ref", ylabel="I", title="(e) travelling-wave index", xlim=(0, 1), ylim=(0, 1))
+    top = max([1e-3] + [max(r["twi"], r["twi_ref"]) for r in rows if math.isfinite(r["twi"])]) * 1.05
+    ax[1, 1].plot([0, top], [0, top], color="k", lw=0.8)
+    ax[1, 1].set(xlabel="I_ref", ylabel="I", title="(e) travelling-wave index", xlim=(0, top), ylim=(0, top))
     ax[1, 1].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -118,6 +118,11 @@ class Task:
     height: int = 480
 
 
+def level_tag(level: float) -> str:
+    """A level as a file-name part without dots (``1.6`` -> ``1p6``: a dot would read as a suffix)."""
+    return f"{level:g}".replace(".", "p").replace("-", "m")
+
+
 def kinematics_seed(seed: int, index: int) -> int:
     """Seed of kinematics ``index`` of a benchmark run with seed ``seed``."""
     return seed * 100_000 + index
@@ -150,7 +155,7 @@ def sweep_clean_tasks(seed: int, preset: Preset, methods: tuple[str, ...], param
 
 def leak_tasks(clean: list[Task], preset: Preset, methods: tuple[str, ...]) -> list[Task]:
     """Part (b): each sweep kinematics at each leak level (same seed as its clean recording)."""
-    return [replace(task, name=f"leak_{task.kinematics:02d}_{level:g}", part="leak", level=level, leak_over_f=level,
+    return [replace(task, name=f"leak_{task.kinematics:02d}_{level_tag(level)}", part="leak", level=level, leak_over_f=level,
                     variants=paper_variants(methods)) for task in clean for level in preset.leak_levels]
 
 
@@ -162,6 +167,6 @@ def shot_tasks(task: Task, clean_events: int, duration_s: float, preset: Preset,
     for level in preset.shot_levels:
         rate = level * PAPER_NOISE_PER_LEVEL * clean_events / (duration_s * pixels)
         variants = param_variants(methods, preset) if params and level == 20.0 else paper_variants(methods)
-        out.append(replace(task, name=f"shot_{task.kinematics:02d}_{level:g}", part="shot", level=level,
+        out.append(replace(task, name=f"shot_{task.kinematics:02d}_{level_tag(level)}", part="shot", level=level,
                            shot_noise_hz=rate, variants=variants))
     return out

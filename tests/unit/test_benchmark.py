@@ -45,6 +45,15 @@ def test_shot_levels_add_the_papers_share_of_noise_events() -> None:
     assert len(tasks[0].variants) > len(tasks[1].variants) == 2  # f_snr/f = 20 also carries fig. 6's sweeps
 
 
+def test_task_names_are_unique_file_stems() -> None:
+    preset = plan.Preset(leak_levels=(0.3, 0.6, 1.2, 1.6), shot_levels=(10.0, 20.0, 35.0))
+    clean = plan.sweep_clean_tasks(0, preset, ("paper",), params=False)
+    tasks = clean + plan.leak_tasks(clean, preset, ("paper",)) + plan.family_tasks(0, preset, ("paper",))
+    tasks += plan.shot_tasks(clean[0], 1000, 1.0, preset, ("paper",), params=False)
+    stems = [Path(t.name).with_suffix(".raw").stem for t in tasks]  # how the simulator names the files
+    assert len(set(stems)) == len(tasks)
+
+
 def test_param_variants_cover_each_sweep_once() -> None:
     preset = plan.Preset(joints=(5, 10), tau_over_t=(1e-3, 5e-3))
     variants = plan.param_variants(("paper",), preset)
