@@ -122,3 +122,20 @@ def test_updates_without_events_of_a_flapping_flag_are_not_compared(flapping: Ru
     f = skipped.fields()
     assert skipped.n_stale == 200 and f["sensor_error_rms_over_l"] < 0.01
     assert f["sensor_compared"] < flapping.validation.fields()["sensor_compared"] - 150
+
+
+def test_a_host_stamped_sensor_without_pulses_is_found_from_wall_stamps_then_correlation(flapping: Run) -> None:
+    # samples stamped with the host's wall clock (µs since the epoch), no trigger wired: the wall-clock
+    # stamps of both sides (a few ms apart) centre the correlation search, which finds the offset
+    wall0_us = 1_763_000_000_000_000  # the camera clock's zero on the wall clock
+    rec = flapping.record
+    t_host = rec.t_us + wall0_us  # sensor clock = camera + 3 ms, so host = camera + wall0 + 3 ms
+    batches = t_host[::50]
+    camera_t = np.arange(300_000, 1_300_000, 4000)
+    host = SensorRecord("dist", "mm", "host", t_host, rec.value, np.zeros(0, dtype=np.int64), 0,
+                        wall_t_us=batches, wall_ns=(batches + 2_500) * 1000,  # arrive 2.5 ms late
+                        camera_t_us=camera_t, camera_wall_ns=(camera_t + wall0_us + 4_000) * 1000)
+    v = validate_point(flapping.lines, host, flapping.triggers, FRAME, BEAM, SyncParams(), "px")
+    assert v.coarse.method == "coarse" and abs(v.coarse.offset_us - (wall0_us + 3000)) < 3000
+    assert v.sync.method == "xcorr" and abs(v.sync.offset_us - (wall0_us + 3000)) < TAU_S * 1e6
+    assert v.fields()["sensor_error_rms_over_l"] < 0.01
