@@ -13,8 +13,10 @@ import importlib
 import logging
 import pkgutil
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from types import ModuleType
+from typing import Any
 
 from flagtrack.daemon import __version__, commands
 from flagtrack.daemon.errors import FlagtrackError
@@ -22,15 +24,27 @@ from flagtrack.daemon.errors import FlagtrackError
 log = logging.getLogger(__name__)
 
 
-def discover(package: ModuleType) -> list[ModuleType]:
-    """Import every command module of ``package`` (those that define ``COMMAND``), sorted by name."""
-    found = []
+@dataclass(frozen=True)
+class Command:
+    """One subcommand, for modules that define several (``COMMANDS = [Command(...), ...]``)."""
+
+    COMMAND: str
+    HELP: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+    DESCRIPTION: str = ""
+
+
+def discover(package: ModuleType) -> list[Any]:
+    """The commands of ``package``'s modules (a module with ``COMMAND``, or its ``COMMANDS``), by name."""
+    found: list[Any] = []
     for info in pkgutil.iter_modules(package.__path__):
         if info.name.startswith("_"):
             continue
         module = importlib.import_module(f"{package.__name__}.{info.name}")
         if hasattr(module, "COMMAND"):
             found.append(module)
+        found.extend(getattr(module, "COMMANDS", ()))
     return sorted(found, key=lambda m: m.COMMAND)
 
 
@@ -41,7 +55,7 @@ def add_subcommands(parser: argparse.ArgumentParser, package: ModuleType, dest: 
         sub = subparsers.add_parser(
             module.COMMAND,
             help=module.HELP,
-            description=getattr(module, "DESCRIPTION", module.HELP),
+            description=getattr(module, "DESCRIPTION", "") or module.HELP,
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )
         module.add_arguments(sub)

@@ -27,7 +27,7 @@ from flagtrack.daemon.services.supervisor.config import SupervisorConfig
 from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor, point_state
 from flagtrack.daemon.sweep.plan import Action, EndPoint, Point, Record, SetSpeed, Wait, plan_points, sweep_plan
-from flagtrack.daemon.sweep.runlog import PointResult, RunLog, completed_points, read_run, stored_sweep
+from flagtrack.daemon.sweep.runlog import PointResult, RunLog, completed_points, stored_sweep
 from flagtrack.daemon.sweep.summary import write_summary
 from flagtrack.daemon.transport import Bus
 

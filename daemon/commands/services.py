@@ -1,0 +1,42 @@
+"""``flagtrack camera|tracker|recorder|viewer|supervisor|sensor -c rig.yaml``: one service of the rig alone.
+
+Each runs in its own process and reaches the others through the config's ``bus:`` section (several
+hosts: see ``deploy/``); ``flagtrack up`` runs them together.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from flagtrack.daemon.cli import Command
+
+SERVICES = {
+    "camera": "run the camera adapter alone: publish its event packets on the bus",
+    "tracker": "run the live tracker alone: camera packets in, centrelines out",
+    "recorder": "run the recorder alone: camera packets to .raw files on command",
+    "viewer": "run the Rerun viewer bridge alone",
+    "supervisor": "run the supervisor alone: tunnel, flag state from event rates, sweeps or feedback",
+    "sensor": "run the point sensor alone: publish its samples on the bus (docs/sensor.md)",
+}
+
+
+def add_service_arguments(parser: argparse.ArgumentParser) -> None:
+    """``-c rig.yaml`` and the shutdown timeout."""
+    parser.add_argument("-c", "--config", type=Path, required=True, help="rig config (YAML)")
+    parser.add_argument("--shutdown-timeout", type=float, default=10.0, help="seconds to wait for the service to stop")
+
+
+def run_one_service(name: str, args: argparse.Namespace) -> int:
+    """Run service ``name`` of the rig config alone until it is stopped (or its work is done)."""
+    from flagtrack.daemon.commands.up import run_rig
+    from flagtrack.daemon.rig import load_rig
+
+    return run_rig(load_rig(args.config), [name], shutdown_timeout_s=args.shutdown_timeout).code
+
+
+def _command(name: str, help_text: str) -> Command:
+    return Command(name, help_text, add_service_arguments, lambda args: run_one_service(name, args))
+
+
+COMMANDS = [_command(name, help_text) for name, help_text in SERVICES.items()]
