@@ -101,6 +101,12 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
     finishers = []
     if "supervisor" in names and rig.supervisor.mode != "monitor" and rig.supervisor.exit_when_done:
         finishers.append("supervisor")
+    if "supervisor" in names and rig.tunnel is not None:  # let a stop ramp the tunnel to zero in full
+        safety = rig.tunnel.safety
+        ramp_s = safety.max_speed_mps / safety.max_ramp_mps2 + safety.settle_timeout_s + 5.0
+        if ramp_s > shutdown_timeout_s:
+            say(f"shutdown may take up to {ramp_s:.0f} s (the tunnel ramps down first)")
+            shutdown_timeout_s = ramp_s
     with Bus(rig.bus_config) as bus:
         services = build_services(rig, bus, names, exit_at_end_of_stream=exit_at_end_of_stream, resume_dir=resume_dir)
         if centrelines is not None:
