@@ -44,6 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jobs", type=int, default=0, help="processes (0: all cores)")
     parser.add_argument("--keep-recordings", action="store_true", help="keep the simulated files in OUTPUT/recordings")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--report-only", action="store_true",
+                        help="rewrite the figures and report.md of OUTPUT from its CSV tables and run.json")
 
 
 def settings_from_args(args: argparse.Namespace) -> object:
@@ -88,6 +90,8 @@ def run(args: argparse.Namespace) -> int:
     from flagtrack.daemon.benchmark.runner import run as run_benchmark
 
     settings = settings_from_args(args)
+    if args.report_only:
+        return _report_only(args.output, settings)
     command = "flagtrack bench accuracy " + " ".join(sys.argv[3:]) if sys.argv[1:3] == ["bench", "accuracy"] else \
         "flagtrack bench accuracy"
     started = time.perf_counter()
@@ -104,4 +108,23 @@ def run(args: argparse.Namespace) -> int:
               f"max eps_RMS/L {100 * entry['max_eps_rms_over_l_min']:.2f}-{100 * entry['max_eps_rms_over_l_max']:.2f} %")
     print(f"{result.recordings} recordings, {result.events / 1e6:.0f} M events in {time.perf_counter() - started:.0f} s "
           f"-> {args.output / 'report.md'}")
+    return 0
+
+
+def _report_only(out: Path, settings: object) -> int:
+    """Rewrite the report of an earlier run (same command line recorded)."""
+    from dataclasses import replace
+
+    from flagtrack.daemon.benchmark.report import rows_from_folder, write_results
+    from flagtrack.daemon.benchmark.tables import method_rank
+    from flagtrack.daemon.errors import ConfigError
+
+    if not (out / "run.json").is_file():
+        raise ConfigError(f"no run.json in {out}: nothing to rewrite", key="output")
+    result, run = rows_from_folder(out)
+    methods = tuple(sorted(dict.fromkeys(r["method"] for r in result.rows), key=method_rank)) or \
+        settings.methods  # type: ignore[attr-defined]
+    jobs = run.get("settings", {}).get("jobs", 0)
+    write_results(out, result, replace(settings, methods=methods, jobs=jobs), run["command"])  # type: ignore[type-var]
+    print(f"rewrote {out / 'report.md'} from {len(result.rows)} rows")
     return 0

@@ -134,6 +134,23 @@ def targets_section(leak: Sequence[dict[str, Any]], shot: Sequence[dict[str, Any
             + _table(header, rows) + "\n")
 
 
+def rows_from_folder(out: Path) -> tuple[RunResult, dict[str, Any]]:
+    """The rows and run figures of a results folder (its CSV tables and run.json), to rewrite its report."""
+    rows: dict[tuple, dict[str, Any]] = {}
+    for name in ("family", "leak", "shot_noise", "params_joints", "params_tau"):
+        path = out / f"{name}.csv"
+        if path.is_file():
+            for row in tables.read_csv(path):
+                row.pop("condition", None)
+                row.pop("n_over_n0", None)
+                rows[(row["name"], row["method"], row["joints"], row["tau_over_t"])] = row
+    run = json.loads((out / "run.json").read_text())
+    result = RunResult(rows=list(rows.values()), recordings=run["recordings"], events=run["events"],
+                       sim_wall_s=run["sim_wall_s"], wall_s=run["wall_s"])
+    result.rows.sort(key=lambda r: (r["part"], r["name"], r["method"], r["joints"], r["tau_over_t"]))
+    return result, run
+
+
 def write_results(out: Path, result: RunResult, settings: RunSettings, command: str) -> dict[str, Any]:
     """Write every table, figure and the report into ``out``; return the headline figures."""
     out.mkdir(parents=True, exist_ok=True)

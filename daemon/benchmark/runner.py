@@ -97,7 +97,8 @@ def run(settings: RunSettings) -> RunResult:
     n_shot = len(settings.preset.shot_levels) if "shot" in settings.parts else int("params" in settings.parts)
     expected = len(tasks) + (settings.preset.n_sweep * n_shot if any(t.part == "clean" for t in tasks) else 0)
     result = RunResult()
-    bar = tqdm(total=expected, desc="bench accuracy", unit="rec", file=sys.stderr, disable=not settings.progress)
+    bar = tqdm(total=expected, desc="bench accuracy", unit="rec", file=sys.stderr, miniters=1,
+               disable=not settings.progress)
     pool: Executor = _SerialExecutor() if jobs == 1 else ProcessPoolExecutor(max_workers=jobs)
     with pool, bar:
         pending = {pool.submit(run_task, t, str(settings.work_dir), settings.keep_recordings) for t in tasks}

@@ -43,6 +43,11 @@ def test_tiny_run_writes_tables_figures_and_report(tmp_path: Path, capsys: pytes
                     "Beyond the paper"):
         assert heading in report
     assert "![family](fig4_family.png)" in report and "0.36-1.00" in report  # the paper's figures beside ours
+    # the report and figures can be rewritten from the tables alone
+    for name in ("report.md", "fig4_family.png", "fig5_defects.png"):
+        (out / name).unlink()
+    assert main(["bench", "accuracy", "-o", str(out), "--report-only"]) == 0
+    assert (out / "report.md").read_text() == report and (out / "fig5_defects.png").is_file()
 
 
 def test_unknown_parts_are_refused(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
