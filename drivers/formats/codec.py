@@ -58,7 +58,7 @@ def event_views(events: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return tt, xyp
 
 
-_SMALL_BUFFER = 1 << 16  # events: a piece of a buffer this small is kept as it is (no copy to trim it)
+_SMALL_BUFFER = 1 << 18  # events (3.4 MB): a piece of a buffer this small is kept as it is (no copy to trim it)
 
 
 class Decoder:
