@@ -144,6 +144,46 @@ def _filter_mask(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, 
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _filter_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, stride: int, base_us: int,
+                 window_us: int, state: np.ndarray, block_us: int, k_min: int, k_max: int, noise_pass: float,
+                 comb: np.ndarray, out_t: np.ndarray, out_x: np.ndarray, out_y: np.ndarray, start: int) -> int:
+    """:func:`_filter_mask` and the copy of the kept events in one pass (the hot path): append them from
+    ``start``, return the index after the last. The adaptive state lives in locals during the loop."""
+    window = np.int32(window_us)
+    j = start
+    if k_max <= k_min:  # the classic filter: no block statistics
+        for i in range(len(t)):
+            ti = np.int64(t[i])
+            n = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
+            out_t[j] = ti  # written always, kept by advancing j: no branch
+            out_x[j] = x[i]
+            out_y[j] = y[i]
+            j += 1 if n >= k_min else 0
+        return j
+    block_now, k, isolated = state[_BLOCK], state[_K], state[_ISOLATED]
+    max_x, max_y = state[_MAX_X], state[_MAX_Y]
+    for i in range(len(t)):
+        ti, xi, yi = np.int64(t[i]), np.int64(x[i]), np.int64(y[i])
+        max_x, max_y = max(max_x, xi), max(max_y, yi)
+        block = ti // block_us
+        if block != block_now:
+            if block == block_now + 1:
+                k = _next_k(isolated, float((max_x + 1) * (max_y + 1)), block_us, window_us, k_min, k_max,
+                            noise_pass, comb)
+            else:  # first block, or blocks without events: no evidence of noise
+                k = k_min
+            block_now, isolated = block, 0
+        n = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
+        isolated += 1 if n == 0 else 0
+        out_t[j] = ti
+        out_x[j] = x[i]
+        out_y[j] = y[i]
+        j += 1 if n >= k else 0
+    state[_BLOCK], state[_K], state[_ISOLATED], state[_MAX_X], state[_MAX_Y] = block_now, k, isolated, max_x, max_y
+    return j
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def scan_chunk(t: np.ndarray, x: np.ndarray, y: np.ndarray, latest: int) -> tuple[bool, int, int, int]:
     """(times never decrease from ``latest`` on, latest time, largest x, largest y) of a chunk."""
     ordered = True
@@ -155,19 +195,6 @@ def scan_chunk(t: np.ndarray, x: np.ndarray, y: np.ndarray, latest: int) -> tupl
         max_x = max(max_x, np.int64(x[i]))
         max_y = max(max_y, np.int64(y[i]))
     return ordered, top, max_x, max_y
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _compact(t: np.ndarray, x: np.ndarray, y: np.ndarray, keep: np.ndarray, out_t: np.ndarray, out_x: np.ndarray,
-             out_y: np.ndarray, start: int) -> int:
-    """Append the kept events as int64 times and float coordinates; return the index after the last."""
-    j = start
-    for i in range(len(t)):
-        out_t[j] = t[i]  # written always, kept by advancing j: no branch
-        out_x[j] = x[i]
-        out_y[j] = y[i]
-        j += 1 if keep[i] else 0
-    return j
 
 
 class BackgroundActivityFilter:
@@ -247,7 +274,9 @@ class BackgroundActivityFilter:
         t, x, y = events["t"], events["x"], events["y"]
         if self.params is None:
             return _copy_into(t, x, y, out_t, out_x, out_y, start), ordered, latest
-        end = _compact(t, x, y, self._mask(events), out_t, out_x, out_y, start)
+        p = self.params
+        end = _filter_into(t, x, y, self._last, self._width + 2, self._base_us, p.window_us, self._state, p.block_us,
+                           p.min_neighbours, p.max_neighbours, p.noise_pass, self._comb, out_t, out_x, out_y, start)
         return end, ordered, latest
 
     def keep_mask(self, events: np.ndarray) -> np.ndarray:
