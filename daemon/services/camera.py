@@ -12,6 +12,7 @@ import threading
 import time
 from dataclasses import dataclass
 
+from flagtrack.daemon.core.events import make_events
 from flagtrack.daemon.schema import CameraStatus, EventPacket, EventRate
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.camera.base import Camera, CameraInfo, EndOfStream
@@ -78,7 +79,7 @@ class CameraService:
 
     def run(self, stop: threading.Event) -> None:
         keys = self.bus.keys
-        events_pub = self.bus.publisher(keys.camera_events(self.cfg.id), block=True)
+        events_pub = self.bus.publisher(keys.camera_events(self.cfg.id), block=True, express=True)
         status_pub = self.bus.publisher(keys.camera_status(self.cfg.id))
         rate_pub = self.bus.publisher(keys.event_rate(self.cfg.id))
         self.bus.declare_alive(self.name)
@@ -87,6 +88,7 @@ class CameraService:
         status_pub.put(self._status(info, "streaming"))
         packetizer = Packetizer(info.encoding, info.width, info.height,
                                 PacketParams(self.cfg.packet_us, self.cfg.max_packet_events))
+        Packetizer(info.encoding, 1, 1).push(make_events([0, 1], [0, 0], [0, 0], [1, 0]), t_until_us=5000)  # load the encoder
         rates = RateCounter(int(self.cfg.rate_interval_s * 1e6))
         state, message = "stopped", ""
         try:

@@ -76,10 +76,27 @@ class TrackerService:
         self.packets_sub = bus.subscribe(bus.keys.camera_events(cfg.camera_id), EventPacket,
                                          capacity=cfg.queue_packets)
 
+    def warm_up(self) -> None:
+        """Run the decoder and the core once on a tiny synthetic stream, so that loading the compiled
+        kernels (about a second) happens before the first packet, not while packets queue up."""
+        from flagtrack.daemon.core.events import make_events
+        from flagtrack.drivers.camera.packets import Packetizer
+
+        n = 400
+        t = np.arange(n, dtype=np.int64) * 10
+        events = make_events(t, 10 + (np.arange(n) % 20), 10 + (np.arange(n) // 20), np.arange(n) % 2)
+        packetizer = Packetizer("evt3", 64, 64)
+        for packet in packetizer.push(events) + packetizer.flush():
+            decoded, _ = decode_packet("evt3", packet.data, packet.t_offset_us)
+            tracker = self.tracker_factory()
+            tracker.feed(decoded)
+            tracker.finish()
+
     def run(self, stop: threading.Event) -> None:
+        self.warm_up()
         keys = self.bus.keys
         packets = self.packets_sub
-        self._lines_pub = self.bus.publisher(keys.centrelines(), block=True)
+        self._lines_pub = self.bus.publisher(keys.centrelines(), block=True, express=True)
         status_pub = self.bus.publisher(keys.tracker_status())
         self.bus.declare_alive(self.name)
         last_status = time.monotonic()
@@ -110,42 +127,60 @@ class TrackerService:
     def handle(self, packets: list[EventPacket]) -> float:
         """Decode and track packets (in order); return the lag (s) from the last one's arrival at the camera.
 
-        Packets that queued up while the tracker was busy are fed together (the core's results do
-        not depend on how the stream is cut), which keeps the per-packet cost from limiting the rate.
+        Packets that queued up while the tracker was busy are decoded and fed together: the packets
+        of a stream concatenate into one valid stream, and the core's results do not depend on how
+        the stream is cut, so the per-packet cost does not limit the rate.
         """
-        chunks: list = []
+        run: list[EventPacket] = []
         for packet in packets:
-            if self._next_seq is not None and packet.seq != self._next_seq and packet.seq > self._next_seq:
+            if self._next_seq is not None and packet.seq > self._next_seq:
                 gap = packet.seq - self._next_seq
                 self.missing_packets += gap
                 log.warning("tracker: %d packet(s) missing before seq %d", gap, packet.seq)
+                self._track_run(run)  # a gap breaks the stream: what came before is decoded apart
+                run = []
             self._next_seq = packet.seq + 1
             self.packets += 1
-            try:
-                events, _ = decode_packet(packet.encoding, packet.data, packet.t_offset_us,
-                                          source=f"packet {packet.seq} of camera {packet.camera_id}")
-            except FormatError as exc:
-                self.malformed_packets += 1
-                log.warning("tracker: %s", exc)
-                continue
-            self.events += len(events)
-            chunks.append(events)
+            if run and packet.encoding != run[0].encoding:
+                self._track_run(run)
+                run = []
+            run.append(packet)
             if packet.end_of_stream:
-                self._track(chunks, packet.sent_ns, end_of_stream=True)
-                chunks = []
-        if chunks:
-            self._track(chunks, packets[-1].sent_ns, end_of_stream=False)
+                self._track_run(run, end_of_stream=True)
+                run = []
+        self._track_run(run)
         return max(0.0, time.time_ns() - packets[-1].sent_ns) * 1e-9
 
+    def _track_run(self, run: list[EventPacket], end_of_stream: bool = False) -> None:
+        """Decode consecutive packets as one stream (one by one if that fails) and track them."""
+        if not run:
+            return
+        first = run[0]
+        try:
+            events, _ = decode_packet(first.encoding, b"".join(p.data for p in run), first.t_offset_us,
+                                      source=f"packets {first.seq}-{run[-1].seq} of camera {first.camera_id}")
+            chunks = [events]
+        except FormatError:
+            chunks = []
+            for packet in run:
+                try:
+                    chunks.append(decode_packet(packet.encoding, packet.data, packet.t_offset_us,
+                                                source=f"packet {packet.seq} of camera {packet.camera_id}")[0])
+                except FormatError as exc:
+                    self.malformed_packets += 1
+                    log.warning("tracker: %s", exc)
+        self.events += sum(len(c) for c in chunks)
+        self._track(chunks, run[-1].sent_ns, end_of_stream)
+
     def _track(self, chunks: list, sent_ns: int, end_of_stream: bool) -> None:
-        events = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
-        batch = self.tracker.feed(events)
+        batches = [self.tracker.feed(events) for events in chunks]
         if end_of_stream:
-            batch = CentrelineBatch.concatenate([batch, self.tracker.finish()])
+            batches.append(self.tracker.finish())
             self.streams_ended += 1
             self.tracker = self.tracker_factory()
             self._next_seq = None
-        self._add(batch, sent_ns)
+        if batches:
+            self._add(batches[0] if len(batches) == 1 else CentrelineBatch.concatenate(batches), sent_ns)
         if end_of_stream:
             self._publish_if_due(force=True, final=True)
 

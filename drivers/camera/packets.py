@@ -188,7 +188,7 @@ def decode_packet(encoding: str, data: bytes, t_offset_us: int, *, source: str =
     if encoding not in LOOP_US:
         raise FormatError(f"unknown packet encoding {encoding!r}", path=source)
     decoder = make_decoder(encoding, t_offset_us=t_offset_us, strict=True, source=source)
-    events, triggers = decoder.decode(data)
+    events, triggers = decoder.decode(data, trim=False)  # packets are decoded, used and dropped
     decoder.finish()
     return events, triggers
 

@@ -114,17 +114,25 @@ class Decoder:
         """File offset of the first byte not yet decoded (start of a pending partial word)."""
         return self._fed - len(self._tail)
 
-    def decode(self, data: bytes | bytearray | memoryview) -> tuple[np.ndarray, np.ndarray]:
-        """Decode the next bytes of the stream; return (events, triggers) of every whole word."""
-        pieces = list(self.pieces(data))
+    def decode(self, data: bytes | bytearray | memoryview, *, trim: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Decode the next bytes of the stream; return (events, triggers) of every whole word.
+
+        ``trim=False`` returns views of the decoding buffer, which may be several times larger than
+        the events (worst case: vector words): faster for results that are used and dropped.
+        """
+        pieces = list(self.pieces(data, trim=trim))
         if not pieces:
             return empty_events(), empty_triggers()
         if len(pieces) == 1:
             return pieces[0][0], pieces[0][1]
         return np.concatenate([p[0] for p in pieces]), np.concatenate([p[1] for p in pieces])
 
-    def pieces(self, data: bytes | bytearray | memoryview) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
+    def pieces(self, data: bytes | bytearray | memoryview, *, trim: bool = True
+               ) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
         """Decode the next bytes in bounded pieces: yield (events, triggers, file offset of the piece).
+
+        With ``trim`` a piece that fills less than half its buffer is copied out of it (bounded memory
+        for pieces that are kept).
 
         A fault in strict mode raises after the pieces before it were yielded.
         """
@@ -144,7 +152,8 @@ class Decoder:
             events = np.empty(capacity + 1, dtype=EVENT_DTYPE)
             i_next, n, nt, status = run(i, *event_views(events))
             if n or nt:
-                piece = events[:n] if 2 * n >= capacity or capacity <= _SMALL_BUFFER else events[:n].copy()
+                keep_view = not trim or 2 * n >= capacity or capacity <= _SMALL_BUFFER
+                piece = events[:n] if keep_view else events[:n].copy()
                 yield piece, self._triggers[:nt].copy(), start_offset + i * self._word
             if status in (tb.BAD_WORD, tb.OUT_OF_SENSOR):
                 self._fault(status, buf, i_next, start_offset + i_next * self._word)
