@@ -20,6 +20,8 @@ from typing import Protocol
 
 log = logging.getLogger(__name__)
 
+_SWITCH_INTERVAL_S = 0.0005
+
 
 class Service(Protocol):
     """A long-running part of the daemon."""
@@ -147,6 +149,9 @@ def run_services(
     on_force: Callable[[], None] | None = None,
 ) -> RunReport:
     """Run services until a signal, a failure, or a finishing service; then shut down."""
+    # Zenoh delivers on its own threads, which need the GIL to queue a message; with Python's default
+    # 5 ms switch interval a busy service thread would hold messages back for up to 5 ms.
+    sys.setswitchinterval(min(sys.getswitchinterval(), _SWITCH_INTERVAL_S))
     group = ServiceGroup(services, stop_when_any_finishes)
     if handle_signals and threading.current_thread() is threading.main_thread():
         install_signal_handlers(group, on_force)

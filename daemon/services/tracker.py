@@ -35,7 +35,8 @@ class TrackerServiceConfig:
     Attributes:
         camera_id: the camera tracked.
         batch_updates: updates per centreline message (at most).
-        max_batch_delay_s: publish a smaller batch after this long.
+        max_batch_delay_s: publish a smaller batch after this long (when no packet is waiting, the
+            updates are published at once).
         status_interval_s: period of the status message.
         queue_packets: packets held while the tracker catches up (beyond: counted as dropped).
         exit_at_end_of_stream: stop after the camera's end of stream (a replayed file).
@@ -113,7 +114,8 @@ class TrackerService:
                     lag_s = self.handle(batch)
                     if batch[-1].end_of_stream and self.cfg.exit_at_end_of_stream:
                         break
-                self._publish_if_due(force=False)
+                # nothing more queued: publish now (latency); under load, batches fill up instead
+                self._publish_if_due(force=len(packets.channel) == 0)
                 now = time.monotonic()
                 if now - last_status >= self.cfg.status_interval_s:
                     self.malformed_packets = packets.malformed

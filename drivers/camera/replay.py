@@ -17,6 +17,8 @@ from flagtrack.drivers.formats import open_events
 
 log = logging.getLogger(__name__)
 
+_PACED_CHUNK_BYTES = 256 << 10
+
 
 @dataclass(frozen=True)
 class ReplayConfig:
@@ -139,7 +141,8 @@ class ReplayCamera:
             return
         slice_us = self.cfg.slice_us
         held, held_tr = empty_events(), empty_triggers()
-        with open_events(path) as reader:
+        # small reads when paced: decoding a big chunk would hold back (and then burst) many slices
+        with open_events(path, chunk_bytes=_PACED_CHUNK_BYTES) as reader:
             for chunk in reader:
                 events = np.concatenate([held, chunk.events]) if len(held) else chunk.events
                 triggers = np.concatenate([held_tr, chunk.triggers])
