@@ -207,8 +207,9 @@ class RecorderService:
                     break
                 if self.current is None or not self.current.want_centrelines:
                     lines.channel.drain()  # not recording them: no need to decode
-                while (msg := lines.recv(timeout_s=0)) is not None:
-                    self.current.write_centrelines(msg)  # type: ignore[union-attr]
+                else:
+                    while (msg := lines.recv(timeout_s=0)) is not None:
+                        self.current.write_centrelines(msg)
                 self.lost_packets = packets.channel.dropped
                 if self.current is not None:
                     self.current.sync(self.cfg)
