@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
+from numba import njit
 from scipy.optimize import brentq
 
 _N_FINE = 256  # Simpson intervals along the flag; position error ~1e-9 L
@@ -77,26 +78,13 @@ class FlagKinematics:
         ``n_fine`` Simpson intervals are integrated; positions in between use cubic Hermite
         interpolation with the exact tangent (error ~ (L / n_fine)^4 curvature^3).
         """
-        s = np.asarray(s, dtype=np.float64)
-        phi = np.atleast_1d(np.asarray(phase_rad, dtype=np.float64))
-        nodes = np.linspace(0.0, self.length, n_fine + 1)
-        h = nodes[1] - nodes[0]
-        mids = nodes[:-1] + 0.5 * h
-        theta_n = self.angles_at_phase(phi, nodes, amp_scale)
-        theta_m = self.angles_at_phase(phi, mids, amp_scale)
-        cos_n, sin_n = np.cos(theta_n), np.sin(theta_n)
-        # Simpson per interval for node positions, then cubic Hermite with the exact tangent.
-        dx = h / 6.0 * (cos_n[:, :-1] + 4.0 * np.cos(theta_m) + cos_n[:, 1:])
-        dy = h / 6.0 * (sin_n[:, :-1] + 4.0 * np.sin(theta_m) + sin_n[:, 1:])
-        zero = np.zeros((len(phi), 1))
-        xn = np.concatenate([zero, np.cumsum(dx, axis=1)], axis=1)
-        yn = np.concatenate([zero, np.cumsum(dy, axis=1)], axis=1)
-        i0 = np.clip(np.floor(s / h).astype(np.int64), 0, n_fine - 1)
-        u = np.clip(s / h - i0, 0.0, 1.0)
-        h00, h10 = 2 * u**3 - 3 * u**2 + 1, (u**3 - 2 * u**2 + u) * h
-        h01, h11 = -2 * u**3 + 3 * u**2, (u**3 - u**2) * h
-        x = h00 * xn[:, i0] + h10 * cos_n[:, i0] + h01 * xn[:, i0 + 1] + h11 * cos_n[:, i0 + 1]
-        y = h00 * yn[:, i0] + h10 * sin_n[:, i0] + h01 * yn[:, i0 + 1] + h11 * sin_n[:, i0 + 1]
+        s = np.ascontiguousarray(s, dtype=np.float64)
+        phi = np.ascontiguousarray(np.atleast_1d(np.asarray(phase_rad, dtype=np.float64)))
+        x = np.empty((len(phi), len(s)))
+        y = np.empty((len(phi), len(s)))
+        _positions_kernel(phi, s, n_fine, self.length, math.radians(self.direction_deg), amp_scale * self.amp_rad,
+                          2.0 * math.pi / (self.wavelength_over_l * self.length), self.w_travel, self.w_standing,
+                          self.envelope_root, self.envelope_power, x, y)
         return self.root[0] + x, self.root[1] + y
 
     def lateral(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -215,3 +203,41 @@ def sample_kinematics(
         if solved is not None:
             return solved
     raise ValueError(f"seed {seed}: no kinematics of the family reached the drawn amplitude in 100 draws")
+
+
+@njit(cache=True, nogil=True)
+def _positions_kernel(phi, s, n_fine, length, direction, amp, k, w_travel, w_standing, env_root, env_power,  # noqa: ANN001, ANN202
+                      out_x, out_y):
+    """x, y (relative to the root) of :meth:`FlagKinematics.positions_at_phase`, one phase per row.
+
+    The tangent angle at ``2 n_fine + 1`` points (nodes and mid-points), Simpson per interval for
+    the node positions, cubic Hermite with the exact tangent in between.
+    """
+    h = length / n_fine
+    n_pts = 2 * n_fine + 1  # node i at 2 i, mid-point of interval i at 2 i + 1
+    env_sin, env_cos = np.empty(n_pts), np.empty(n_pts)  # phase-independent parts of the wave
+    for m in range(n_pts):
+        sm = 0.5 * h * m
+        env = env_root + (1.0 - env_root) * (sm / length) ** env_power
+        env_sin[m], env_cos[m] = env * np.sin(k * sm), env * np.cos(k * sm)
+    cos_t, sin_t = np.empty(n_pts), np.empty(n_pts)
+    xn, yn = np.empty(n_fine + 1), np.empty(n_fine + 1)
+    for r in range(len(phi)):
+        cos_phi, sin_phi = np.cos(phi[r]), np.sin(phi[r])
+        for m in range(n_pts):
+            # sin(ks - phi) = sin ks cos phi - cos ks sin phi
+            wave = w_travel * (env_sin[m] * cos_phi - env_cos[m] * sin_phi) + w_standing * env_sin[m] * cos_phi
+            theta = direction + amp * wave
+            cos_t[m], sin_t[m] = np.cos(theta), np.sin(theta)
+        xn[0] = yn[0] = 0.0
+        for i in range(n_fine):
+            xn[i + 1] = xn[i] + h / 6.0 * (cos_t[2 * i] + 4.0 * cos_t[2 * i + 1] + cos_t[2 * i + 2])
+            yn[i + 1] = yn[i] + h / 6.0 * (sin_t[2 * i] + 4.0 * sin_t[2 * i + 1] + sin_t[2 * i + 2])
+        for j in range(len(s)):
+            i0 = min(max(int(np.floor(s[j] / h)), 0), n_fine - 1)
+            u = min(max(s[j] / h - i0, 0.0), 1.0)
+            h00, h10 = 2 * u**3 - 3 * u**2 + 1, (u**3 - 2 * u**2 + u) * h
+            h01, h11 = -2 * u**3 + 3 * u**2, (u**3 - u**2) * h
+            a, b = 2 * i0, 2 * i0 + 2
+            out_x[r, j] = h00 * xn[i0] + h10 * cos_t[a] + h01 * xn[i0 + 1] + h11 * cos_t[b]
+            out_y[r, j] = h00 * yn[i0] + h10 * sin_t[a] + h01 * yn[i0 + 1] + h11 * sin_t[b]

@@ -123,11 +123,7 @@ def _chunk_events(x: np.ndarray, y: np.ndarray, edges_us: np.ndarray, ds: float,
                   params: QuickLineParams, rng: np.random.Generator) -> np.ndarray:
     """Line and noise events of every slice between consecutive rows of x, y (positions at ``edges_us``)."""
     x0, y0 = x[:-1], y[:-1]
-    tx, ty = np.gradient(x0, axis=1), np.gradient(y0, axis=1)
-    norm = np.hypot(tx, ty) + 1e-12
-    tx, ty = tx / norm, ty / norm  # unit tangent; the normal is (-ty, tx)
-    dx, dy = x[1:] - x0, y[1:] - y0
-    normal_motion = dx * -ty + dy * tx
+    tx, ty, dx, dy, normal_motion = _slice_geometry(np.ascontiguousarray(x), np.ascontiguousarray(y))
     counts = rng.poisson(np.abs(normal_motion) * ds * params.events_per_px2 * (1.0 - params.drop_fraction))
     noise = rng.poisson(params.noise_rate_hz * np.diff(edges_us) * 1e-6) if params.noise_rate_hz > 0 \
         else np.zeros(len(edges_us) - 1, dtype=np.int64)
@@ -141,7 +137,25 @@ def _chunk_events(x: np.ndarray, y: np.ndarray, edges_us: np.ndarray, ds: float,
     return events[:n]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
+def _slice_geometry(x, y):  # noqa: ANN001, ANN202
+    """Unit tangent (tx, ty) at the slice starts (rows of x, y but the last; np.gradient along s),
+    displacement (dx, dy) to the next row, and its component along the normal (-ty, tx)."""
+    n_rows, n_s = x.shape[0] - 1, x.shape[1]
+    tx, ty = np.empty((n_rows, n_s)), np.empty((n_rows, n_s))
+    dx, dy, normal_motion = np.empty((n_rows, n_s)), np.empty((n_rows, n_s)), np.empty((n_rows, n_s))
+    for i in range(n_rows):
+        for j in range(n_s):
+            lo, hi = max(j - 1, 0), min(j + 1, n_s - 1)
+            gx, gy = (x[i, hi] - x[i, lo]) / (hi - lo), (y[i, hi] - y[i, lo]) / (hi - lo)
+            norm = np.hypot(gx, gy) + 1e-12
+            tx[i, j], ty[i, j] = gx / norm, gy / norm
+            dx[i, j], dy[i, j] = x[i + 1, j] - x[i, j], y[i + 1, j] - y[i, j]
+            normal_motion[i, j] = dx[i, j] * -ty[i, j] + dy[i, j] * tx[i, j]
+    return tx, ty, dx, dy, normal_motion
+
+
+@njit(cache=True, nogil=True)
 def _fill_events(x0, y0, dx, dy, tx, ty, normal_motion, counts, noise, edges_us, ds, width, height,  # noqa: ANN001, ANN202
                  uniforms, spread, noise_uniforms, out_t, out_x, out_y, out_p):
     """Fill the events slice by slice, each slice sorted by time; return how many are on the sensor.
