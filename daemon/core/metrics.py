@@ -193,12 +193,14 @@ def tip_amplitude_over_l(tip_lateral: np.ndarray, length: float, robust: bool = 
     return float((values.max() - values.min()) / 2.0 / length)
 
 
-def flapping_frequency_hz(t_s: np.ndarray, signal: np.ndarray, pad: int = 8) -> float:
+def flapping_frequency_hz(t_s: np.ndarray, signal: np.ndarray, pad: int = 8, gap_factor: float = 5.0) -> float:
     """Dominant frequency of ``signal`` (e.g. tip lateral displacement), Hz, with sub-bin refinement.
 
     The signal is resampled on a uniform grid (median step), its mean removed, Hann-windowed and
     zero-padded ``pad`` times; the spectral peak is refined by a parabola through the log magnitudes
-    of the three bins around it.
+    of the three bins around it. Gaps (steps over ``gap_factor`` median steps, e.g. dropped packets)
+    are set to zero rather than bridged: the peak stays where the flapping is, since the flag
+    keeps its phase across a gap.
     """
     t_s, signal = np.asarray(t_s, dtype=np.float64), np.asarray(signal, dtype=np.float64)
     ok = np.isfinite(signal)
@@ -206,9 +208,14 @@ def flapping_frequency_hz(t_s: np.ndarray, signal: np.ndarray, pad: int = 8) -> 
     if len(t_s) < 8:
         return float("nan")
     dt = float(np.median(np.diff(t_s)))
+    if not dt > 0:
+        return float("nan")
     grid = np.arange(t_s[0], t_s[-1] + 0.5 * dt, dt)
-    uniform = np.interp(grid, t_s, signal)
-    uniform = (uniform - uniform.mean()) * np.hanning(len(uniform))
+    right = np.clip(np.searchsorted(t_s, grid), 1, len(t_s) - 1)
+    in_gap = t_s[right] - t_s[right - 1] > gap_factor * dt
+    uniform = np.interp(grid, t_s, signal) - signal.mean()
+    uniform[in_gap] = 0.0
+    uniform *= np.hanning(len(uniform))
     n_fft = pad * len(uniform)
     mag = np.abs(np.fft.rfft(uniform, n_fft))
     k = int(np.argmax(mag[1:]) + 1)

@@ -120,6 +120,15 @@ def test_frequency_with_sub_bin_refinement_and_amplitude() -> None:
     assert tip_amplitude_over_l(signal * 300, 300.0, robust=True) == pytest.approx(0.2, rel=0.03)
 
 
+def test_frequency_across_gaps_of_dropped_data() -> None:
+    """A 1.5 s record with three 0.3-0.5 s holes (a twin that skipped ahead, packets dropped): no
+    stretch holds even five periods, yet the peak stays at the flapping frequency."""
+    t = np.arange(0, 1.5, 5e-4)
+    kept = ~(((t > 0.2) & (t < 0.55)) | ((t > 0.62) & (t < 0.95)) | ((t > 1.0) & (t < 1.45)))
+    t, signal = t[kept], 40 * np.sin(2 * np.pi * 12.7 * t[kept] + 1.0) + 25.0  # an offset too
+    assert flapping_frequency_hz(t, signal) == pytest.approx(12.7, abs=0.3)
+
+
 def test_lateral_displacement_and_rest_frame() -> None:
     assert lateral_displacement(np.array([1.0]), np.array([5.0]), (0.0, 0.0), 0.0)[0] == pytest.approx(5.0)
     assert lateral_displacement(np.array([3.0]), np.array([0.0]), (1.0, 0.0), 90.0)[0] == pytest.approx(-2.0)

@@ -49,9 +49,9 @@ def point_metrics(batches: list[CentrelineBatch], length: float, root: tuple[flo
     lateral = lateral_displacement(batch.x, batch.y, root, direction_deg)
     tip = lateral[:, -1]
     amplitude = tip_amplitude_over_l(tip, length)
-    run = _longest_run(batch.t_s)  # spectra and modes need evenly sampled time: no gaps
+    frequency = flapping_frequency_hz(batch.t_s, tip)  # gaps (dropped packets) are allowed for
+    run = _longest_run(batch.t_s)  # modes need evenly sampled time: no gaps
     t_run, lateral_run = batch.t_s[run], lateral[run]
-    frequency = flapping_frequency_hz(t_run, lateral_run[:, -1])
     spread = _amplitude_spread(batch.t_s, tip, length, frequency, cycles_window)
     twi = math.nan
     if len(t_run) >= 16 and np.all(np.isfinite(lateral_run)):
