@@ -61,6 +61,7 @@ def twin_point(speed_mps: float, *, tau_s: float = 0.001, offset_ms: float = 3.0
 
     camera = SimulatedCamera(from_mapping(SimulatedCameraConfig, {
         "speed_mps": speed_mps, "events_per_px2": 1.0, "trigger_period_ms": 50, "seed": seed,
+        "slice_us": 4000,
         "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4, "tau_amp_s": 0.1}}))
     camera.open()
     sensor = TwinSensor(TwinSensorParams(rate_hz=1000, noise_over_l=noise_over_l, latency_ms=2.0,
@@ -68,8 +69,9 @@ def twin_point(speed_mps: float, *, tau_s: float = 0.001, offset_ms: float = 3.0
                         BeamParams(**BEAM), camera, "mm")
     sensor.open()
     readings, events = [], []
-    for _ in range(round((warm_s + record_s) / 0.004)):  # slice by slice, the sensor reading as it goes
-        events += fast_forward(camera, 0.004)
+    slice_s = camera.cfg.slice_us * 1e-6
+    for _ in range(round((warm_s + record_s) / slice_s)):  # slice by slice, the sensor reading as it goes
+        events += fast_forward(camera, slice_s)
         while len(got := sensor.read(0.0)):
             readings.append(got)
     tracking = from_mapping(TrackingConfig, {"root": [150, 240], "length": L_PX, "tau_s": tau_s})

@@ -49,7 +49,9 @@ class SimulatedCameraConfig:
         events_per_px2: events per pixel area swept by the line (sets the event rate).
         line_width_px: spread of events across the line.
         noise_rate_hz: background events per second over the whole sensor.
-        slice_us: camera time generated per read (events are released at its end).
+        slice_us: camera time generated per read (events are released at its end). Each read costs
+            a few dozen hand-overs of the GIL; in a process shared with the rest of the rig, slices
+            of 4 ms fell behind real time where 16 ms keep up.
         time_scale: camera seconds per wall second (1 = real time).
         max_lag_s: when the machine cannot generate events in real time and falls this far behind,
             the twin skips ahead (the flag moves on, no events for the skipped time), as a real
@@ -74,7 +76,7 @@ class SimulatedCameraConfig:
     events_per_px2: float = 2.0
     line_width_px: float = 0.8
     noise_rate_hz: float = 20_000.0
-    slice_us: int = 4000
+    slice_us: int = 16_000
     time_scale: float = 1.0
     max_lag_s: float = 0.25
     trigger_period_ms: float = 0.0
