@@ -9,8 +9,8 @@ listing what they yield. Example (section ``sweep`` of a run config)::
       branches: [up, down]        # up: ascending speeds, down: descending (hysteresis)
       settle_s: 10                # wait after each speed change, s
       record_s: 20                # recording per point, s
-      actions:                    # per point, named; the runner knows what they mean
-        - {name: reconstruct, when: after_record}
+      actions:                    # per point (see daemon/sweep/actions.py): command, pause
+        - {name: command, when: after_record, params: {argv: [flagtrack, events, info, "{raw}"]}}
 
 Each point yields: ``Point`` (metadata), ``SetSpeed``, ``Wait`` (settle), the ``before_record``
 actions, ``Record``, the ``after_record`` actions, ``EndPoint``; the plan ends with
@@ -27,6 +27,8 @@ from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
+
+from flagtrack.daemon.sweep.actions import parse_action
 
 from flagtrack.daemon.config import from_mapping, load_yaml
 from flagtrack.daemon.errors import ConfigError
@@ -59,11 +61,14 @@ class SpeedRange:
 
 @dataclass(frozen=True)
 class ActionSpec:
-    """A named action at every point (``params`` are passed to the runner as they are)."""
+    """A named action at every point (a built-in of :mod:`~flagtrack.daemon.sweep.actions`, checked here)."""
 
     name: str
     when: Literal["before_record", "after_record"] = "after_record"
     params: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        parse_action(self.name, self.params)
 
 
 @dataclass(frozen=True)

@@ -72,6 +72,7 @@ class PointResult:
         sensor_samples, sensor_missing, sensor_compared: samples received, lost, and compared (a sample
             is compared when the reconstruction has updates around it).
         sensor_file, sensor_figure: the point's sensor record and figure, relative to the run folder.
+        actions: how the point's actions went (``command ok; pause ok``), ``None`` without actions.
     """
 
     point_id: str
@@ -110,6 +111,7 @@ class PointResult:
     sensor_compared: int = 0
     sensor_file: str | None = None
     sensor_figure: str | None = None
+    actions: str | None = None
 
     @classmethod
     def planned(cls, point: Point, **values: Any) -> PointResult:
@@ -122,7 +124,7 @@ _FLOAT_FIELDS = {f.name for f in dataclasses.fields(PointResult) if f.type in ("
 
 def point_paths(point_id: str) -> tuple[str, str]:
     """Raw and centreline file paths of a point, relative to the run folder."""
-    return f"{POINTS_DIR}/{point_id}.raw", f"{POINTS_DIR}/{point_id}.h5"
+    return f"{POINTS_DIR}/{point_id}.raw", f"{POINTS_DIR}/{point_id}_centrelines.h5"  # as the recorder names them
 
 
 @dataclass(frozen=True)

@@ -4,6 +4,7 @@ intact and a resumable run."""
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from pathlib import Path
@@ -171,3 +172,23 @@ def test_feedback_holds_the_target_amplitude_on_the_simulated_rig(tmp_path: Path
     assert abs(np.median(late[:, 1]) - 0.18) < 0.025  # then held at the target
     assert late[:, 2].mean() < 5.0  # by slowing the wind
     assert simulator.setpoint_mps == 0.0
+
+
+def test_point_actions_run_with_placeholders_and_a_required_failure_stops_at_zero(tmp_path: Path) -> None:
+    write_raw_path = "import pathlib, sys; pathlib.Path(sys.argv[1]).write_text(sys.argv[2] + ' ' + sys.argv[3])"
+    config = rig(tmp_path, sweep={"speeds": [4.0], "branches": ["up"], "settle_s": 0.3, "record_s": 0.5, "actions": [
+        {"name": "pause", "when": "before_record", "params": {"seconds": 0.1}},
+        {"name": "command", "params": {"argv": [sys.executable, "-c", write_raw_path, "{point_dir}/{point_id}.seen",
+                                                "{raw}", "{speed_mps}"]}},
+        {"name": "command", "params": {"argv": [sys.executable, "-c", "print('bad data'); raise SystemExit(3)"],
+                                       "required": True}},
+    ]})
+    supervisor, _, simulator = run(config)
+    run_dir = tmp_path / "runs" / "run"
+    (point,) = read_run(run_dir).latest_points().values()
+    seen = (run_dir / "points" / f"{point.point_id}.seen").read_text().split()
+    assert seen == [str((run_dir / point.raw_file).resolve()), "4"] and (run_dir / point.raw_file).stat().st_size > 0
+    assert point.actions == "pause ok; command ok; command failed: exit code 3 (output: 000-up-4.00.action2.log)"
+    assert "bad data" in (run_dir / "points" / "000-up-4.00.action2.log").read_text()
+    assert point.status == "failed" and "required action" in supervisor.stop_reason
+    assert completed_points(run_dir) == set() and simulator.setpoint_mps == 0.0

@@ -63,12 +63,12 @@ def test_up_and_down_branches_share_the_turning_point_unless_asked() -> None:
 def test_actions_surround_the_record() -> None:
     cfg = SweepConfig(
         speeds=(3.0,), branches=(Branch.UP,), settle_s=1, record_s=2,
-        actions=(ActionSpec("reconstruct"), ActionSpec("snapshot", when="before_record", params={"frames": 3})),
+        actions=(ActionSpec("command", params={"argv": ["true"]}), ActionSpec("pause", when="before_record", params={"seconds": 3})),
     )  # fmt: skip
     kinds = [type(s).__name__ for s in sweep_plan(cfg)]
     assert kinds == ["Point", "SetSpeed", "Wait", "Action", "Record", "Action", "EndPoint", "SetSpeed"]
     actions = [s for s in sweep_plan(cfg) if isinstance(s, Action)]
-    assert actions == [Action("snapshot", "000-up-3.00", {"frames": 3}), Action("reconstruct", "000-up-3.00", {})]
+    assert actions == [Action("pause", "000-up-3.00", {"seconds": 3}), Action("command", "000-up-3.00", {"argv": ["true"]})]
 
 
 def test_resume_skips_done_points_and_reenters_the_down_branch_from_the_top() -> None:
@@ -107,11 +107,11 @@ def test_plan_from_yaml(tmp_path: Path) -> None:
         "  settle_s: 10\n"
         "  record_s: 20\n"
         "  actions:\n"
-        "    - {name: reconstruct, when: after_record}\n"
+        "    - {name: command, when: after_record, params: {argv: [flagtrack, events, info, '{raw}']}}\n"
     )
     cfg = load_sweep_config(path)
     assert cfg.speed_values() == (3.0, 3.5, 4.0)
-    assert cfg.branches == (Branch.UP, Branch.DOWN) and cfg.actions == (ActionSpec("reconstruct"),)
+    assert cfg.branches == (Branch.UP, Branch.DOWN) and cfg.actions == (ActionSpec("command", params={"argv": ["flagtrack", "events", "info", "{raw}"]}),)
     assert len([s for s in sweep_plan(cfg) if isinstance(s, Record)]) == 5
 
 

@@ -13,7 +13,7 @@ import math
 import threading
 import time
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -26,8 +26,9 @@ from flagtrack.daemon.services.supervisor.analysis import point_metrics
 from flagtrack.daemon.services.supervisor.config import SupervisorConfig
 from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor, point_state
+from flagtrack.daemon.sweep.actions import ActionOutcome, PauseAction, parse_action, run_command
 from flagtrack.daemon.sweep.plan import Action, EndPoint, Point, Record, SetSpeed, Wait, plan_points, sweep_plan
-from flagtrack.daemon.sweep.runlog import PointResult, RunLog, completed_points, stored_sweep
+from flagtrack.daemon.sweep.runlog import PointResult, RunLog, completed_points, point_paths, stored_sweep
 from flagtrack.daemon.sweep.summary import write_summary
 from flagtrack.daemon.transport import Bus
 
@@ -235,9 +236,10 @@ class SupervisorService:
     def _run_sweep(self, runlog: RunLog) -> None:
         point: Point | None = None
         result: PointResult | None = None
+        outcomes: list[ActionOutcome] = []
         for step in sweep_plan(self._sweep, self._done):
             if isinstance(step, Point):
-                point, result = step, None
+                point, result, outcomes = step, None, []
                 self._point, self._branch = step.point_id, step.branch.value
                 log.info("supervisor: point %s", step.point_id)
             elif isinstance(step, SetSpeed):
@@ -248,12 +250,39 @@ class SupervisorService:
                 assert point is not None
                 result = self._record_point(point, step)
             elif isinstance(step, Action):
-                log.info("supervisor: action %s for %s (no built-in meaning; logged)", step.name, step.point_id)
+                assert point is not None
+                outcomes.append(self._run_action(step, point, len(outcomes)))
             elif isinstance(step, EndPoint) and result is not None:
+                failed = next((o for o in outcomes if o.required and not o.ok), None)
+                if outcomes:
+                    result = replace(result, actions="; ".join(o.summary() for o in outcomes))
+                if failed is not None:  # recorded, but not finished: a resumed run measures it again
+                    result = replace(result, status="failed", error=f"required action: {failed.summary()}")
                 runlog.point(result)
                 self.points_done.append(result)
                 self._point = ""
+                if failed is not None:
+                    raise RunStopped(f"point {result.point_id}: required action {failed.summary()}")
         self._mode = "done"
+
+    def _run_action(self, step: Action, point: Point, number: int) -> ActionOutcome:
+        """Run one per-point action (see :mod:`~flagtrack.daemon.sweep.actions`); stop requests still work."""
+        action = parse_action(step.name, step.params)
+        if isinstance(action, PauseAction):
+            self._idle(action.seconds)
+            return ActionOutcome(step.name, True, "", action.seconds)
+        point_dir = self.run_dir / "points"  # type: ignore[operator]
+        raw, lines = point_paths(point.point_id)
+        context = {"point_id": point.point_id, "index": point.index, "branch": point.branch.value,
+                   "speed_mps": f"{point.speed_mps:g}", "run_dir": str(self.run_dir.resolve()),  # type: ignore[union-attr]
+                   "point_dir": str(point_dir.resolve()), "raw": str((self.run_dir / raw).resolve()),  # type: ignore[operator]
+                   "centrelines": str((self.run_dir / lines).resolve())}  # type: ignore[operator]
+        log_path = point_dir / f"{point.point_id}.action{number}.log"
+        log.info("supervisor: action %s for %s", step.name, point.point_id)
+        outcome = run_command(action, step.name, context, self.run_dir, log_path, idle=self._idle)  # type: ignore[arg-type]
+        if not outcome.ok:
+            log.warning("supervisor: point %s: %s", point.point_id, outcome.summary())
+        return outcome
 
     def _record_point(self, point: Point, step: Record) -> PointResult:
         base = self.run_dir / "points" / point.point_id  # type: ignore[operator]
@@ -275,8 +304,7 @@ class SupervisorService:
         if state != "flapping":  # a still flag has no amplitude or frequency worth a number
             metrics = type(metrics)(amplitude_over_l=metrics.amplitude_over_l, delta_rms_over_l=metrics.delta_rms_over_l,
                                     updates=metrics.updates, delta_rms_std_over_l=metrics.delta_rms_std_over_l)
-        raw = base.with_name(base.name + ".raw")
-        lines = base.with_name(base.name + "_centrelines.h5")
+        raw, lines = (self.run_dir / path for path in point_paths(point.point_id))  # type: ignore[operator]
         readback = [v for v in readbacks if np.isfinite(v)]
         sensor_fields = self._check_sensor(point, base, collection, raw, state)
         return PointResult.planned(
