@@ -27,10 +27,8 @@ import importlib.util
 import logging
 import os
 import pickle
-import subprocess
 import sys
 import sysconfig
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -140,6 +138,9 @@ def build_recorded(timeout_s: float = 600.0) -> Path | None:
     Returns:
         The module path, or None if there was nothing new to build or the build failed (logged).
     """
+    import subprocess
+    import tempfile
+
     new = pending()
     if not enabled() or not new:
         return None
