@@ -81,7 +81,7 @@ def test_service_publishes_the_sensor_events_and_reports_the_stall(adapter: str,
 
         thread = threading.Thread(target=run)
         thread.start()
-        thread.join(timeout=30)
+        thread.join(timeout=120)  # generous: in a fresh clone the first run compiles the codec kernels
         assert not thread.is_alive()
         statuses = []
         while (status := status_sub.recv(timeout_s=2.0)) is not None:
