@@ -162,10 +162,16 @@ def _filter_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, 
         return j
     block_now, k, isolated = state[_BLOCK], state[_K], state[_ISOLATED]
     max_x, max_y = state[_MAX_X], state[_MAX_Y]
+    block_lo, block_hi = np.int64(1), np.int64(0)  # times of block_now: [lo, hi); empty: divide first
     for i in range(len(t)):
         ti, xi, yi = np.int64(t[i]), np.int64(x[i]), np.int64(y[i])
         max_x, max_y = max(max_x, xi), max(max_y, yi)
-        block = ti // block_us
+        if ti < block_lo or ti >= block_hi:  # ti // block_us != block_now, without a division per event
+            block = ti // block_us
+            block_lo = block * block_us
+            block_hi = block_lo + block_us
+        else:
+            block = block_now
         if block != block_now:
             if block == block_now + 1:
                 k = _next_k(isolated, float((max_x + 1) * (max_y + 1)), block_us, window_us, k_min, k_max,
