@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             aot.build_recorded()
     finally:
-        aot.disable_recording()
+        aot.disable()
     return 0
 
 

@@ -114,9 +114,12 @@ def enable() -> int:
     return len(manifest["exports"])
 
 
-def disable_recording() -> None:
-    """Stop recording kernel signatures (the end of a command)."""
+def disable() -> None:
+    """End of a command: stop recording signatures and drop the native functions, so that code
+    running later in the same process (tests, services) uses numba's dispatchers as before."""
     jit.record_calls(False)
+    jit.uninstall_natives()
+    _loaded.update(exports=[], types=None)
 
 
 def pending() -> list[dict[str, Any]]:
@@ -180,7 +183,19 @@ def build_recorded(timeout_s: float = 600.0) -> Path | None:
         part.write_bytes((Path(tmp) / "manifest.pkl").read_bytes())
         os.replace(part, _manifest_path(tag))
     log.info("built %d AOT kernels in %.1f s: %s", len(entries), time.perf_counter() - started, folder / so_name)
+    _prune(folder, keep=(so_name, types_name, _manifest_path(tag).name))
     return folder / so_name
+
+
+def _prune(folder: Path, keep: tuple[str, ...], max_age_s: float = 86400.0) -> None:
+    """Remove the builds of other sources or export sets not used for ``max_age_s``."""
+    now = time.time()
+    for path in folder.glob("flagtrack_aot_*"):
+        try:
+            if path.name not in keep and now - path.stat().st_atime > max_age_s:
+                path.unlink()
+        except OSError:
+            pass
 
 
 def _build(request_path: Path) -> None:

@@ -160,6 +160,12 @@ def install_native(key: str, expected: tuple[Any, ...], func: Callable[..., Any]
         _NATIVE.setdefault(key, []).append((expected, func))
 
 
+def uninstall_natives() -> None:
+    """Remove every native function (later calls go through numba)."""
+    with _LOCK:
+        _NATIVE.clear()
+
+
 def native_count() -> int:
     """How many native functions are installed."""
     return sum(len(v) for v in _NATIVE.values())

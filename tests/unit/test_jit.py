@@ -55,3 +55,10 @@ def test_arg_key_of_scalars_and_records() -> None:
     assert jit.arg_key(np.int32(3)) == ("s", "<i4")
     rec = np.zeros(2, dtype=[("t", "<i8"), ("c", "u1")])
     assert jit.arg_key(rec)[1] != jit.arg_key(np.zeros(2, dtype=[("t", "<i8"), ("d", "u1")]))[1]
+
+
+def test_uninstalled_natives_are_not_used() -> None:
+    jit.install_native(twice.key, (jit.arg_key(np.zeros(2)),), lambda a: "native")
+    assert twice(np.ones(2)) == "native"
+    jit.uninstall_natives()
+    np.testing.assert_array_equal(twice(np.ones(2)), 2.0)
