@@ -123,9 +123,9 @@ def run(args: argparse.Namespace) -> int:
             os.sched_setaffinity(0, {max(cores)})  # children inherit the affinity
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / "out.h5"
-            # warm-up, as any earlier run of the command would: fills numba's cache, builds the AOT
-            # kernels (daemon/core/aot.py) and writes Python's bytecode cache even where
-            # PYTHONDONTWRITEBYTECODE is set (without .pyc files, ~60 modules compile each run: ~0.1 s)
+            # warm-up, as any earlier run of the command would: fills numba's cache and writes Python's
+            # bytecode cache even where PYTHONDONTWRITEBYTECODE is set (without .pyc files, ~60
+            # modules compile on each run: ~0.1 s)
             warm_env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
             _command(tiny, out, args.method, warm_env)
             startup = min(_command(tiny, out, args.method)[0] for _ in range(args.repeat))

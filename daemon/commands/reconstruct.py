@@ -36,7 +36,6 @@ example:
 log = logging.getLogger(__name__)
 
 _WRITE_EVERY = 8192  # updates buffered before an HDF5 append
-_AOT_MIN_EVENTS = 500_000  # smaller runs (tests, snippets) do not trigger the ~25 s one-time AOT build
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -50,28 +49,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Reconstruct ``args.file`` into ``args.output``."""
-    from flagtrack.daemon.core import aot
     from flagtrack.daemon.tracking_config import TrackingConfig
 
-    aot.enable()  # native kernels built by an earlier run: no numba import (~1 s less start-up)
-    try:
-        config = load_tracking_config_file(args.config) if args.config else TrackingConfig()
-        config = apply_tracking_arguments(config, args)
-        started = time.perf_counter()
-        summary = reconstruct_file(args.file, args.output, config,
-                                   config_path=str(args.config) if args.config else None,
-                                   progress=not args.no_progress and sys.stderr.isatty())
-        elapsed = time.perf_counter() - started
-        rate = summary["events_in"] / elapsed / 1e6 if elapsed > 0 else 0.0
-        print(f"{summary['updates']} updates from {summary['events_in']} events "
-              f"({summary['events_kept']} after denoising) in {elapsed:.2f} s ({rate:.1f} Mev/s) -> {args.output}",
-              file=sys.stderr)
-        if summary["events_in"] >= _AOT_MIN_EVENTS and aot.pending():
-            print("compiling the kernels ahead of time once for these sources (faster start-up next time) ...",
-                  file=sys.stderr)
-            aot.build_recorded()
-    finally:
-        aot.disable()
+    config = load_tracking_config_file(args.config) if args.config else TrackingConfig()
+    config = apply_tracking_arguments(config, args)
+    started = time.perf_counter()
+    summary = reconstruct_file(args.file, args.output, config, config_path=str(args.config) if args.config else None,
+                               progress=not args.no_progress and sys.stderr.isatty())
+    elapsed = time.perf_counter() - started
+    rate = summary["events_in"] / elapsed / 1e6 if elapsed > 0 else 0.0
+    print(f"{summary['updates']} updates from {summary['events_in']} events "
+          f"({summary['events_kept']} after denoising) in {elapsed:.2f} s ({rate:.1f} Mev/s) -> {args.output}",
+          file=sys.stderr)
     return 0
 
 

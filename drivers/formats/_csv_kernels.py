@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from flagtrack.daemon.core.jit import njit
+from numba import njit
 
 OK = 0
 FULL = 1
