@@ -28,10 +28,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from flagtrack.daemon.sweep.actions import parse_action
-
 from flagtrack.daemon.config import from_mapping, load_yaml
 from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.sweep.actions import parse_action
 
 
 class Branch(enum.Enum):

@@ -251,18 +251,20 @@ class SupervisorService:
                 result = self._record_point(point, step)
             elif isinstance(step, Action):
                 assert point is not None
-                outcomes.append(self._run_action(step, point, len(outcomes)))
+                outcome = self._run_action(step, point, len(outcomes))
+                outcomes.append(outcome)
+                if outcome.required and not outcome.ok:  # the point is failed (a resumed run measures it again)
+                    failed = replace(result or PointResult.planned(point), status="failed",
+                                     error=f"required action: {outcome.summary()}", actions=_summary(outcomes))
+                    runlog.point(failed)
+                    self.points_done.append(failed)
+                    raise RunStopped(f"point {point.point_id}: required action {outcome.summary()}")
             elif isinstance(step, EndPoint) and result is not None:
-                failed = next((o for o in outcomes if o.required and not o.ok), None)
                 if outcomes:
-                    result = replace(result, actions="; ".join(o.summary() for o in outcomes))
-                if failed is not None:  # recorded, but not finished: a resumed run measures it again
-                    result = replace(result, status="failed", error=f"required action: {failed.summary()}")
+                    result = replace(result, actions=_summary(outcomes))
                 runlog.point(result)
                 self.points_done.append(result)
                 self._point = ""
-                if failed is not None:
-                    raise RunStopped(f"point {result.point_id}: required action {failed.summary()}")
         self._mode = "done"
 
     def _run_action(self, step: Action, point: Point, number: int) -> ActionOutcome:
@@ -373,3 +375,8 @@ def _mapping(obj: Any) -> Any:
     from flagtrack.daemon.config import to_mapping
 
     return to_mapping(obj)
+
+
+def _summary(outcomes: list[ActionOutcome]) -> str:
+    """How a point's actions went, for its record: ``pause ok; command failed: exit code 3 (...)``."""
+    return "; ".join(o.summary() for o in outcomes)
