@@ -1,6 +1,6 @@
 """A simulated point sensor on a real pseudo-terminal: the ASCII protocol (poll or stream) or a Modbus RTU slave.
 
-Like :class:`~flagtrack.drivers.tunnel.simulated.SimulatedTunnel`, it opens a pty pair, gives the
+Like :class:`~flagtrack.drivers.tunnel.simulated.SimulatedTunnel`, it opens a pty pair (:class:`~flagtrack.drivers.pty_link.PtyLink`), gives the
 client side's path as :attr:`SimulatedSensorDevice.port` and answers from a thread; the Modbus
 framing is :mod:`flagtrack.drivers.tunnel.modbus_rtu`'s. The reading comes from ``signal(t_us)``
 on the device's own clock (µs since start plus ``clock_offset_us``). Faults for tests:
@@ -9,19 +9,16 @@ on the device's own clock (µs since start plus ``clock_offset_us``). Faults for
 
 from __future__ import annotations
 
-import fcntl
 import logging
 import math
-import os
-import select
 import threading
 import time
-import tty
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Literal
 
+from flagtrack.drivers.pty_link import PtyLink
 from flagtrack.drivers.sensor.modbus import ModbusSensorMap
 from flagtrack.drivers.tunnel import modbus_rtu as rtu
 
@@ -71,11 +68,8 @@ class SimulatedSensorDevice:
         self._next_pulse_us = 0
         self.requests = 0
         self._mono0_ns = time.monotonic_ns()
-        self._master_fd, self._slave_fd = os.openpty()
-        tty.setraw(self._slave_fd)
-        flags = fcntl.fcntl(self._master_fd, fcntl.F_GETFL)
-        fcntl.fcntl(self._master_fd, fcntl.F_SETFL, flags | os.O_NONBLOCK)
-        self.port = os.ttyname(self._slave_fd)
+        self._link = PtyLink()
+        self.port = self._link.port
         self._thread = threading.Thread(target=self._serve, name=f"simulated sensor {self.port}", daemon=True)
 
     def now_us(self) -> int:
@@ -101,12 +95,7 @@ class SimulatedSensorDevice:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=2.0)
-        for fd in (self._master_fd, self._slave_fd):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-        self._master_fd = self._slave_fd = -1
+        self._link.close()
 
     def __enter__(self) -> SimulatedSensorDevice:
         return self.start()
@@ -118,11 +107,10 @@ class SimulatedSensorDevice:
 
     def _serve(self) -> None:
         while not self._stop.is_set():
-            try:
-                ready, _, _ = select.select([self._master_fd], [], [], self.params.tick_s)
-            except (OSError, ValueError):
+            ready = self._link.wait_readable(self.params.tick_s)
+            if ready is None:
                 return
-            data = self._read() if ready else b""
+            data = self._link.read(self.params.tick_s) if ready else b""
             with self._lock:
                 if self._mute:
                     self._buffer = b""
@@ -132,7 +120,7 @@ class SimulatedSensorDevice:
                 if self._streaming:
                     out += self._stream_lines()
             if out:
-                self._write(out)
+                self._link.write(out)
 
     def _reading(self, t_us: int) -> float:
         value = self.signal(t_us)
@@ -218,15 +206,3 @@ class SimulatedSensorDevice:
         if m.word_order == "little":
             words.reverse()
         return rtu.read_response(request, words)
-
-    def _read(self) -> bytes:
-        try:
-            return os.read(self._master_fd, 4096)
-        except (BlockingIOError, OSError):
-            return b""
-
-    def _write(self, data: bytes) -> None:
-        try:
-            os.write(self._master_fd, data)
-        except OSError:  # nobody reads the other side and its buffer is full
-            pass

@@ -13,16 +13,12 @@ processed or answered, so the watchdog trips), ``stall_mps`` (the fan cannot go 
 
 from __future__ import annotations
 
-import errno
-import fcntl
 import logging
-import os
-import select
 import threading
 import time
-import tty
 from types import TracebackType
 
+from flagtrack.drivers.pty_link import PtyLink
 from flagtrack.drivers.tunnel.modbus import ModbusMap
 from flagtrack.drivers.tunnel.sim_model import SimParams, TunnelModel
 from flagtrack.drivers.tunnel.sim_responders import AsciiResponder, ModbusResponder, Responder
@@ -52,12 +48,8 @@ class SimulatedTunnel:
         )
         self._mute = False
         self._garbage = False
-        self._dropped_replies = 0
-        self._master_fd, self._slave_fd = os.openpty()
-        tty.setraw(self._slave_fd)  # no echo, no line editing: a plain byte pipe like a serial port
-        flags = fcntl.fcntl(self._master_fd, fcntl.F_GETFL)
-        fcntl.fcntl(self._master_fd, fcntl.F_SETFL, flags | os.O_NONBLOCK)
-        self.port = os.ttyname(self._slave_fd)
+        self._link = PtyLink()
+        self.port = self._link.port
         self._thread = threading.Thread(target=self._serve, name=f"simulated tunnel {self.port}", daemon=True)
 
     def start(self) -> SimulatedTunnel:
@@ -118,12 +110,7 @@ class SimulatedTunnel:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=2.0)
-        for fd in (self._master_fd, self._slave_fd):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-        self._master_fd = self._slave_fd = -1
+        self._link.close()
 
     def __enter__(self) -> SimulatedTunnel:
         return self.start()
@@ -135,11 +122,10 @@ class SimulatedTunnel:
 
     def _serve(self) -> None:
         while not self._stop.is_set():
-            try:
-                ready, _, _ = select.select([self._master_fd], [], [], self.params.tick_s)
-            except (OSError, ValueError):
+            ready = self._link.wait_readable(self.params.tick_s)
+            if ready is None:
                 return
-            data = self._read() if ready else b""
+            data = self._link.read(self.params.tick_s) if ready else b""
             with self._lock:
                 now_s = time.monotonic()
                 self._model.advance(now_s)
@@ -149,21 +135,4 @@ class SimulatedTunnel:
                 if reply and self._garbage:
                     reply = GARBAGE_LINE if self.params.protocol == "ascii" else bytes(b ^ 0x5A for b in reply)
             if reply:
-                self._write(reply)
-
-    def _read(self) -> bytes:
-        try:
-            return os.read(self._master_fd, 4096)
-        except BlockingIOError:
-            return b""
-        except OSError as exc:  # EIO: no client has the slave open (we keep one, so rare)
-            if exc.errno != errno.EIO:
-                log.warning("simulated tunnel: read failed: %s", exc)
-            time.sleep(self.params.tick_s)
-            return b""
-
-    def _write(self, data: bytes) -> None:
-        try:
-            os.write(self._master_fd, data)
-        except OSError:  # nobody reads the other side and its buffer is full
-            self._dropped_replies += 1
+                self._link.write(reply)
