@@ -29,7 +29,7 @@ from typing import Literal
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.sensor.base import HostClock, SensorInfo, SensorReading, reading
 from flagtrack.drivers.sensor.poll import Poller, PollParams
-from flagtrack.drivers.tunnel.ascii import NUMBER
+from flagtrack.drivers.tunnel.ascii import NUMBER, compile_pattern
 from flagtrack.drivers.tunnel.serial_adapter import SerialAdapter
 
 log = logging.getLogger(__name__)
@@ -76,13 +76,14 @@ class AsciiSensorProtocol:
     def __post_init__(self) -> None:
         if not self.eol or not self.eol.isascii():
             raise ValueError("eol must be a non-empty ASCII string")
-        if "value" not in _compile("reply", self.reply).groupindex:
+        if "value" not in compile_pattern("reply", self.reply).groupindex:
             raise ValueError("reply must have a named group (?P<value>...)")
-        if self.trigger_reply is not None and "t" not in _compile("trigger_reply", self.trigger_reply).groupindex:
+        trigger = self.trigger_reply
+        if trigger is not None and "t" not in compile_pattern("trigger_reply", trigger).groupindex:
             raise ValueError("trigger_reply must have a named group (?P<t>...)")
-        if "text" not in _compile("error_reply", self.error_reply).groupindex:
+        if "text" not in compile_pattern("error_reply", self.error_reply).groupindex:
             raise ValueError("error_reply must have a named group (?P<text>...)")
-        _compile("invalid_reply", self.invalid_reply)
+        compile_pattern("invalid_reply", self.invalid_reply)
         if self.time_us_per_count <= 0 or self.scale == 0:
             raise ValueError("time_us_per_count must be positive and scale non-zero")
         if self.stamps_time and "t" not in re.compile(self.reply).groupindex:
@@ -92,13 +93,6 @@ class AsciiSensorProtocol:
     def stamps_time(self) -> bool:
         """True when samples carry the sensor's time (group ``t``), False when the host stamps them."""
         return self.clock == "sensor" or (self.clock == "auto" and self.mode == "stream")
-
-
-def _compile(name: str, pattern: str) -> re.Pattern[str]:
-    try:
-        return re.compile(pattern)
-    except re.error as exc:
-        raise ValueError(f"{name} is not a valid regular expression: {exc}") from None
 
 
 class LineParser:

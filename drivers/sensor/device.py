@@ -1,7 +1,7 @@
 """A simulated point sensor on a real pseudo-terminal: the ASCII protocol (poll or stream) or a Modbus RTU slave.
 
-Like :class:`~flagtrack.drivers.tunnel.simulated.SimulatedTunnel`, it opens a pty pair (:class:`~flagtrack.drivers.pty_link.PtyLink`), gives the
-client side's path as :attr:`SimulatedSensorDevice.port` and answers from a thread; the Modbus
+Like :class:`~flagtrack.drivers.tunnel.simulated.SimulatedTunnel`, it opens a pty pair
+(:class:`~flagtrack.drivers.pty_link.PtyLink`), gives the client side's path as :attr:`SimulatedSensorDevice.port` and answers from a thread; the Modbus
 framing is :mod:`flagtrack.drivers.tunnel.modbus_rtu`'s. The reading comes from ``signal(t_us)``
 on the device's own clock (µs since start plus ``clock_offset_us``). Faults for tests:
 ``inject(mute=True)`` (nothing answered or sent), ``inject(out_of_range=True)`` (every reading invalid).

@@ -68,14 +68,15 @@ class AsciiProtocol:
         except (KeyError, IndexError, ValueError) as exc:
             raise ValueError(f"set_command {self.set_command!r} must format with {{value}}: {exc}") from None
         for name, group in (("query_reply", "value"), ("fault_reply", "text"), ("error_reply", "text")):
-            if group not in _compile(name, getattr(self, name)).groupindex:
+            if group not in compile_pattern(name, getattr(self, name)).groupindex:
                 raise ValueError(f"{name} must have a named group (?P<{group}>...)")
         for name in ("set_reply", "stop_reply", "ping_reply"):
             if getattr(self, name) is not None:
-                _compile(name, getattr(self, name))
+                compile_pattern(name, getattr(self, name))
 
 
-def _compile(name: str, pattern: str) -> re.Pattern[str]:
+def compile_pattern(name: str, pattern: str) -> re.Pattern[str]:
+    """``re.compile(pattern)``; a bad pattern raises ValueError naming the setting ``name``."""
     try:
         return re.compile(pattern)
     except re.error as exc:
