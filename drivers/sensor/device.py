@@ -1,8 +1,9 @@
 """A simulated point sensor on a real pseudo-terminal: the ASCII protocol (poll or stream) or a Modbus RTU slave.
 
 Like :class:`~flagtrack.drivers.tunnel.simulated.SimulatedTunnel`, it opens a pty pair
-(:class:`~flagtrack.drivers.pty_link.PtyLink`), gives the client side's path as :attr:`SimulatedSensorDevice.port` and answers from a thread; the Modbus
-framing is :mod:`flagtrack.drivers.tunnel.modbus_rtu`'s. The reading comes from ``signal(t_us)``
+(:class:`~flagtrack.drivers.pty_link.PtyLink`), gives the client side's path as
+:attr:`SimulatedSensorDevice.port` and answers from a thread; lines and Modbus RTU frames are split
+as the simulated tunnel splits them. The reading comes from ``signal(t_us)``
 on the device's own clock (µs since start plus ``clock_offset_us``). Faults for tests:
 ``inject(mute=True)`` (nothing answered or sent), ``inject(out_of_range=True)`` (every reading invalid).
 """
@@ -21,6 +22,7 @@ from typing import Literal
 from flagtrack.drivers.pty_link import PtyLink
 from flagtrack.drivers.sensor.modbus import ModbusSensorMap
 from flagtrack.drivers.tunnel import modbus_rtu as rtu
+from flagtrack.drivers.tunnel.sim_responders import split_frames, split_lines
 
 log = logging.getLogger(__name__)
 
@@ -127,17 +129,9 @@ class SimulatedSensorDevice:
         return math.nan if self._out_of_range else value
 
     def _ascii(self, data: bytes) -> bytes:
-        self._buffer += data
-        out = []
-        while b"\n" in self._buffer:
-            raw, self._buffer = self._buffer.split(b"\n", 1)
-            line = raw.decode("ascii", errors="replace").strip()
-            if line:
-                self.requests += 1
-                out.append(self._answer(line).encode("ascii") + b"\n")
-        if len(self._buffer) > 256:
-            self._buffer = b""
-        return b"".join(out)
+        lines, self._buffer, _ = split_lines(self._buffer + data)  # an overlong line is dropped silently
+        self.requests += len(lines)
+        return b"".join(self._answer(line).encode("ascii") + b"\n" for line in lines)
 
     def _answer(self, line: str) -> str:
         command = line.upper()
@@ -172,18 +166,14 @@ class SimulatedSensorDevice:
         return "".join(line + "\n" for line in lines).encode("ascii")
 
     def _modbus(self, data: bytes) -> bytes:
-        self._buffer += data
+        frames, self._buffer = split_frames(self._buffer + data)
         out = []
-        while (length := rtu.frame_length(self._buffer)) is not None and len(self._buffer) >= length:
-            if length == 0:
-                self._buffer = b""
-                break
-            frame, self._buffer = self._buffer[:length], self._buffer[length:]
+        for frame in frames:
             try:
                 request = rtu.parse_request(frame)
-            except ValueError:
+            except ValueError:  # a bad frame: resynchronise, dropping what follows it
                 self._buffer = b""
-                continue
+                break
             if request.device_id != self.params.modbus.device_id:
                 continue
             self.requests += 1

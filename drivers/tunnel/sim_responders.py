@@ -21,6 +21,28 @@ WATCHDOG_FAULT_CODE = 1  # fault register value of the simulated drive after a w
 OTHER_FAULT_CODE = 2
 
 
+def split_lines(buffer: bytes) -> tuple[list[str], bytes, bool]:
+    """The complete non-empty lines of ``buffer`` (stripped), the partial rest, and whether that rest
+    grew over ``MAX_LINE_BYTES`` (then it is dropped: returned empty)."""
+    *complete, rest = buffer.split(b"\n")
+    lines = [line for raw in complete if (line := raw.decode("ascii", errors="replace").strip())]
+    if len(rest) > MAX_LINE_BYTES:
+        return lines, b"", True
+    return lines, rest, False
+
+
+def split_frames(buffer: bytes) -> tuple[list[bytes], bytes]:
+    """The complete Modbus RTU request frames of ``buffer`` and the partial rest (dropped when a
+    frame's end cannot be found: unknown function)."""
+    frames = []
+    while (length := rtu.frame_length(buffer)) is not None and len(buffer) >= length:
+        if length == 0:
+            return frames, b""
+        frames.append(buffer[:length])
+        buffer = buffer[length:]
+    return frames, buffer
+
+
 class Responder(Protocol):
     """Turns received bytes into reply bytes."""
 
@@ -37,15 +59,9 @@ class AsciiResponder:
         self._buffer = b""
 
     def feed(self, data: bytes, now_s: float) -> bytes:
-        self._buffer += data
-        out = []
-        while b"\n" in self._buffer:
-            raw, self._buffer = self._buffer.split(b"\n", 1)
-            line = raw.decode("ascii", errors="replace").strip()
-            if line:
-                out.append(self.answer(line, now_s).encode("ascii") + b"\n")
-        if len(self._buffer) > MAX_LINE_BYTES:
-            self._buffer = b""
+        lines, self._buffer, overflow = split_lines(self._buffer + data)
+        out = [self.answer(line, now_s).encode("ascii") + b"\n" for line in lines]
+        if overflow:
             out.append(b"ERR line too long\n")
         return b"".join(out)
 
@@ -96,25 +112,23 @@ class ModbusResponder:
         if data:
             self._buffer += data
             self._last_rx_s = now_s
+        frames, self._buffer = split_frames(self._buffer)
         out = []
-        while True:
-            length = rtu.frame_length(self._buffer)
-            if length is None or len(self._buffer) < length:
-                break
-            if length == 0:  # unknown function: cannot find the frame end, drop what we have
+        for frame in frames:
+            reply = self._answer(frame, now_s)
+            if reply is None:  # a bad frame: resynchronise, dropping what follows it
                 self._buffer = b""
                 break
-            frame, self._buffer = self._buffer[:length], self._buffer[length:]
-            out.append(self._answer(frame, now_s))
+            out.append(reply)
         return b"".join(out)
 
-    def _answer(self, frame: bytes, now_s: float) -> bytes:
+    def _answer(self, frame: bytes, now_s: float) -> bytes | None:
+        """The reply to one frame (may be empty); None for a frame that does not parse."""
         try:
             request = rtu.parse_request(frame)
         except ValueError as exc:
             log.debug("simulated drive: dropped frame %r: %s", frame, exc)
-            self._buffer = b""
-            return b""
+            return None
         if request.device_id not in (0, self.map.device_id):
             return b""
         reply, valid = self._execute(request)
