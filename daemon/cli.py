@@ -13,6 +13,7 @@ import importlib
 import logging
 import pkgutil
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from types import ModuleType
@@ -75,11 +76,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _print_warnings_as_lines(command: str) -> None:
+    """Warnings (a damaged file's words skipped, a truncated end) print as one line, as errors do."""
+    def show(message: Warning | str, category: type[Warning], filename: str, lineno: int,  # noqa: ARG001
+             file: Any = None, line: str | None = None) -> None:  # noqa: ARG001
+        print(f"flagtrack {command}: warning: {message}", file=sys.stderr)
+
+    warnings.showwarning = show
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``flagtrack`` command; return its exit status."""
     args = build_parser().parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    previous = warnings.showwarning
+    _print_warnings_as_lines(args.command)
     try:
         return int(args.run(args) or 0)
     except FlagtrackError as exc:
@@ -88,6 +100,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"flagtrack {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        warnings.showwarning = previous  # main() is also called in-process (tests)
 
 
 if __name__ == "__main__":

@@ -107,6 +107,16 @@ def test_errors_are_one_line(raw_file: Path, tmp_path: Path, extra: list[str], w
     assert err.startswith("flagtrack reconstruct: error:") and words in err and "\n" not in err
 
 
+def test_a_truncated_file_is_reconstructed_with_a_one_line_warning(raw_file: Path, tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    cut = tmp_path / "cut.raw"
+    cut.write_bytes(raw_file.read_bytes()[:-1])  # the last word is incomplete
+    assert main(["reconstruct", str(cut), "-o", str(tmp_path / "o.h5"), "--no-progress", *ARGS]) == 0
+    warning = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert warning == [f"flagtrack reconstruct: warning: {cut}, byte {cut.stat().st_size - 1}: stream ends inside "
+                       "a 2-byte EVT 3.0 word (1 trailing bytes; truncated file?); kept the events before it"]
+
+
 def test_missing_input_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["reconstruct", str(tmp_path / "nope.raw"), "-o", str(tmp_path / "o.h5"), *ARGS]) == 2
     assert "nope.raw" in capsys.readouterr().err
