@@ -16,7 +16,12 @@ import numpy as np
 from flagtrack.daemon.core.events import empty_events, empty_triggers
 from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.formats import make_decoder
+from flagtrack.drivers.formats import _timebase as tb
+from flagtrack.drivers.formats._packet_kernels import encode_packets, packet_words, slot_runs
 from flagtrack.drivers.formats.codec import LOOP_US, Encoder
+
+
+_WORD_DTYPE = {"evt3": "<u2", "evt2": "<u4"}
 
 
 @dataclass(frozen=True)
@@ -65,7 +70,7 @@ class Packetizer:
         self.width, self.height = width, height
         self.params = params
         self._cols = _Columns.empty()
-        self._t_max = np.zeros(0, dtype=np.int64)  # running maximum of t (small steps back stay put)
+        self._max_before = np.iinfo(np.int64).min  # running maximum of t before the held events
         self._triggers = empty_triggers()
         self._horizon_us: int | None = None  # t_last_us of the last packet emitted
 
@@ -78,70 +83,103 @@ class Packetizer:
              ) -> list[Packet]:
         """Add data (and, optionally, "complete before ``t_until_us``"); return the packets it closes."""
         if len(events):
-            new = _Columns.of(events)
-            t_max = np.maximum.accumulate(new.t)
-            if len(self._t_max):
-                np.maximum(t_max, self._t_max[-1], out=t_max)
-            self._cols = self._cols.append(new)
-            self._t_max = np.concatenate([self._t_max, t_max]) if len(self._t_max) else t_max
+            self._cols = self._cols.append(_Columns.of(events))
         if triggers is not None and len(triggers):
             self._triggers = np.concatenate([self._triggers, triggers])
         packet_us = self.params.packet_us
-        known_until = max(int(self._t_max[-1]) if len(self._t_max) else -1,
-                          -1 if t_until_us is None else int(t_until_us))
-        closed_until = (known_until // packet_us) * packet_us  # slots ending at or before this are closed
-        slots = self._t_max // packet_us
-        n_closed = int(np.searchsorted(slots, closed_until // packet_us, side="left"))
-        packets = []
-        start = 0
-        for cut in list(np.flatnonzero(np.diff(slots[:n_closed])) + 1) + ([n_closed] if n_closed else []):
-            slot_end = (int(slots[start]) + 1) * packet_us
-            packets += self._slot_packets(start, cut, slot_end - 1)
-            start = cut
+        n_held = len(self._cols.t)
+        run_starts, run_slots, run_maxima = (np.empty(n_held + 1, dtype=np.int64) for _ in range(3))
+        n_runs = slot_runs(self._cols.t, self._max_before, packet_us, run_starts, run_slots, run_maxima)
+        known_until = max(int(run_maxima[n_runs - 1]) if n_runs else -1, -1 if t_until_us is None else int(t_until_us))
+        closed_slot = known_until // packet_us  # slots before this one are closed
+        n_closed_runs = int(np.searchsorted(run_slots[:n_runs], closed_slot, side="left"))
+        segments: list[tuple[int, int, int]] = []
+        for q in range(n_closed_runs):
+            stop = int(run_starts[q + 1]) if q + 1 < n_runs else n_held
+            segments += self._slot_segments(int(run_starts[q]), stop, (int(run_slots[q]) + 1) * packet_us - 1)
+        start = segments[-1][1] if segments else 0
+        if not segments and t_until_us is not None and closed_slot * packet_us - 1 > (self._horizon_us or -1) \
+                and n_held == 0:
+            segments.append((0, 0, closed_slot * packet_us - 1))  # only time passed: an empty packet
+        packets = self._packets(segments)
+        if n_closed_runs:
+            self._max_before = int(run_maxima[n_closed_runs - 1])
         self._cols = self._cols.tail(start)
-        self._t_max = self._t_max[start:]
-        if not packets and t_until_us is not None and closed_until - 1 > (self._horizon_us or -1) \
-                and not len(self._t_max):
-            packets.append(self._packet(self._cols, closed_until - 1))
         return packets
 
     def flush(self) -> list[Packet]:
         """Emit everything held (end of stream)."""
-        if len(self._t_max) == 0 and len(self._triggers) == 0:
+        n_held = len(self._cols.t)
+        if n_held == 0 and len(self._triggers) == 0:
             return []
-        t_last = max(int(self._t_max[-1]) if len(self._t_max) else -1,
+        t_last = max(int(self._cols.t.max()) if n_held else -1,
                      int(self._triggers["t"].max()) if len(self._triggers) else -1)
-        packets = self._slot_packets(0, len(self._t_max), t_last)
-        self._cols, self._t_max = _Columns.empty(), self._t_max[:0]
+        packets = self._packets(self._slot_segments(0, n_held, t_last))
+        self._cols = _Columns.empty()
         return packets
 
-    def _slot_packets(self, start: int, stop: int, horizon_us: int) -> list[Packet]:
-        """Packets of the held events [start:stop] (one slot), split at ``max_events``."""
-        packets = []
+    def _slot_segments(self, start: int, stop: int, horizon_us: int) -> list[tuple[int, int, int]]:
+        """(start, stop, horizon) of the packets of the held events [start:stop] (one slot), split at
+        ``max_events``."""
+        segments = []
         while stop - start > self.params.max_events:
-            part = self._cols.slice(start, start + self.params.max_events)
-            packets.append(self._packet(part, int(part.t.max()) - 1))
-            start += self.params.max_events
-        packets.append(self._packet(self._cols.slice(start, stop), horizon_us))
+            cut = start + self.params.max_events
+            segments.append((start, cut, int(self._cols.t[start:cut].max()) - 1))
+            start = cut
+        segments.append((start, stop, horizon_us))
+        return segments
+
+    def _packets(self, segments: list[tuple[int, int, int]]) -> list[Packet]:
+        """Encode the held events of each segment, with the held triggers up to its horizon, in one
+        compiled call; each packet is what a fresh encoder makes of it (see :func:`_packet`)."""
+        if not segments:
+            return []
+        starts, stops, horizons = (np.array(column, dtype=np.int64) for column in zip(*segments))
+        triggers, tr_bounds = self._take_triggers(horizons)
+        cols, n_packets = self._cols, len(segments)
+        n_triggers = np.diff(tr_bounds)
+        out = np.empty(packet_words(stops - starts, n_triggers), dtype=_WORD_DTYPE[self.encoding])
+        out_ends, t_offsets, n_on = (np.zeros(n_packets, dtype=np.int64) for _ in range(3))
+        done, status = encode_packets(self.encoding == "evt3", cols.t, cols.x, cols.y, cols.p, starts, stops, horizons,
+                                      triggers["t"], triggers["channel"], triggers["edge"], tr_bounds[:-1],
+                                      tr_bounds[1:], LOOP_US[self.encoding], self.width, self.height, out, out_ends,
+                                      t_offsets, n_on)
+        if status != tb.OK:  # encode the failing packet alone: the encoder names the event and the reason
+            q = done
+            self._packet(cols.slice(int(starts[q]), int(stops[q])), triggers[tr_bounds[q]:tr_bounds[q + 1]],
+                         int(t_offsets[q]))
+            raise FormatError(f"cannot encode packet {q} (status {status})")  # the encoder raised above
+        self._horizon_us = int(horizons[-1])
+        packets = []
+        word_start = 0
+        for q in range(n_packets):
+            i0, i1, n_tr = int(starts[q]), int(stops[q]), int(n_triggers[q])
+            t_first = int(cols.t[i0]) if i1 > i0 else \
+                min(int(horizons[q]), int(triggers["t"][tr_bounds[q]:tr_bounds[q + 1]].min()) if n_tr else int(horizons[q]))
+            packets.append(Packet(
+                data=out[word_start:out_ends[q]].tobytes(), t_first_us=t_first, t_last_us=int(horizons[q]),
+                n_events=i1 - i0, n_on=int(n_on[q]), n_triggers=n_tr, t_offset_us=int(t_offsets[q]),
+            ))
+            word_start = int(out_ends[q])
         return packets
 
-    def _packet(self, cols: _Columns, horizon_us: int) -> Packet:
-        take = self._triggers["t"] <= horizon_us
-        triggers, self._triggers = self._triggers[take], self._triggers[~take]
-        n = len(cols.t)
-        t_first = min(int(cols.t.min()) if n else horizon_us, int(triggers["t"].min()) if len(triggers) else horizon_us)
-        loop = LOOP_US[self.encoding]
-        t_offset = (max(t_first, 0) // loop) * loop
-        data = b""
-        if n or len(triggers):
-            encoder = Encoder(self.encoding, t_offset_us=t_offset, width=self.width, height=self.height)
-            data = encoder.encode_columns(cols.t, cols.x, cols.y, cols.p, triggers)
-        self._horizon_us = horizon_us
-        first = int(cols.t[0]) if n else t_first
-        return Packet(
-            data=data, t_first_us=first if n else t_first, t_last_us=horizon_us, n_events=n,
-            n_on=int(np.count_nonzero(cols.p)), n_triggers=len(triggers), t_offset_us=t_offset,
-        )
+    def _take_triggers(self, horizons: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The held triggers each packet takes (those up to its horizon not taken by an earlier one),
+        grouped by packet in held order, and the group bounds (n_packets + 1,); the rest stay held."""
+        held = self._triggers
+        if len(held) == 0:
+            return held, np.zeros(len(horizons) + 1, dtype=np.int64)
+        packet_of = np.searchsorted(np.maximum.accumulate(horizons), held["t"], side="left")
+        taken = packet_of < len(horizons)
+        order = np.argsort(packet_of[taken], kind="stable")
+        self._triggers = held[~taken]
+        counts = np.bincount(packet_of[taken], minlength=len(horizons))
+        return held[taken][order], np.concatenate([[0], np.cumsum(counts)])
+
+    def _packet(self, cols: _Columns, triggers: np.ndarray, t_offset_us: int) -> bytes:
+        """One packet's bytes by a fresh :class:`Encoder` (raises its FormatError on a bad event)."""
+        encoder = Encoder(self.encoding, t_offset_us=t_offset_us, width=self.width, height=self.height)
+        return encoder.encode_columns(cols.t, cols.x, cols.y, cols.p, triggers)
 
 
 @dataclass(frozen=True)

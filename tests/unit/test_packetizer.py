@@ -1,0 +1,69 @@
+"""The packetizer: self-contained packets that partition the stream, cut by time slot and size."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flagtrack.daemon.core.events import TRIGGER_DTYPE, make_events
+from flagtrack.daemon.errors import FormatError
+from flagtrack.drivers.camera.packets import PacketParams, Packetizer, decode_packet
+from flagtrack.drivers.formats.codec import LOOP_US, Encoder
+
+
+def stream(n: int = 40_000, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Events over ~20 ms with repeated times, small steps back and a time-loop crossing; triggers."""
+    rng = np.random.default_rng(seed)
+    t = 16_770_000 + np.sort(rng.integers(0, 20_000, n))
+    t[7::131] -= 2  # small steps back, as sensors make
+    events = make_events(t, rng.integers(0, 640, n), rng.integers(0, 480, n), rng.integers(0, 2, n))
+    triggers = np.zeros(60, dtype=TRIGGER_DTYPE)
+    triggers["t"] = np.sort(rng.integers(16_770_000, 16_790_000, 60))
+    triggers["channel"] = rng.integers(0, 3, 60)
+    triggers["edge"] = rng.integers(0, 2, 60)
+    return events, triggers
+
+
+@pytest.mark.parametrize("encoding", ["evt3", "evt2"])
+@pytest.mark.parametrize("params", [PacketParams(), PacketParams(packet_us=250, max_events=700)])
+def test_packets_partition_the_stream_and_decode_alone(encoding: str, params: PacketParams) -> None:
+    events, triggers = stream()
+    packetizer = Packetizer(encoding, 640, 480, params)
+    packets = []
+    cuts = [0, 1, 5_000, 5_001, 17_000, 33_333, len(events)]
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        late = triggers["t"] >= (events["t"][a] if a else 0)
+        early = triggers["t"] < (events["t"][b] if b < len(events) else 1 << 60)
+        packets += packetizer.push(events[a:b], triggers[late & early], t_until_us=int(events["t"][b - 1]))
+    packets += packetizer.flush()
+
+    got_events, got_triggers = [], []
+    running_max = -1
+    for packet in packets:
+        ev, tr = decode_packet(encoding, packet.data, packet.t_offset_us)
+        assert (len(ev), len(tr), packet.n_on) == (packet.n_events, packet.n_triggers, int(np.count_nonzero(ev["p"])))
+        loop = LOOP_US[encoding]
+        times = np.concatenate([ev["t"], tr["t"]])
+        if len(times):
+            assert packet.t_offset_us == times.min() // loop * loop
+            assert times.max() <= packet.t_last_us  # the horizon covers the packet
+            fresh = Encoder(encoding, t_offset_us=packet.t_offset_us, width=640, height=480)
+            assert fresh.encode(ev, tr) == packet.data  # what a fresh encoder makes of it
+        assert packet.n_events <= params.max_events
+        if len(ev):
+            maxima = np.maximum.accumulate(np.concatenate([[running_max], ev["t"]]))[1:]
+            if packet.n_events < params.max_events:  # whole slots: one slot of the running maximum
+                assert len(np.unique(maxima // params.packet_us)) == 1
+            running_max = int(maxima[-1])
+        got_events.append(ev)
+        got_triggers.append(tr)
+    np.testing.assert_array_equal(np.concatenate(got_events), events)
+    np.testing.assert_array_equal(np.sort(np.concatenate(got_triggers)["t"]), triggers["t"])
+    assert all(a.t_last_us <= b.t_last_us for a, b in zip(packets, packets[1:]) if b.n_events < params.max_events)
+
+
+def test_an_event_outside_the_sensor_is_named() -> None:
+    events = make_events([1_000, 1_010, 1_020], [5, 700, 6], [5, 5, 5], [1, 1, 1])
+    packetizer = Packetizer("evt3", 640, 480)
+    with pytest.raises(FormatError, match=r"event 1 .*'x': 700"):
+        packetizer.push(events, None, t_until_us=3_000)
