@@ -65,7 +65,7 @@ class TrackerService:
         self.tracker = tracker_factory()
         self.packets = 0
         self.missing_packets = 0
-        self.malformed_packets = 0
+        self.undecodable_packets = 0  # well-formed messages whose EVT bytes are corrupt
         self.updates = 0
         self.events = 0
         self.streams_ended = 0
@@ -118,7 +118,6 @@ class TrackerService:
                 self._publish_if_due(force=len(packets.channel) == 0)
                 now = time.monotonic()
                 if now - last_status >= self.cfg.status_interval_s:
-                    self.malformed_packets = packets.malformed
                     status_pub.put(self._status("tracking", window, now, lag_s))
                     window = {"events": self.events, "updates": self.updates, "t": now}
                     last_status = now
@@ -169,7 +168,7 @@ class TrackerService:
                     chunks.append(decode_packet(packet.encoding, packet.data, packet.t_offset_us,
                                                 source=f"packet {packet.seq} of camera {packet.camera_id}")[0])
                 except FormatError as exc:
-                    self.malformed_packets += 1
+                    self.undecodable_packets += 1
                     log.warning("tracker: %s", exc)
         self.events += sum(len(c) for c in chunks)
         self._track(chunks, run[-1].sent_ns, end_of_stream)
@@ -216,6 +215,11 @@ class TrackerService:
                 batch.select(part), source=self.name, seq=self._seq_out, units=self.units, source_ns=source_ns[part],
                 final=final and start == starts[-1]))
             self._seq_out += 1
+
+    @property
+    def malformed_packets(self) -> int:
+        """Packets dropped as malformed: bad messages and messages whose EVT bytes do not decode."""
+        return self.packets_sub.malformed + self.undecodable_packets
 
     def _status(self, state: str, window: dict[str, float], now: float, lag_s: float) -> TrackerStatus:
         elapsed = max(now - window["t"], 1e-9)

@@ -72,3 +72,41 @@ def test_replay_through_the_bus_equals_offline_reconstruct(tmp_path: Path, metho
         np.testing.assert_allclose(getattr(got, name), getattr(want, name), rtol=0, atol=1e-9, err_msg=name)
     assert service.missing_packets == 0 and service.malformed_packets == 0
     assert statuses[-1].state == "stopped" and statuses[-1].packets == service.packets
+
+
+def test_bad_packets_and_gaps_are_counted_and_tracking_goes_on(tmp_path: Path) -> None:
+    """A message that is not a packet, a packet whose EVT bytes are corrupt and a lost packet are
+    counted (status), and the packets around them are still tracked."""
+    from flagtrack.daemon.schema import EventPacket
+    from flagtrack.drivers.camera.packets import PacketParams, Packetizer
+
+    events = np.concatenate(list(line_events(FLAG, 0, 40_000, 640, 480)))
+    packets = Packetizer("evt3", 640, 480, PacketParams(packet_us=1000)).push(events, None, t_until_us=40_000)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    params = CONFIG.tracker_params()
+    with Bus(BusConfig(namespace="flagtrack/bad", listen=(endpoint,))) as trk_bus, \
+            Bus(BusConfig(namespace="flagtrack/bad", connect=(endpoint,))) as cam_bus:
+        lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=100_000)
+        service = TrackerService(trk_bus, TrackerServiceConfig(status_interval_s=0.2),
+                                 lambda: Tracker(params, sensor_size=(640, 480)))
+        stop = threading.Event()
+        thread = threading.Thread(target=service.run, args=(stop,))
+        thread.start()
+        time.sleep(0.4)
+        pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
+        corrupt = np.full(8, 0x9000, dtype="<u2").tobytes()  # a reserved EVT 3.0 word type
+        for seq, packet in enumerate(packets):
+            if seq == 10:
+                pub.put_bytes(b"not a packet")
+            data = corrupt if seq == 20 else packet.data
+            if seq != 30:  # lost on the way
+                pub.put(EventPacket("cam0", seq, packet.t_first_us, packet.t_last_us, packet.n_events, 640, 480,
+                                    "evt3", time.time_ns(), packet.t_offset_us, data=data))
+        assert wait_for(lambda: service.packets == len(packets) - 1, timeout_s=20)
+        updates = 0
+        while (msg := lines.recv(timeout_s=1.0)) is not None:
+            updates += len(msg.t_s)
+        stop.set()
+        thread.join(10)
+    assert service.missing_packets == 1 and service.malformed_packets == 2
+    assert updates > 120  # 4 updates per 1 ms packet, a few lost around the gaps
