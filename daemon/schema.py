@@ -173,6 +173,7 @@ class CentrelineMessage:
 
     ``source_ns`` (n_t,) is the ``sent_ns`` of the newest packet each update used (for latency).
     ``final`` marks the last message of a stream (after the camera's end of stream).
+    ``published_ns`` is the wall-clock time (ns) the tracker published the message (0: not said).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.CENTRELINES
@@ -191,14 +192,16 @@ class CentrelineMessage:
     n_events: np.ndarray
     source_ns: np.ndarray
     final: bool = False
+    published_ns: int = 0
 
     @classmethod
     def from_batch(
-        cls, batch: CentrelineBatch, *, source: str, seq: int, units: str, source_ns: np.ndarray, final: bool = False
+        cls, batch: CentrelineBatch, *, source: str, seq: int, units: str, source_ns: np.ndarray, final: bool = False,
+        published_ns: int = 0,
     ) -> CentrelineMessage:
         """Wrap a tracker batch for the wire."""
         return cls(
-            final=final, source=source, seq=seq, units=units, t_s=batch.t_s, s=batch.s, x=batch.x, y=batch.y,
+            final=final, published_ns=published_ns, source=source, seq=seq, units=units, t_s=batch.t_s, s=batch.s, x=batch.x, y=batch.y,
             joints_x=batch.joints_x, joints_y=batch.joints_y, tip_x=batch.tip_x, tip_y=batch.tip_y,
             delta_rms=batch.delta_rms, n_events=batch.n_events, source_ns=np.asarray(source_ns, np.int64),
         )

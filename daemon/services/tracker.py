@@ -213,7 +213,7 @@ class TrackerService:
             part = slice(start, start + self.cfg.batch_updates)
             self._lines_pub.put(CentrelineMessage.from_batch(
                 batch.select(part), source=self.name, seq=self._seq_out, units=self.units, source_ns=source_ns[part],
-                final=final and start == starts[-1]))
+                final=final and start == starts[-1], published_ns=time.time_ns()))
             self._seq_out += 1
 
     @property

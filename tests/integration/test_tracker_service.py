@@ -56,6 +56,8 @@ def live(path: Path, config: TrackingConfig, speed: float = 0.0) -> tuple[Centre
         while (s := status.recv(timeout_s=0.5)) is not None:
             statuses.append(s)
     assert [m.seq for m in messages] == list(range(len(messages)))
+    # stamped at publication, after the packets they used reached the camera adapter (same host clock)
+    assert all(m.published_ns >= m.source_ns.max() for m in messages if len(m.source_ns))
     return CentrelineBatch.concatenate([m.batch() for m in messages]), statuses, service
 
 
