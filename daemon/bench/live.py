@@ -39,6 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--latency-rate", type=float, default=5.0, help="event rate of the latency run, Mev/s")
     parser.add_argument("--latency-seconds", type=float, default=4.0, help="wall time of the latency run, s")
     parser.add_argument("--tau", type=float, default=2.5e-4, help="tracker update interval, s")
+    parser.add_argument("--packet-us", type=int, default=1000, help="camera time per event packet, us (the default "
+                        "of camera.packet_us); the replay hands over as much per read when paced")
     parser.add_argument("--cache", type=Path, default=None, help="folder for the recording")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
@@ -58,11 +60,13 @@ def run(args: argparse.Namespace) -> int:
         n_events = sum(len(chunk.events) for chunk in reader)
     file_rate = n_events / args.seconds
     tracker = {"root": list(ROOT), "length": LENGTH, "tau_s": args.tau}
-    throughput = _measure(recording, tracker, speed=0.0, loop=False, wall_s=None)
+    if args.packet_us < 1:
+        raise SystemExit("flagtrack bench live: --packet-us must be positive")
+    throughput = _measure(recording, tracker, args.packet_us, speed=0.0, loop=False, wall_s=None)
     speed = args.latency_rate * 1e6 / file_rate
-    latency = _measure(recording, tracker, speed=speed, loop=True, wall_s=args.latency_seconds)
+    latency = _measure(recording, tracker, args.packet_us, speed=speed, loop=True, wall_s=args.latency_seconds)
     results = {
-        "events": n_events, "file_rate_mev_s": file_rate / 1e6,
+        "events": n_events, "file_rate_mev_s": file_rate / 1e6, "packet_us": args.packet_us,
         "sustained_mev_s": n_events / throughput["elapsed_s"] / 1e6 if throughput["complete"] else None,
         "throughput_missing_packets": throughput["missing_packets"], "throughput_updates": throughput["updates"],
         "latency_rate_mev_s": args.latency_rate, "latency_updates": latency["updates"],
@@ -74,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(results))
     else:
         print(f"camera -> Zenoh -> tracker, separate processes, {n_events / 1e6:.1f} M events "
-              f"({file_rate / 1e6:.1f} Mev/s of camera data), tau = {args.tau * 1e6:g} us")
+              f"({file_rate / 1e6:.1f} Mev/s of camera data), tau = {args.tau * 1e6:g} us, "
+              f"packets of {args.packet_us} us")
         sustained = results["sustained_mev_s"]
         print(f"  throughput: {sustained:.1f} Mev/s sustained, {throughput['missing_packets']} packets lost"
               if sustained else "  throughput: the tracker did not finish the stream")
@@ -86,7 +91,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _measure(recording: Path, tracker: dict[str, Any], *, speed: float, loop: bool, wall_s: float | None) -> dict[str, Any]:
+def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed: float, loop: bool,
+             wall_s: float | None) -> dict[str, Any]:
     import numpy as np
 
     from flagtrack.daemon.schema import CentrelineMessage, TrackerStatus
@@ -99,8 +105,9 @@ def _measure(recording: Path, tracker: dict[str, Any], *, speed: float, loop: bo
         common = {"rig": rig, "tracker": tracker, "tracker_service": {"batch_updates": 64, "max_batch_delay_s": 0.001}}
         tracker_cfg.write_text(json.dumps({**common, "bus": {"listen": [f"tcp/127.0.0.1:{port}"]}}))
         camera_cfg.write_text(json.dumps({**common, "bus": {"connect": [f"tcp/127.0.0.1:{port}"]},
-                                          "camera": {"adapter": "replay",
-                                                     "replay": {"path": str(recording), "speed": speed, "loop": loop}}}))
+                                          "camera": {"adapter": "replay", "packet_us": packet_us,
+                                                     "replay": {"path": str(recording), "speed": speed, "loop": loop,
+                                                                "slice_us": packet_us}}}))
         procs = [_start("tracker", tracker_cfg)]
         try:
             with Bus(BusConfig(namespace=f"flagtrack/{rig}", connect=(f"tcp/127.0.0.1:{port}",))) as bus:
