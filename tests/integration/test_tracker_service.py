@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -32,26 +34,42 @@ def offline(path: Path, config: TrackingConfig) -> CentrelineBatch:
     return CentrelineBatch.concatenate([*batches, tracker.finish()])
 
 
-def live(path: Path, config: TrackingConfig, speed: float = 0.0) -> tuple[CentrelineBatch, list, TrackerService]:
+@contextmanager
+def running_tracker(config: TrackingConfig, namespace: str) -> Iterator[tuple[Bus, TrackerService, Callable[[], None]]]:
+    """A tracker service on its own bus and thread; yields (a second bus joined to it, the service,
+    a function that stops the service and waits for it). Callers subscribe, then wait a little for
+    the subscriptions to reach the other session before publishing."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     params = config.tracker_params()
-    with Bus(BusConfig(namespace="flagtrack/trk", listen=(endpoint,))) as trk_bus, \
-            Bus(BusConfig(namespace="flagtrack/trk", connect=(endpoint,))) as cam_bus:
-        lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000)
-        status = cam_bus.subscribe(cam_bus.keys.tracker_status(), TrackerStatus)
+    with Bus(BusConfig(namespace=namespace, listen=(endpoint,))) as trk_bus, \
+            Bus(BusConfig(namespace=namespace, connect=(endpoint,))) as cam_bus:
         service = TrackerService(trk_bus, TrackerServiceConfig(status_interval_s=0.2),
                                  lambda: Tracker(params, sensor_size=(640, 480)))
         stop = threading.Event()
         thread = threading.Thread(target=service.run, args=(stop,))
         thread.start()
+
+        def stop_service() -> None:
+            stop.set()
+            thread.join(10)
+
+        try:
+            yield cam_bus, service, stop_service
+        finally:
+            stop_service()
+
+
+def live(path: Path, config: TrackingConfig, speed: float = 0.0) -> tuple[CentrelineBatch, list, TrackerService]:
+    with running_tracker(config, "flagtrack/trk") as (cam_bus, service, stop_service):
+        lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000)
+        status = cam_bus.subscribe(cam_bus.keys.tracker_status(), TrackerStatus)
         time.sleep(0.4)
         CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(ReplayConfig(path, speed=speed))).run(threading.Event())
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
         messages = []
         while (msg := lines.recv(timeout_s=1.0)) is not None:
             messages.append(msg)
-        stop.set()
-        thread.join(10)
+        stop_service()
         statuses = []
         while (s := status.recv(timeout_s=0.5)) is not None:
             statuses.append(s)
@@ -84,18 +102,10 @@ def test_bad_packets_and_gaps_are_counted_and_tracking_goes_on(tmp_path: Path) -
 
     events = np.concatenate(list(line_events(FLAG, 0, 40_000, 640, 480)))
     packets = Packetizer("evt3", 640, 480, PacketParams(packet_us=1000)).push(events, None, t_until_us=40_000)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    params = CONFIG.tracker_params()
-    with Bus(BusConfig(namespace="flagtrack/bad", listen=(endpoint,))) as trk_bus, \
-            Bus(BusConfig(namespace="flagtrack/bad", connect=(endpoint,))) as cam_bus:
+    with running_tracker(CONFIG, "flagtrack/bad") as (cam_bus, service, _):
         lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=100_000)
-        service = TrackerService(trk_bus, TrackerServiceConfig(status_interval_s=0.2),
-                                 lambda: Tracker(params, sensor_size=(640, 480)))
-        stop = threading.Event()
-        thread = threading.Thread(target=service.run, args=(stop,))
-        thread.start()
-        time.sleep(0.4)
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
+        time.sleep(0.4)
         corrupt = np.full(8, 0x9000, dtype="<u2").tobytes()  # a reserved EVT 3.0 word type
         for seq, packet in enumerate(packets):
             if seq == 10:
@@ -108,7 +118,5 @@ def test_bad_packets_and_gaps_are_counted_and_tracking_goes_on(tmp_path: Path) -
         updates = 0
         while (msg := lines.recv(timeout_s=1.0)) is not None:
             updates += len(msg.t_s)
-        stop.set()
-        thread.join(10)
     assert service.missing_packets == 1 and service.malformed_packets == 2
     assert updates > 120  # 4 updates per 1 ms packet, a few lost around the gaps
