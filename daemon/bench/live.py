@@ -50,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
     from flagtrack.daemon.bench.reconstruct import LENGTH, ROOT, make_recording
     from flagtrack.drivers.formats import open_events
 
+    if args.packet_us < 1:
+        raise SystemExit("flagtrack bench live: --packet-us must be positive")
     cache = args.cache or Path(tempfile.gettempdir()) / "flagtrack-bench"
     cache.mkdir(parents=True, exist_ok=True)
     recording = cache / f"live-{args.seconds:g}s.raw"
@@ -60,8 +62,6 @@ def run(args: argparse.Namespace) -> int:
         n_events = sum(len(chunk.events) for chunk in reader)
     file_rate = n_events / args.seconds
     tracker = {"root": list(ROOT), "length": LENGTH, "tau_s": args.tau}
-    if args.packet_us < 1:
-        raise SystemExit("flagtrack bench live: --packet-us must be positive")
     throughput = _measure(recording, tracker, args.packet_us, speed=0.0, loop=False, wall_s=None)
     speed = args.latency_rate * 1e6 / file_rate
     latency = _measure(recording, tracker, args.packet_us, speed=speed, loop=True, wall_s=args.latency_seconds)

@@ -56,8 +56,10 @@ class Packetizer:
     says its stream is complete past the slot end (``t_until_us``, e.g. a still flag: no events,
     but time goes on). Each packet's ``t_last_us`` is its completeness horizon: every event with
     ``t <= t_last_us`` is in it or in an earlier packet. When only time passes, an empty packet
-    carries the horizon forward. Events are held as contiguous columns (the encoder runs about
-    twice as fast on them as on the fields of an event array).
+    carries the horizon forward. An event's slot is that of the latest time seen so far (sensors
+    step back by a few µs; a late event joins the current slot), so horizons never go back. Events
+    are held as contiguous columns (the encoder runs about twice as fast on them as on the fields
+    of an event array).
 
     Args:
         encoding: ``evt3`` or ``evt2``.
@@ -66,6 +68,8 @@ class Packetizer:
     """
 
     def __init__(self, encoding: str, width: int, height: int, params: PacketParams = PacketParams()) -> None:
+        if encoding not in _WORD_DTYPE:
+            raise FormatError(f"cannot encode {encoding!r} (encoders: evt2, evt3)")
         self.encoding = encoding
         self.width, self.height = width, height
         self.params = params
@@ -112,7 +116,7 @@ class Packetizer:
         n_held = len(self._cols.t)
         if n_held == 0 and len(self._triggers) == 0:
             return []
-        t_last = max(int(self._cols.t.max()) if n_held else -1,
+        t_last = max(max(self._max_before, int(self._cols.t.max())) if n_held else -1,
                      int(self._triggers["t"].max()) if len(self._triggers) else -1)
         packets = self._packets(self._slot_segments(0, n_held, t_last))
         self._cols = _Columns.empty()
@@ -138,29 +142,38 @@ class Packetizer:
         triggers, tr_bounds = self._take_triggers(horizons)
         cols, n_packets = self._cols, len(segments)
         n_triggers = np.diff(tr_bounds)
-        out = np.empty(packet_words(stops - starts, n_triggers), dtype=_WORD_DTYPE[self.encoding])
         out_ends, t_offsets, n_on = (np.zeros(n_packets, dtype=np.int64) for _ in range(3))
-        done, status = encode_packets(self.encoding == "evt3", cols.t, cols.x, cols.y, cols.p, starts, stops, horizons,
-                                      triggers["t"], triggers["channel"], triggers["edge"], tr_bounds[:-1],
-                                      tr_bounds[1:], LOOP_US[self.encoding], self.width, self.height, out, out_ends,
-                                      t_offsets, n_on)
-        if status != tb.OK:  # encode the failing packet alone: the encoder names the event and the reason
-            q = done
-            self._packet(cols.slice(int(starts[q]), int(stops[q])), triggers[tr_bounds[q]:tr_bounds[q + 1]],
-                         int(t_offsets[q]))
-            raise FormatError(f"cannot encode packet {q} (status {status})")  # the encoder raised above
+        data: list[bytes] = []
+        q0 = 0
+        while q0 < n_packets:
+            out = np.empty(packet_words(stops[q0:] - starts[q0:], n_triggers[q0:]), dtype=_WORD_DTYPE[self.encoding])
+            done, status = encode_packets(self.encoding == "evt3", cols.t, cols.x, cols.y, cols.p, starts[q0:],
+                                          stops[q0:], horizons[q0:], triggers["t"], triggers["channel"],
+                                          triggers["edge"], tr_bounds[q0:-1], tr_bounds[q0 + 1:],
+                                          LOOP_US[self.encoding], self.width, self.height, out, out_ends[q0:],
+                                          t_offsets[q0:], n_on[q0:])
+            word = 0
+            for q in range(q0, q0 + done):
+                data.append(out[word:out_ends[q]].tobytes())
+                word = int(out_ends[q])
+            q0 += done
+            if status != tb.OK:
+                # packet q0 did not fit the room the batch allows (time jumps or jitter across a time-base
+                # step cost more words per event) or holds a bad event: a fresh encoder grows its output
+                # as needed, and raises a FormatError naming the event and the reason
+                data.append(self._packet(cols.slice(int(starts[q0]), int(stops[q0])),
+                                         triggers[tr_bounds[q0]:tr_bounds[q0 + 1]], int(t_offsets[q0])))
+                q0 += 1
         self._horizon_us = int(horizons[-1])
         packets = []
-        word_start = 0
         for q in range(n_packets):
             i0, i1, n_tr = int(starts[q]), int(stops[q]), int(n_triggers[q])
             t_first = int(cols.t[i0]) if i1 > i0 else \
                 min(int(horizons[q]), int(triggers["t"][tr_bounds[q]:tr_bounds[q + 1]].min()) if n_tr else int(horizons[q]))
             packets.append(Packet(
-                data=out[word_start:out_ends[q]].tobytes(), t_first_us=t_first, t_last_us=int(horizons[q]),
-                n_events=i1 - i0, n_on=int(n_on[q]), n_triggers=n_tr, t_offset_us=int(t_offsets[q]),
+                data=data[q], t_first_us=t_first, t_last_us=int(horizons[q]), n_events=i1 - i0, n_on=int(n_on[q]),
+                n_triggers=n_tr, t_offset_us=int(t_offsets[q]),
             ))
-            word_start = int(out_ends[q])
         return packets
 
     def _take_triggers(self, horizons: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

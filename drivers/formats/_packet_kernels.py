@@ -18,7 +18,8 @@ from flagtrack.drivers.formats._timebase import OK
 
 @njit(cache=True, nogil=True)
 def packet_words(n_events: np.ndarray, n_triggers: np.ndarray) -> int:
-    """Words of output room for packets of these sizes (an encoder's bound, per packet)."""
+    """Words of output room for packets of these sizes (the encoder's usual bound; time jumps of
+    several loops or jitter across time-base steps can need more)."""
     total = 0
     for q in range(len(n_events)):
         total += 3 * n_events[q] + 4 * n_triggers[q] + 64
@@ -32,8 +33,10 @@ def encode_packets(evt3, t, x, y, p, starts, stops, horizons, tr_t, tr_c, tr_e, 
 
     Packet q's words are ``out[out_ends[q-1]:out_ends[q]]``; its time offset is the start of the
     ``loop_us`` loop of its earliest time (``horizons[q]`` if it is empty), and ``n_on`` counts its
-    ON events. Returns (packets encoded, status): on an error status, packet ``packets encoded`` is
-    the one that failed (the caller encodes it alone to report the error).
+    ON events (both set even for a packet that fails). Returns (packets encoded, status): on another
+    status than OK, packet ``packets encoded`` failed: it did not fit ``out`` (sized by
+    :func:`packet_words`, which rare streams exceed) or holds a bad event; the caller encodes it
+    alone with an encoder that grows its output and names bad events.
     """
     state = np.zeros(16, dtype=np.int64)
     k0 = 0

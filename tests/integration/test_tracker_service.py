@@ -96,7 +96,7 @@ def test_replay_through_the_bus_equals_offline_reconstruct(tmp_path: Path, metho
 
 def test_bad_packets_and_gaps_are_counted_and_tracking_goes_on(tmp_path: Path) -> None:
     """A message that is not a packet, a packet whose EVT bytes are corrupt and a lost packet are
-    counted (status), and the packets around them are still tracked."""
+    counted, and the packets around them are still tracked."""
     from flagtrack.daemon.schema import EventPacket
     from flagtrack.drivers.camera.packets import PacketParams, Packetizer
 

@@ -66,6 +66,8 @@ def test_up_replay_gives_exactly_the_reconstruct_centrelines(recording: Path, tm
         ("camra: {}\n", "'camra'"),
         ("services: [camera, teleporter]\ntracker: {root: [1, 2], length: 100}\n", "teleporter"),
         ("camera: {adapter: replay}\ntracker: {root: [1, 2], length: 100}\n", "replay"),
+        ("camera: {adapter: replay, replay: {path: x.raw, encoding: evt21}}\ntracker: {root: [1, 2], length: 100}\n",
+         "'camera.replay': encoding must be evt2 or evt3"),
     ],
 )
 def test_bad_rig_config_is_one_clear_line(tmp_path: Path, yaml_text: str, words: str) -> None:

@@ -67,3 +67,30 @@ def test_an_event_outside_the_sensor_is_named() -> None:
     packetizer = Packetizer("evt3", 640, 480)
     with pytest.raises(FormatError, match=r"event 1 .*'x': 700"):
         packetizer.push(events, None, t_until_us=3_000)
+
+
+def test_packets_that_need_more_room_than_usual_are_still_encoded() -> None:
+    """Sensor jitter across a time-base step (the time high word repeats for every event) and a
+    trigger many time loops before an event need more words than the usual bound."""
+    n = 200
+    jitter = make_events(np.where(np.arange(n) % 2 == 0, 4096, 4095), np.arange(n) % 640, np.arange(n) % 480,
+                         np.ones(n))
+    packets = Packetizer("evt3", 640, 480).push(jitter, None, t_until_us=5_000)
+    assert [p.n_events for p in packets] == [n]
+    np.testing.assert_array_equal(decode_packet("evt3", packets[0].data, packets[0].t_offset_us)[0], jitter)
+
+    trigger = np.zeros(1, dtype=TRIGGER_DTYPE)  # at t = 0, then an event 600 s (36 EVT 3.0 loops) later
+    late = make_events([600_000_000], [1], [1], [1])
+    after = make_events([600_002_500], [2], [2], [0])
+    packetizer = Packetizer("evt3", 640, 480)
+    packets = packetizer.push(late, trigger, t_until_us=600_001_000) + packetizer.push(after, None, 600_003_000)
+    assert [(p.n_events, p.n_triggers) for p in packets] == [(1, 1), (1, 0)]
+    events, triggers = decode_packet("evt3", packets[0].data, packets[0].t_offset_us)
+    np.testing.assert_array_equal(events, late)
+    np.testing.assert_array_equal(triggers, trigger)
+    np.testing.assert_array_equal(decode_packet("evt3", packets[1].data, packets[1].t_offset_us)[0], after)
+
+
+def test_an_encoding_without_encoder_is_refused_up_front() -> None:
+    with pytest.raises(FormatError, match="cannot encode 'evt21'"):
+        Packetizer("evt21", 640, 480)
