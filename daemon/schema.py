@@ -201,8 +201,9 @@ class CentrelineMessage:
     ) -> CentrelineMessage:
         """Wrap a tracker batch for the wire."""
         return cls(
-            final=final, published_ns=published_ns, source=source, seq=seq, units=units, t_s=batch.t_s, s=batch.s, x=batch.x, y=batch.y,
-            joints_x=batch.joints_x, joints_y=batch.joints_y, tip_x=batch.tip_x, tip_y=batch.tip_y,
+            final=final, published_ns=published_ns, source=source, seq=seq, units=units, t_s=batch.t_s, s=batch.s,
+            x=batch.x, y=batch.y, joints_x=batch.joints_x, joints_y=batch.joints_y, tip_x=batch.tip_x,
+            tip_y=batch.tip_y,
             delta_rms=batch.delta_rms, n_events=batch.n_events, source_ns=np.asarray(source_ns, np.int64),
         )
 

@@ -168,8 +168,11 @@ class Packetizer:
         packets = []
         for q in range(n_packets):
             i0, i1, n_tr = int(starts[q]), int(stops[q]), int(n_triggers[q])
-            t_first = int(cols.t[i0]) if i1 > i0 else \
-                min(int(horizons[q]), int(triggers["t"][tr_bounds[q]:tr_bounds[q + 1]].min()) if n_tr else int(horizons[q]))
+            t_first = int(horizons[q])
+            if i1 > i0:
+                t_first = int(cols.t[i0])
+            elif n_tr:
+                t_first = min(t_first, int(triggers["t"][tr_bounds[q]:tr_bounds[q + 1]].min()))
             packets.append(Packet(
                 data=data[q], t_first_us=t_first, t_last_us=int(horizons[q]), n_events=i1 - i0, n_on=int(n_on[q]),
                 n_triggers=n_tr, t_offset_us=int(t_offsets[q]),

@@ -47,7 +47,8 @@ class ReplayConfig:
         if self.slice_us < 1:
             raise ValueError("slice_us must be positive")
         if self.encoding not in (None, "evt2", "evt3"):
-            raise ValueError(f"encoding must be evt2 or evt3 (the encodings packets are made in), got {self.encoding!r}")
+            raise ValueError(f"encoding must be evt2 or evt3 (the encodings packets are made in), "
+                             f"got {self.encoding!r}")
 
 
 class ReplayCamera:
