@@ -3,7 +3,7 @@
 Makes (once, cached) an EVT 3.0 recording of a flapping line (``drivers/sim/quickline``,
 ``WavyFlag`` L = 200 px at 20 Hz, about 6 Mev/s of camera data), then, pinned to one core:
 
-- runs the command once to warm up (numba cache, ahead-of-time kernels, .pyc files);
+- runs the command once to warm up (numba cache, .pyc files);
 - times the real command end to end in a subprocess (interpreter start, imports, loading the
   compiled kernels, decoding, tracking, HDF5 writing), best of ``--repeat``, with its peak RSS;
 - times the same command on a 0.1 s file: the fixed start-up cost;

@@ -15,7 +15,7 @@ Two built-in actions (config ``sweep.actions``)::
 Placeholders in ``argv`` (Python ``{name}``): ``point_id``, ``index``, ``branch``, ``speed_mps``,
 ``run_dir``, ``point_dir`` (``run_dir/points``), ``raw`` (the point's raw file; after recording) and
 ``centrelines`` (its centreline file). The command runs in ``run_dir``; its output goes to
-``points/<point_id>.<action index>.log``.
+``points/<point_id>.action<N>.log`` (N: the action's number at the point, from 0).
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flagtrack.daemon.core.events import empty_events, empty_triggers
+from flagtrack.daemon.core.events import empty_triggers
 from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.formats import make_decoder
 from flagtrack.drivers.formats import _timebase as tb

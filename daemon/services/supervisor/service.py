@@ -28,7 +28,7 @@ from flagtrack.daemon.services.supervisor.feedback import ControllerState, contr
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor, point_state
 from flagtrack.daemon.sweep.actions import ActionOutcome, PauseAction, parse_action, run_command
 from flagtrack.daemon.sweep.plan import Action, EndPoint, Point, Record, SetSpeed, Wait, plan_points, sweep_plan
-from flagtrack.daemon.sweep.runlog import PointResult, RunLog, completed_points, point_paths, stored_sweep
+from flagtrack.daemon.sweep.runlog import POINTS_DIR, PointResult, RunLog, completed_points, point_paths, stored_sweep
 from flagtrack.daemon.sweep.summary import write_summary
 from flagtrack.daemon.transport import Bus
 
@@ -273,7 +273,7 @@ class SupervisorService:
         if isinstance(action, PauseAction):
             self._idle(action.seconds)
             return ActionOutcome(step.name, True, "", action.seconds)
-        point_dir = self.run_dir / "points"  # type: ignore[operator]
+        point_dir = self.run_dir / POINTS_DIR  # type: ignore[operator]
         raw, lines = point_paths(point.point_id)
         context = {"point_id": point.point_id, "index": point.index, "branch": point.branch.value,
                    "speed_mps": f"{point.speed_mps:g}", "run_dir": str(self.run_dir.resolve()),  # type: ignore[union-attr]
