@@ -52,6 +52,24 @@ class TrackerServiceConfig:
     max_coalesce: int = 64
 
 
+def warm_up_kernels(tracker_factory: Any) -> None:
+    """Run the packetizer, the decoder and a core tracker once on a tiny synthetic stream, so that
+    loading the compiled kernels (about a second; on a first run, compiling them: tens of seconds)
+    happens before the first packet, not while packets queue up."""
+    from flagtrack.daemon.core.events import make_events
+    from flagtrack.drivers.camera.packets import Packetizer
+
+    n = 400
+    t = np.arange(n, dtype=np.int64) * 10
+    events = make_events(t, 10 + (np.arange(n) % 20), 10 + (np.arange(n) // 20), np.arange(n) % 2)
+    packetizer = Packetizer("evt3", 64, 64)
+    for packet in packetizer.push(events) + packetizer.flush():
+        decoded, _ = decode_packet("evt3", packet.data, packet.t_offset_us)
+        tracker = tracker_factory()
+        tracker.feed(decoded)
+        tracker.finish()
+
+
 class TrackerService:
     """Tracks one camera live. ``tracker_factory`` builds a fresh core Tracker (one per stream)."""
 
@@ -78,20 +96,8 @@ class TrackerService:
                                          capacity=cfg.queue_packets)
 
     def warm_up(self) -> None:
-        """Run the decoder and the core once on a tiny synthetic stream, so that loading the compiled
-        kernels (about a second) happens before the first packet, not while packets queue up."""
-        from flagtrack.daemon.core.events import make_events
-        from flagtrack.drivers.camera.packets import Packetizer
-
-        n = 400
-        t = np.arange(n, dtype=np.int64) * 10
-        events = make_events(t, 10 + (np.arange(n) % 20), 10 + (np.arange(n) // 20), np.arange(n) % 2)
-        packetizer = Packetizer("evt3", 64, 64)
-        for packet in packetizer.push(events) + packetizer.flush():
-            decoded, _ = decode_packet("evt3", packet.data, packet.t_offset_us)
-            tracker = self.tracker_factory()
-            tracker.feed(decoded)
-            tracker.finish()
+        """Load the compiled kernels before the first packet (see :func:`warm_up_kernels`)."""
+        warm_up_kernels(self.tracker_factory)
 
     def run(self, stop: threading.Event) -> None:
         self.warm_up()
