@@ -75,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"flagtrack demo: simulated onset {ONSET_MPS} m/s going up, decay {DECAY_MPS} m/s coming down; "
           f"sweeping {speeds[0]:g} -> {speeds[-1]:g} -> {speeds[0]:g} m/s in {step_mps:g} m/s steps "
           f"(about {'30 s' if args.quick else '2 minutes'}) into {out}", file=sys.stderr)
-    _load_kernels(rig)
+    print("flagtrack demo: loading the compiled kernels (the first run compiles them: about a minute) ...",
+          file=sys.stderr)
     started = time.monotonic()
     result = run_rig(rig, list(rig.services), shutdown_timeout_s=30.0, quiet=True)
     supervisor = result.service("supervisor")
@@ -99,17 +100,3 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary))
     return result.code or (0 if reason == "finished" else 1)
-
-
-def _load_kernels(rig: Any) -> None:
-    """Compile (first run after installing: about a minute) or load the compiled kernels of the twin
-    camera, the packets and the tracker before the rig starts: all services share this process, and
-    while they compile, the tracker would not come up within the supervisor's start-up timeout."""
-    from flagtrack.daemon.services.build import open_camera, tracker_setup
-    from flagtrack.daemon.services.tracker import warm_up_kernels
-    from flagtrack.drivers.camera.simulated import fast_forward
-
-    print("flagtrack demo: loading the compiled kernels (the first run compiles them: about a minute) ...",
-          file=sys.stderr)
-    fast_forward(open_camera(rig.camera), 0.05)
-    warm_up_kernels(tracker_setup(rig).factory)
