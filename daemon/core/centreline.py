@@ -33,13 +33,8 @@ class CentrelineBatch:
 
     def __post_init__(self) -> None:
         n_t, n_s = len(self.t_s), len(self.s)
-        shapes = {
-            "x": (self.x.shape, (n_t, n_s)),
-            "y": (self.y.shape, (n_t, n_s)),
-            "delta_rms": (self.delta_rms.shape, (n_t,)),
-            "n_events": (self.n_events.shape, (n_t,)),
-        }
-        for name, (got, want) in shapes.items():
+        for name, want in (("x", (n_t, n_s)), ("y", (n_t, n_s)), ("delta_rms", (n_t,)), ("n_events", (n_t,))):
+            got = getattr(self, name).shape
             if got != want:
                 raise ValueError(f"CentrelineBatch.{name} has shape {got}, expected {want}")
         if self.joints_x.shape != self.joints_y.shape or self.joints_x.shape[:1] != (n_t,):

@@ -206,7 +206,7 @@ class Tracker:
         times = buf.t[:buf.n]
         lo_idx = np.searchsorted(times, lo_us, side="left")
         hi_idx = np.searchsorted(times, hi_us, side="left")
-        if self.params.max_gap_s is not None:
+        if self.params.max_gap_s is not None and bool((hi_idx == lo_idx).any()):  # gaps are empty windows
             if len(times):
                 previous = np.where(lo_idx > 0, times[np.maximum(lo_idx - 1, 0)], buf.last_dropped_t)
             else:  # every event so far was filtered out (a still flag and sensor noise)

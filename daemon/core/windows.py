@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 _MAX_BATCH = 1 << 16  # update times generated per step (bounds memory after a long gap)
+_NONE = (np.empty(0), np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64))  # no update taken (read-only use)
 
 
 @dataclass(frozen=True)
@@ -126,6 +127,8 @@ class UpdateClock:
         Returns:
             t_us (n,) float64 window centres, lo_us (n,) int64, hi_us (n,) int64 integer bounds.
         """
+        if not self._next_ready(complete_before_us, started_before_us):
+            return _NONE
         parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         reach = complete_before_us if started_before_us is None else max(complete_before_us, started_before_us)
         taken = 0
@@ -156,5 +159,17 @@ class UpdateClock:
                 continue  # moved into the next segment: keep going there
             break
         if not parts:
-            return np.empty(0), np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+            return _NONE
+        if len(parts) == 1:
+            return parts[0]
         return tuple(np.concatenate(cols) for cols in zip(*parts))  # type: ignore[return-value]
+
+    def _next_ready(self, complete_before_us: int, started_before_us: int | None) -> bool:
+        """Whether the next update can be taken (the cheap test that spares :meth:`take` its arrays
+        when a chunk completed no window); the same rounding as :meth:`take`."""
+        t_us, tau_us = self._peek()
+        if t_us > self._stop_us:
+            return False
+        lo = math.ceil(t_us - tau_us / 2)
+        hi = math.ceil(t_us + tau_us / 2)
+        return hi <= complete_before_us or (started_before_us is not None and lo <= started_before_us)
