@@ -408,7 +408,7 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
 def _read_blobs(cls: type, blobs: Any, payload: memoryview, key: str | None) -> dict[str, Any]:
     if not isinstance(blobs, list):
         raise SchemaError(f"{cls.__name__}: meta has no '_blobs' list", key=key)
-    blob_fields = {f.name for f in dataclasses.fields(cls) if _is_blob(f)}
+    blob_fields = _blob_fields(cls)
     values: dict[str, Any] = {}
     offset = 0
     for item in blobs:
@@ -433,6 +433,12 @@ def _read_blobs(cls: type, blobs: Any, payload: memoryview, key: str | None) -> 
     if offset != len(payload):
         raise SchemaError(f"{cls.__name__}: {len(payload) - offset} unexpected trailing payload bytes", key=key)
     return values
+
+
+@functools.cache
+def _blob_fields(cls: type) -> frozenset[str]:
+    """Names of the fields of ``cls`` carried as binary payloads (arrays, bytes)."""
+    return frozenset(f.name for f in dataclasses.fields(cls) if _is_blob(f))
 
 
 def _is_blob(f: dataclasses.Field) -> bool:
