@@ -100,7 +100,7 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
         tracker_setup(rig)  # bad tracker config: one clear line, before anything opens
     if "tracker" in names or ("camera" in names and rig.camera.adapter == "simulated"):
         say("loading the compiled kernels (the first run after installing compiles them: about a minute)")
-        load_kernels(rig, names)
+    prepare_services(rig, names)
     finishers = []
     if "supervisor" in names and rig.supervisor.mode != "monitor" and rig.supervisor.exit_when_done:
         finishers.append("supervisor")
@@ -130,19 +130,27 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
     return RigRun(code, services, report)
 
 
-def load_kernels(rig, names: list[str]) -> None:  # noqa: ANN001
-    """Compile (first run after installing: about a minute) or load the compiled kernels of the twin
-    camera, the packets and the tracker before the services start: services that share this process
-    would otherwise compile together, and the supervisor would not see the tracker come up within
-    its start-up timeout (hardware cameras are not opened here)."""
+def prepare_services(rig, names: list[str]) -> None:  # noqa: ANN001
+    """Do the slow one-off work of the services before they start, while nothing runs in real time.
+
+    - Compile (first run after installing: about a minute) or load the compiled kernels of the twin
+      camera, the packets and the tracker: services that share this process would otherwise compile
+      together, and the supervisor would not see the tracker come up within its start-up timeout
+      (hardware cameras are not opened here).
+    - A supervisor imports matplotlib (about a second, holding the GIL): drawing the summary figure
+      at the end of a sweep would otherwise stall the twin camera of the same process.
+    """
     from flagtrack.daemon.services.build import open_camera, tracker_setup
     from flagtrack.daemon.services.tracker import warm_up_kernels
+    from flagtrack.daemon.sweep.summary import load_figure_modules
     from flagtrack.drivers.camera.simulated import fast_forward
 
     if "camera" in names and rig.camera.adapter == "simulated":
         fast_forward(open_camera(rig.camera), 0.05)
     if "tracker" in names:
         warm_up_kernels(tracker_setup(rig).factory)
+    if "supervisor" in names:
+        load_figure_modules()
 
 
 class RigRun:

@@ -77,6 +77,12 @@ def _first_change(points: Sequence[PointResult], branch: str, before: str, after
     return None
 
 
+def load_figure_modules() -> None:
+    """Import what :func:`plot_amplitude` draws with (about a second, the first time)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: F401
+    from matplotlib.figure import Figure  # noqa: F401
+
+
 def plot_amplitude(points: Sequence[PointResult], path: str | Path, title: str = "") -> Path:
     """Save the A/L- and event-rate-versus-speed figure (PNG; headless Agg backend)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg

@@ -166,12 +166,14 @@ tracker: {{root: [100, 240], length: 200, tau_s: 0.0003}}
     assert [p.returncode for p in procs] == [130, 130]
 
 
-def test_the_rig_loads_every_shared_kernel_before_its_services_start() -> None:
+def test_the_rig_does_its_slow_one_off_work_before_its_services_start() -> None:
     """A first run after installing compiles for tens of seconds: that must happen before the services
     start (else a supervisor in the same process gives up waiting for the tracker), so after the
-    loading step the tracker's, the packets' and the twin's kernels are all compiled or loaded."""
+    preparation the tracker's, the packets' and the twin's kernels are all compiled or loaded; and
+    matplotlib is imported (else the summary figure stalls the twin camera at the end of a sweep)."""
     code = """
-from flagtrack.daemon.commands.up import load_kernels
+import sys
+from flagtrack.daemon.commands.up import prepare_services
 from flagtrack.daemon.config import from_mapping
 from flagtrack.daemon.rig import RigConfig
 from flagtrack.daemon.core.kernels import run_updates
@@ -180,8 +182,10 @@ from flagtrack.drivers.sim.quickline import _fill_events
 rig = from_mapping(RigConfig, {"camera": {"adapter": "simulated"}, "tracker": {"root": [100, 240], "length": 200}},
                    key="test")
 assert not run_updates.signatures and not encode_packets.signatures and not _fill_events.signatures
-load_kernels(rig, ["camera", "tracker"])
-print(len(run_updates.signatures), len(encode_packets.signatures), len(_fill_events.signatures))
+assert "matplotlib.figure" not in sys.modules
+prepare_services(rig, ["camera", "tracker", "supervisor"])
+print(len(run_updates.signatures), len(encode_packets.signatures), len(_fill_events.signatures),
+      int("matplotlib.figure" in sys.modules))
 """
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
