@@ -18,7 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 
 _MAX_BATCH = 1 << 16  # update times generated per step (bounds memory after a long gap)
-_NONE = (np.empty(0), np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64))  # no update taken (read-only use)
+_NONE = (np.empty(0), np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64))  # what take() returns for no update
+for _array in _NONE:
+    _array.flags.writeable = False
 
 
 @dataclass(frozen=True)

@@ -206,3 +206,24 @@ def test_a_still_start_gives_updates_for_max_gap_then_none() -> None:
     # filtered noise only: the rest chain is reported during the first second, then nothing
     assert 990 <= len(batch) <= 1002 and batch.t_s[-1] < 1.002
     np.testing.assert_allclose(batch.y, FLAG.root[1])
+
+
+def test_the_update_clock_gives_the_same_windows_however_often_it_is_asked() -> None:
+    """Asked after every few µs (mostly nothing is complete: the early return) or once at the end,
+    the clock gives the same windows, across a change of dt and tau and up to the stop time."""
+    from flagtrack.daemon.core.windows import UpdateClock
+
+    schedule = WindowSchedule((WindowSegment(0.0, 1.7e-4, 2.5e-4), WindowSegment(1.01, 4.1e-4, 3e-4)),
+                              t_stop_s=1.03)
+    once = UpdateClock(schedule, 1_000_003).take(1_040_000)
+    often = UpdateClock(schedule, 1_000_003)
+    rng = np.random.default_rng(3)
+    horizons = [*(np.cumsum(rng.integers(0, 40, 2000)) + 1_000_000), 1_040_000]
+    parts = [often.take(int(horizon)) for horizon in horizons]
+    assert len(once[0]) > 100
+    for column, got in zip(once, (np.concatenate([p[i] for p in parts]) for i in range(3))):
+        np.testing.assert_array_equal(got, column)
+    hi = once[2]
+    for before, horizon, part in zip([-1, *horizons], horizons, parts):  # each window as soon as it is complete
+        np.testing.assert_array_equal(part[2], hi[(hi > before) & (hi <= horizon)])
+    assert sum(len(p[0]) == 0 for p in parts) > 1000  # most calls completed no window
