@@ -27,7 +27,7 @@ def demo_rig(out: Path, headless: bool, quick: bool = False) -> dict[str, Any]:
              {"range": {"start": 4.0, "stop": 6.0, "step": STEP_MPS}, "settle_s": 1.5, "record_s": 2.0})
     return {
         "rig": f"demo{int(time.time() * 1000) % 100000}",
-        # a light twin (~0.4 Mev/s flapping) in 4 ms packets: the whole rig shares one Python process (one
+        # a light twin (0.25-0.36 Mev/s flapping) in 4 ms packets: the whole rig shares one Python process (one
         # GIL) on a small machine; with 2 ms packets the process was GIL-bound while the flag flapped and
         # the twin fell behind real time in about half the runs (1 in 9 with 4 ms, 2-core VM)
         "camera": {"id": "cam0", "adapter": "simulated", "packet_us": 4000,
