@@ -142,8 +142,9 @@ class RerunLogger:
         times = [rr.TimeColumn(TIMELINE, duration=t_s)]
         x, y = np.concatenate([m.x for m in msgs]), np.concatenate([m.y for m in msgs])
         jx, jy = np.concatenate([m.joints_x for m in msgs]), np.concatenate([m.joints_y for m in msgs])
+        strips = np.stack([x, y], axis=-1)  # one (n, n_s, 2) array: Rerun converts it at once, a list strip by strip
         self.rec.send_columns("tracker/centreline", times, rr.LineStrips2D.columns(
-            strips=list(np.stack([x, y], axis=-1))).partition(np.ones(len(t_s), dtype=np.int32)))
+            strips=strips).partition(np.ones(len(t_s), dtype=np.int32)))
         self.rec.send_columns("tracker/joints", times, rr.Points2D.columns(
             positions=np.stack([jx, jy], axis=-1).reshape(-1, 2)).partition(np.full(len(t_s), jx.shape[1], np.int32)))
         for name, field_name in (("plots/delta_rms", "delta_rms"), ("plots/events_per_update", "n_events"),

@@ -10,7 +10,7 @@ import numpy as np
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate
-from flagtrack.daemon.services.viewer import ViewerConfig, ViewerService, age_colours
+from flagtrack.daemon.services.viewer import RerunLogger, ViewerConfig, ViewerService, age_colours, open_recording
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.camera.packets import Packetizer
 from flagtrack.drivers.sim.quickline import WavyFlag, line_events
@@ -56,3 +56,28 @@ def test_age_colours_run_from_bright_to_dark() -> None:
     colours = age_colours(np.array([0.0, 0.005, 0.01]), 0.01)
     assert colours.dtype == np.uint8 and colours.shape == (3, 3)
     assert colours[0].sum() > colours[1].sum() > colours[2].sum()
+
+
+def test_the_rrd_holds_each_update_centreline_at_its_time(tmp_path: Path) -> None:
+    """Read back from the .rrd file: one strip per update, its points the centreline's (x, y)."""
+    from rerun.chunk import RrdReader
+
+    rrd = tmp_path / "lines.rrd"
+    cfg = ViewerConfig(sink="rrd", rrd_path=rrd, geometry_rate_hz=1000.0)
+    rec, _ = open_recording(cfg)
+    logger = RerunLogger(rec, cfg)
+    n_t, n_s = 5, 7
+    x = np.arange(n_t * n_s, dtype=float).reshape(n_t, n_s)
+    batch = CentrelineBatch(1.0 + np.arange(n_t) * 1e-3, np.linspace(0, 200, n_s), x, -2 * x, np.zeros((n_t, 11)),
+                            np.zeros((n_t, 11)), np.ones(n_t), np.ones(n_t, dtype=np.int64))
+    logger.centrelines(CentrelineMessage.from_batch(batch, source="tracker", seq=0, units="px",
+                                                    source_ns=np.zeros(n_t, dtype=np.int64)))
+    assert logger.frame(0.0, force=True)
+    rec.flush()
+    rec.disconnect()
+    rows = [chunk.to_record_batch() for chunk in RrdReader(rrd).stream() if chunk.entity_path == "/tracker/centreline"]
+    strips = [strip for rows_ in rows for strip in rows_.column("LineStrips2D:strips").to_pylist()]
+    assert len(strips) == n_t
+    for k, strip in enumerate(strips):
+        assert len(strip) == 1  # one strip per update
+        np.testing.assert_allclose(np.array(strip[0]), np.stack([x[k], -2 * x[k]], axis=-1))
