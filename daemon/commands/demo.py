@@ -59,7 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo and report the simulated and detected onset and decay speeds."""
-    from flagtrack.daemon.commands.up import run_rig
+    from flagtrack.daemon.commands.up import prepare_services, run_rig
     from flagtrack.daemon.config import from_mapping
     from flagtrack.daemon.rig import RigConfig
     from flagtrack.daemon.sweep.runlog import read_run
@@ -79,8 +79,9 @@ def run(args: argparse.Namespace) -> int:
           f"(about {'30 s' if args.quick else '2 minutes'}) into {out}", file=sys.stderr)
     print("flagtrack demo: loading the compiled kernels (the first run compiles them: about a minute) ...",
           file=sys.stderr)
+    prepare_services(rig, list(rig.services))
     started = time.monotonic()
-    result = run_rig(rig, list(rig.services), shutdown_timeout_s=30.0, quiet=True)
+    result = run_rig(rig, list(rig.services), shutdown_timeout_s=30.0, quiet=True, prepared=True)
     supervisor = result.service("supervisor")
     viewer = result.service("viewer")
     run_dir = out / "sweep"

@@ -81,8 +81,11 @@ def rig_from_args(args: argparse.Namespace):  # noqa: ANN201 - (RigConfig, list[
 
 
 def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centrelines: Path | None = None,  # noqa: ANN001
-            shutdown_timeout_s: float = 10.0, resume_dir: Path | None = None, quiet: bool = False):  # noqa: ANN201
+            shutdown_timeout_s: float = 10.0, resume_dir: Path | None = None, quiet: bool = False,
+            prepared: bool = False):  # noqa: ANN201
     """Open the bus, build and run the services until a signal, a failure or the end of the work.
+
+    ``prepared``: the caller already ran :func:`prepare_services` (to time the run without it).
 
     Returns:
         A :class:`RigRun` (exit code, the services, the runner's report).
@@ -98,9 +101,10 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
 
     if "tracker" in names:
         tracker_setup(rig)  # bad tracker config: one clear line, before anything opens
-    if "tracker" in names or ("camera" in names and rig.camera.adapter == "simulated"):
-        say("loading the compiled kernels (the first run after installing compiles them: about a minute)")
-    prepare_services(rig, names)
+    if not prepared:
+        if "tracker" in names or ("camera" in names and rig.camera.adapter == "simulated"):
+            say("loading the compiled kernels (the first run after installing compiles them: about a minute)")
+        prepare_services(rig, names)
     finishers = []
     if "supervisor" in names and rig.supervisor.mode != "monitor" and rig.supervisor.exit_when_done:
         finishers.append("supervisor")
@@ -140,17 +144,23 @@ def prepare_services(rig, names: list[str]) -> None:  # noqa: ANN001
     - A supervisor imports matplotlib (about a second, holding the GIL): drawing the summary figure
       at the end of a sweep would otherwise stall the twin camera of the same process.
     """
+    from flagtrack.daemon.errors import FlagtrackError
     from flagtrack.daemon.services.build import open_camera, tracker_setup
     from flagtrack.daemon.services.tracker import warm_up_kernels
     from flagtrack.daemon.sweep.summary import load_figure_modules
     from flagtrack.drivers.camera.simulated import fast_forward
 
-    if "camera" in names and rig.camera.adapter == "simulated":
-        fast_forward(open_camera(rig.camera), 0.05)
-    if "tracker" in names:
-        warm_up_kernels(tracker_setup(rig).factory)
-    if "supervisor" in names:
-        load_figure_modules()
+    try:
+        if "camera" in names and rig.camera.adapter == "simulated":
+            fast_forward(open_camera(rig.camera), 0.05)
+        if "tracker" in names:
+            warm_up_kernels(tracker_setup(rig).factory)
+        if "supervisor" in names:
+            load_figure_modules()
+    except FlagtrackError:
+        raise
+    except Exception as exc:  # a failed compile or import: one line, as the services' own failures are
+        raise FlagtrackError(f"preparing the services failed ({type(exc).__name__}: {exc})") from exc
 
 
 class RigRun:

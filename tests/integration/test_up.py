@@ -190,3 +190,19 @@ print(len(run_updates.signatures), len(encode_packets.signatures), len(_fill_eve
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert all(int(n) >= 1 for n in done.stdout.split()), done.stdout
+
+
+def test_a_failing_preparation_is_one_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A broken install (here: matplotlib cannot be imported) stops the rig before anything opens,
+    with one line for the user instead of a traceback."""
+    from flagtrack.daemon.commands.up import prepare_services
+    from flagtrack.daemon.errors import FlagtrackError
+    from flagtrack.daemon.rig import RigConfig
+    from flagtrack.daemon.sweep import summary
+
+    def broken() -> None:
+        raise ImportError("No module named 'matplotlib'")
+
+    monkeypatch.setattr(summary, "load_figure_modules", broken)
+    with pytest.raises(FlagtrackError, match="preparing the services failed .*ImportError.*matplotlib"):
+        prepare_services(RigConfig(), ["supervisor"])
