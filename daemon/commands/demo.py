@@ -77,9 +77,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"flagtrack demo: simulated onset {ONSET_MPS} m/s going up, decay {DECAY_MPS} m/s coming down; "
           f"sweeping {speeds[0]:g} -> {speeds[-1]:g} -> {speeds[0]:g} m/s in {step_mps:g} m/s steps "
           f"(about {'30 s' if args.quick else '2 minutes'}) into {out}", file=sys.stderr)
-    print("flagtrack demo: loading the compiled kernels (the first run compiles them: about a minute) ...",
-          file=sys.stderr)
-    prepare_services(rig, list(rig.services))
+    prepare_services(rig, list(rig.services), lambda text: print(f"flagtrack demo: {text} ...", file=sys.stderr))
     started = time.monotonic()
     result = run_rig(rig, list(rig.services), shutdown_timeout_s=30.0, quiet=True, prepared=True)
     supervisor = result.service("supervisor")

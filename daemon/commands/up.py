@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from flagtrack.daemon.commands._tracking_args import add_tracking_arguments
@@ -102,9 +103,7 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
     if "tracker" in names:
         tracker_setup(rig)  # bad tracker config: one clear line, before anything opens
     if not prepared:
-        if "tracker" in names or ("camera" in names and rig.camera.adapter == "simulated"):
-            say("loading the compiled kernels (the first run after installing compiles them: about a minute)")
-        prepare_services(rig, names)
+        prepare_services(rig, names, say)
     finishers = []
     if "supervisor" in names and rig.supervisor.mode != "monitor" and rig.supervisor.exit_when_done:
         finishers.append("supervisor")
@@ -134,8 +133,9 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
     return RigRun(code, services, report)
 
 
-def prepare_services(rig, names: list[str]) -> None:  # noqa: ANN001
-    """Do the slow one-off work of the services before they start, while nothing runs in real time.
+def prepare_services(rig, names: list[str], say: Callable[[str], None] = lambda text: None) -> None:  # noqa: ANN001
+    """Do the slow one-off work of the services before they start, while nothing runs in real time
+    (``say`` tells the user when that includes loading or compiling kernels).
 
     - Compile (first run after installing: about a minute) or load the compiled kernels of the twin
       camera, the packets and the tracker: services that share this process would otherwise compile
@@ -150,8 +150,11 @@ def prepare_services(rig, names: list[str]) -> None:  # noqa: ANN001
     from flagtrack.daemon.sweep.summary import load_figure_modules
     from flagtrack.drivers.camera.simulated import fast_forward
 
+    twin = "camera" in names and rig.camera.adapter == "simulated"
+    if twin or "tracker" in names:
+        say("loading the compiled kernels (the first run after installing compiles them: about a minute)")
     try:
-        if "camera" in names and rig.camera.adapter == "simulated":
+        if twin:
             fast_forward(open_camera(rig.camera), 0.05)
         if "tracker" in names:
             warm_up_kernels(tracker_setup(rig).factory)
