@@ -14,6 +14,7 @@ from flagtrack.daemon.core.events import empty_events, empty_triggers
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.camera.base import CameraData, CameraInfo, EndOfStream
 from flagtrack.drivers.formats import open_events
+from flagtrack.drivers.formats._packet_kernels import slot_runs
 
 log = logging.getLogger(__name__)
 
@@ -106,10 +107,8 @@ class ReplayCamera:
         while True:
             t_first = t_last = None
             for events, triggers, t_until in self._file_slices(path):
-                if shift:
-                    events = events.copy()
+                if shift:  # the slices are the decoder's own arrays: shifted in place
                     events["t"] += shift
-                    triggers = triggers.copy()
                     triggers["t"] += shift
                 t_first = t_until if t_first is None else t_first
                 t_last = t_until
@@ -143,26 +142,59 @@ class ReplayCamera:
             yield from self._file_chunks(path)
             return
         slice_us = self.cfg.slice_us
-        held, held_tr = empty_events(), empty_triggers()
+        held, held_tr, held_slot = empty_events(), empty_triggers(), -1  # the slice still open
+        running_max = np.iinfo(np.int64).min
+        runs = _Runs()
         # small reads when paced: decoding a big chunk would hold back (and then burst) many slices
         with open_events(path, chunk_bytes=_PACED_CHUNK_BYTES) as reader:
             for chunk in reader:
-                events = np.concatenate([held, chunk.events]) if len(held) else chunk.events
-                triggers = np.concatenate([held_tr, chunk.triggers])
+                triggers = np.concatenate([held_tr, chunk.triggers]) if len(chunk.triggers) else held_tr
+                events = chunk.events
                 if len(events) == 0:
-                    held, held_tr = events, triggers
+                    held_tr = triggers
                     continue
-                slots = np.maximum.accumulate(events["t"]) // slice_us
-                bounds = np.flatnonzero(np.diff(slots)) + 1
-                start = 0
-                for cut in bounds:
-                    piece = events[start:cut]
-                    t_until = (int(slots[start]) + 1) * slice_us
-                    take = triggers["t"] < t_until
-                    yield piece, triggers[take], t_until
-                    triggers = triggers[~take]
-                    start = cut
-                held, held_tr = events[start:], triggers
+                starts, slots, running_max = runs.cut(events["t"], running_max, slice_us)
+                for q in range(len(slots)):
+                    piece = events[starts[q]:starts[q + 1]]
+                    slot = int(slots[q])
+                    if q == 0 and len(held) and slot == held_slot:  # the open slice goes on
+                        piece = np.concatenate([held, piece])
+                    elif q == 0 and len(held):
+                        piece_tr, triggers = _triggers_before(triggers, (held_slot + 1) * slice_us)
+                        yield held, piece_tr, (held_slot + 1) * slice_us
+                    if q == len(slots) - 1:  # may go on in the next chunk
+                        held, held_slot = piece, slot
+                        continue
+                    piece_tr, triggers = _triggers_before(triggers, (slot + 1) * slice_us)
+                    yield piece, piece_tr, (slot + 1) * slice_us
+                held_tr = triggers
             if len(held) or len(held_tr):
                 t_end = int(held["t"].max()) + 1 if len(held) else int(held_tr["t"].max()) + 1
                 yield held, held_tr, t_end
+
+
+def _triggers_before(triggers: np.ndarray, t_until_us: int) -> tuple[np.ndarray, np.ndarray]:
+    """(the triggers before ``t_until_us``, the rest)."""
+    if len(triggers) == 0:
+        return triggers, triggers
+    take = triggers["t"] < t_until_us
+    return triggers[take], triggers[~take]
+
+
+class _Runs:
+    """Cuts a chunk's events into slices of one time slot (compiled; scratch kept across chunks)."""
+
+    def __init__(self) -> None:
+        self._starts = self._slots = self._maxima = np.empty(0, dtype=np.int64)
+
+    def cut(self, t: np.ndarray, running_max: int, slice_us: int) -> tuple[np.ndarray, np.ndarray, int]:
+        """(start indices of the runs plus the end, their slots, running maximum after the chunk);
+        a slot is the running maximum of t (from ``running_max`` on) over ``slice_us``."""
+        n = len(t)
+        if len(self._starts) < n + 1:
+            self._starts, self._slots, self._maxima = (np.empty(2 * n + 1, dtype=np.int64) for _ in range(3))
+        n_runs = slot_runs(np.ascontiguousarray(t, dtype=np.int64), running_max, slice_us, self._starts,
+                           self._slots, self._maxima)
+        starts = self._starts[:n_runs + 1].copy()
+        starts[n_runs] = n
+        return starts, self._slots[:n_runs].copy(), int(self._maxima[n_runs - 1])

@@ -107,7 +107,7 @@ class Decoder:
         self._state[7] = 1  # EVT 3.0 starts in CD mode
         self._tail = b""
         self._fed = base_offset  # file offset just past the last byte fed
-        self._triggers = empty_triggers(1 << 14)
+        self._triggers = np.empty(1 << 14, dtype=TRIGGER_DTYPE)  # written before read: no zero fill
 
     @property
     def offset(self) -> int:
