@@ -13,6 +13,10 @@ centrelines and the tracker status.
    (``sent_ns``) to the publication of the centreline message by the tracker (``published_ns``,
    the latency the live-pipeline issue asks for) and to its arrival here (the bus hop back to a
    subscriber in another process included); p50 and p99 of both.
+
+In both runs it also reports the cores each process used while the centrelines came (from
+``/proc``, Linux only): the camera, the tracker and this process share the machine, and when
+together they keep it busy, packets wait for a core and the latency's tail grows.
 """
 
 from __future__ import annotations
@@ -73,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
         "latency_p50_ms": latency["p50_ms"], "latency_p99_ms": latency["p99_ms"],
         "publish_latency_p50_ms": latency["publish_p50_ms"], "publish_latency_p99_ms": latency["publish_p99_ms"],
         "latency_missing_packets": latency["missing_packets"],
+        "throughput_cpu_cores": throughput["cpu_cores"], "latency_cpu_cores": latency["cpu_cores"],
     }
     if args.json:
         print(json.dumps(results))
@@ -88,6 +93,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"    to publication by the tracker: p50 {latency['publish_p50_ms']:.2f} ms, "
               f"p99 {latency['publish_p99_ms']:.2f} ms")
         print(f"    to arrival at a subscriber:    p50 {latency['p50_ms']:.2f} ms, p99 {latency['p99_ms']:.2f} ms")
+        for label, cores in (("throughput run", throughput["cpu_cores"]), ("latency run", latency["cpu_cores"])):
+            if cores:
+                used = ", ".join(f"{name} {value:.2f}" for name, value in cores.items())
+                print(f"  CPU in the {label} (cores; this machine has {os.cpu_count()}): {used}")
     return 0
 
 
@@ -117,6 +126,7 @@ def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed:
                     raise RuntimeError("the tracker process did not start")
                 procs.append(_start("camera", camera_cfg))
                 latencies, published, updates, first_ns, last_ns, complete = [], [], 0, None, None, False
+                cpu_start: dict[str, float] | None = None
                 deadline = time.monotonic() + 600
                 while time.monotonic() < deadline:
                     msg = lines.recv(timeout_s=0.5)
@@ -125,6 +135,8 @@ def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed:
                     now = time.time_ns()
                     if first_ns is None and wall_s:  # measure wall_s from the first centreline on
                         deadline = time.monotonic() + wall_s
+                    if first_ns is None:
+                        cpu_start = _cpu_snapshot(procs)
                     if first_ns is None and len(msg.source_ns):
                         first_ns = int(msg.source_ns.min())
                     last_ns = now
@@ -134,6 +146,7 @@ def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed:
                     if msg.final:
                         complete = True
                         break
+                cpu = _cpu_use(cpu_start, _cpu_snapshot(procs)) if cpu_start else {}
                 procs[-1].send_signal(signal.SIGINT)
                 procs[-1].communicate(timeout=30)
                 time.sleep(1.2)
@@ -149,13 +162,39 @@ def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed:
     lat = np.concatenate(latencies) if latencies else np.zeros(0)
     pub = np.concatenate(published) if published else np.zeros(0)
     return {
-        "complete": complete, "updates": updates, "missing_packets": missing,
+        "complete": complete, "updates": updates, "missing_packets": missing, "cpu_cores": cpu,
         "elapsed_s": ((last_ns or 0) - (first_ns or 0)) * 1e-9,
         "p50_ms": float(np.percentile(lat, 50)) if len(lat) else float("nan"),
         "p99_ms": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
         "publish_p50_ms": float(np.percentile(pub, 50)) if len(pub) else float("nan"),
         "publish_p99_ms": float(np.percentile(pub, 99)) if len(pub) else float("nan"),
     }
+
+
+def _cpu_snapshot(procs: list[subprocess.Popen]) -> dict[str, float]:
+    """Wall time and CPU seconds so far of the tracker, the camera (if started) and this process."""
+    snapshot = {"wall": time.monotonic(), "bench": time.process_time()}
+    for name, proc in zip(("tracker", "camera"), procs):
+        seconds = _process_cpu_s(proc.pid)
+        if seconds is not None:
+            snapshot[name] = seconds
+    return snapshot
+
+
+def _cpu_use(start: dict[str, float], end: dict[str, float]) -> dict[str, float]:
+    """Cores each process used between two snapshots (1.0 = one core busy all the time)."""
+    wall = max(end["wall"] - start["wall"], 1e-9)
+    return {name: (end[name] - start[name]) / wall for name in ("camera", "tracker", "bench")
+            if name in start and name in end}
+
+
+def _process_cpu_s(pid: int) -> float | None:
+    """User + system CPU seconds of a process, all threads (Linux /proc; ``None`` elsewhere)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _start(service: str, config: Path) -> subprocess.Popen:

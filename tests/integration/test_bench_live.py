@@ -1,0 +1,28 @@
+"""``flagtrack bench live`` on a short recording: real processes, real Zenoh, its JSON figures."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+
+def test_bench_live_reports_rate_latency_and_cpu_without_loss(tmp_path: Path) -> None:
+    out = subprocess.run([sys.executable, "-m", "flagtrack.daemon", "bench", "live", "--seconds", "0.3",
+                          "--latency-seconds", "1.0", "--latency-rate", "1.0", "--cache", str(tmp_path), "--json"],
+                         capture_output=True, text=True, timeout=240)
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert result["events"] > 1_000_000  # 0.3 s of a flapping line at ~6 Mev/s
+    assert result["throughput_missing_packets"] == 0 and result["latency_missing_packets"] == 0
+    assert result["sustained_mev_s"] > 0.5
+    assert result["latency_updates"] > 400  # 1 s at 1 Mev/s: ~0.16 s of camera time, ~650 updates of 250 us
+    assert 0 < result["publish_latency_p50_ms"] <= result["publish_latency_p99_ms"]
+    assert result["publish_latency_p50_ms"] < result["latency_p50_ms"]  # the hop back to a subscriber
+    for run in ("throughput_cpu_cores", "latency_cpu_cores"):
+        cores = result[run]
+        assert set(cores) == {"camera", "tracker", "bench"}
+        assert 0 < cores["tracker"] <= 4 and 0 < cores["camera"] <= 4 and 0 <= cores["bench"] <= 4
+    # paced at a sixth of the camera's rate, the tracker works less than flat out
+    assert result["latency_cpu_cores"]["tracker"] < result["throughput_cpu_cores"]["tracker"]
