@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 _MAX_BATCH = 1 << 16  # update times generated per step (bounds memory after a long gap)
+_SCALAR_MAX = 32  # up to this many candidate windows, take() tests them one by one (no array passes)
 _NONE = (np.empty(0), np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64))  # what take() returns for no update
 for _array in _NONE:
     _array.flags.writeable = False
@@ -142,14 +143,19 @@ class UpdateClock:
             seg_end_us = self.schedule.segments[nxt].t_from_s * 1e6 if nxt < len(self.schedule.segments) else math.inf
             # every candidate window starts before ``reach`` (+1 for rounding); bounded count
             n_max = min(limit - taken, max(0, int((reach + tau_us - t_first) // dt_us) + 2))
-            t_us = self._anchor_us + (self._count + np.arange(n_max, dtype=np.float64)) * dt_us
-            lo = np.ceil(t_us - tau_us / 2).astype(np.int64)
-            hi = np.ceil(t_us + tau_us / 2).astype(np.int64)
-            ready = hi <= complete_before_us
-            if started_before_us is not None:
-                ready |= lo <= started_before_us
-            ok = ready & (t_us <= self._stop_us) & (t_us < seg_end_us)
-            n = int(np.argmin(ok)) if not ok.all() else n_max
+            if n_max <= _SCALAR_MAX:  # a live packet completes a few windows: plain floats are quicker
+                t_us, lo, hi = self._ready_few(n_max, dt_us, tau_us, complete_before_us, started_before_us,
+                                               seg_end_us)
+                n = len(t_us)
+            else:
+                t_us = self._anchor_us + (self._count + np.arange(n_max, dtype=np.float64)) * dt_us
+                lo = np.ceil(t_us - tau_us / 2).astype(np.int64)
+                hi = np.ceil(t_us + tau_us / 2).astype(np.int64)
+                ready = hi <= complete_before_us
+                if started_before_us is not None:
+                    ready |= lo <= started_before_us
+                ok = ready & (t_us <= self._stop_us) & (t_us < seg_end_us)
+                n = int(np.argmin(ok)) if not ok.all() else n_max
             if n:
                 parts.append((t_us[:n], lo[:n], hi[:n]))
                 self._count += n
@@ -165,6 +171,25 @@ class UpdateClock:
         if len(parts) == 1:
             return parts[0]
         return tuple(np.concatenate(cols) for cols in zip(*parts))  # type: ignore[return-value]
+
+    def _ready_few(self, n_max: int, dt_us: float, tau_us: float, complete_before_us: int,
+                   started_before_us: int | None, seg_end_us: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The ready windows among the next ``n_max`` of the segment, one by one (the same float
+        operations, in the same order, as the array path of :meth:`take`)."""
+        t_list: list[float] = []
+        lo_list: list[int] = []
+        hi_list: list[int] = []
+        for i in range(n_max):
+            t_us = self._anchor_us + float(self._count + i) * dt_us
+            lo, hi = math.ceil(t_us - tau_us / 2), math.ceil(t_us + tau_us / 2)
+            ready = hi <= complete_before_us or (started_before_us is not None and lo <= started_before_us)
+            if not (ready and t_us <= self._stop_us and t_us < seg_end_us):
+                break
+            t_list.append(t_us)
+            lo_list.append(lo)
+            hi_list.append(hi)
+        return (np.array(t_list, dtype=np.float64), np.array(lo_list, dtype=np.int64),
+                np.array(hi_list, dtype=np.int64))
 
     def _next_ready(self, complete_before_us: int, started_before_us: int | None) -> bool:
         """Whether the next update can be taken (the cheap test that spares :meth:`take` its arrays
