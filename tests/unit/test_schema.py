@@ -92,6 +92,43 @@ def test_malformed_bytes_raise_clear_errors(data: bytes, words: str) -> None:
     assert "flagtrack/x/camera/cam0/events" in str(info.value)
 
 
+def with_blobs(message: object, edit: object) -> bytes:
+    """``message`` encoded, with its payload descriptors changed by ``edit(blobs)``."""
+    data = encode(message)
+    magic, version, type_id, meta_len = struct.unpack_from("<2sBBI", data)
+    meta = json.loads(data[8:8 + meta_len])
+    edit(meta["_blobs"])
+    body = json.dumps(meta).encode()
+    return struct.pack("<2sBBI", magic, version, type_id, len(body)) + body + data[8 + meta_len:]
+
+
+def _set(index: int, part: int, value: object):  # noqa: ANN202
+    def edit(blobs: list) -> None:
+        blobs[index][part] = value
+    return edit
+
+
+@pytest.mark.parametrize(
+    ("data", "words"),
+    [
+        (with_blobs(packet(), _set(0, 2, [])), "bad payload descriptor"),  # bytes without a length
+        (with_blobs(centreline_message(), _set(0, 1, "|O")), "object arrays"),
+        (with_blobs(centreline_message(), _set(0, 1, "<bogus")), "bad payload descriptor"),
+        (with_blobs(centreline_message(), _set(0, 2, ["x"])), "bad payload descriptor"),
+        (with_blobs(centreline_message(), _set(0, 2, [-4])), "bad payload descriptor"),
+        (with_blobs(centreline_message(), _set(-1, 2, [10**6])), "truncated"),
+    ],
+)
+def test_malformed_payload_descriptors_raise_clear_errors(data: bytes, words: str) -> None:
+    with pytest.raises(SchemaError, match=words):
+        decode(data, key="flagtrack/x/centrelines")
+
+
+def test_decoded_arrays_are_read_only_views_of_the_message() -> None:
+    got = decode(encode(centreline_message()), CentrelineMessage)
+    assert not got.x.flags.writeable and got.x.shape == (4, 51) and got.x.dtype == np.float64
+
+
 def test_wrong_type_is_refused() -> None:
     with pytest.raises(SchemaError, match="expected CentrelineMessage, got EventPacket"):
         decode(encode(packet()), CentrelineMessage)
