@@ -208,7 +208,9 @@ class TrackerService:
             return
         if not force and time.monotonic() - self._pending_since < self.cfg.max_batch_delay_s:
             return
-        if self._pending:
+        if len(self._pending) == 1:  # the usual case live: one packet's updates, published at once
+            batch, source_ns = self._pending[0], self._pending_ns[0]
+        elif self._pending:
             batch = CentrelineBatch.concatenate(self._pending)
             source_ns = np.concatenate(self._pending_ns)
         else:
@@ -217,8 +219,9 @@ class TrackerService:
         starts = list(range(0, len(batch), self.cfg.batch_updates)) or [0]
         for start in starts:
             part = slice(start, start + self.cfg.batch_updates)
+            lines = batch if len(starts) == 1 else batch.select(part)
             self._lines_pub.put(CentrelineMessage.from_batch(
-                batch.select(part), source=self.name, seq=self._seq_out, units=self.units, source_ns=source_ns[part],
+                lines, source=self.name, seq=self._seq_out, units=self.units, source_ns=source_ns[part],
                 final=final and start == starts[-1], published_ns=time.time_ns()))
             self._seq_out += 1
 
