@@ -457,30 +457,32 @@ def _required(f: dataclasses.Field) -> bool:
     return f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
 
 
-_SCALAR_VIEWS: dict[type, type] = {}
-
-
+@functools.cache
 def _scalar_view(cls: type) -> type:
-    """A dataclass with only the JSON (non-blob) fields of ``cls``, for checked decoding."""
-    if cls not in _SCALAR_VIEWS:
-        specs: list[tuple] = []
-        for f in dataclasses.fields(cls):
-            if _is_blob(f):
-                continue
-            if f.default is not dataclasses.MISSING:
-                specs.append((f.name, f.type, field(default=f.default)))
-            elif f.default_factory is not dataclasses.MISSING:
-                specs.append((f.name, f.type, field(default_factory=f.default_factory)))
-            else:
-                specs.append((f.name, f.type))
-        view = dataclasses.make_dataclass(f"{cls.__name__}Meta", specs, frozen=True)
-        view.__module__ = __name__  # so string annotations resolve against this module
-        _SCALAR_VIEWS[cls] = view
-    return _SCALAR_VIEWS[cls]
+    """A dataclass with only the JSON (non-blob) fields of ``cls``, for checked decoding (made once per class)."""
+    specs: list[tuple] = []
+    for f in dataclasses.fields(cls):
+        if _is_blob(f):
+            continue
+        if f.default is not dataclasses.MISSING:
+            specs.append((f.name, f.type, field(default=f.default)))
+        elif f.default_factory is not dataclasses.MISSING:
+            specs.append((f.name, f.type, field(default_factory=f.default_factory)))
+        else:
+            specs.append((f.name, f.type))
+    view = dataclasses.make_dataclass(f"{cls.__name__}Meta", specs, frozen=True)
+    view.__module__ = __name__  # so string annotations resolve against this module
+    return view
 
 
 _SIMPLE = {"str": str, "int": int, "float": float, "bool": bool}
-_FAST_TYPES: dict[type, dict[str, type] | None] = {}
+
+
+@functools.cache
+def _simple_types(cls: type) -> dict[str, type] | None:
+    """Name -> exact Python type of each scalar field of ``cls``; ``None`` if one is not simple."""
+    simple = {f.name: _SIMPLE.get(f.type) for f in dataclasses.fields(cls) if not _is_blob(f)}
+    return simple if all(simple.values()) else None  # type: ignore[return-value]
 
 
 def _fast_scalars_ok(cls: type, meta: dict[str, Any]) -> bool:
@@ -489,11 +491,7 @@ def _fast_scalars_ok(cls: type, meta: dict[str, Any]) -> bool:
     The hot path (event packets at kHz): skips the general checked conversion, which still runs
     (and explains the problem) whenever this quick test fails.
     """
-    if cls not in _FAST_TYPES:
-        scalar = [f for f in dataclasses.fields(cls) if not _is_blob(f)]
-        simple = {f.name: _SIMPLE.get(f.type) for f in scalar}
-        _FAST_TYPES[cls] = simple if all(simple.values()) else None
-    types_ = _FAST_TYPES[cls]
+    types_ = _simple_types(cls)
     if types_ is None or len(meta) != len(types_):
         return False
     for name, value in meta.items():
