@@ -100,10 +100,10 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
         if not quiet:
             print(f"flagtrack up: {text}", file=sys.stderr)
 
-    if "tracker" in names:
-        tracker_setup(rig)  # bad tracker config: one clear line, before anything opens
+    # bad tracker config: one clear line, before anything opens (the setup then serves every step)
+    setup = tracker_setup(rig) if "tracker" in names else None
     if not prepared:
-        prepare_services(rig, names, say)
+        prepare_services(rig, names, say, tracker=setup)
     finishers = []
     if "supervisor" in names and rig.supervisor.mode != "monitor" and rig.supervisor.exit_when_done:
         finishers.append("supervisor")
@@ -114,7 +114,8 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
             say(f"shutdown may take up to {ramp_s:.0f} s (the tunnel ramps down first)")
             shutdown_timeout_s = ramp_s
     with Bus(rig.bus_config) as bus:
-        services = build_services(rig, bus, names, exit_at_end_of_stream=exit_at_end_of_stream, resume_dir=resume_dir)
+        services = build_services(rig, bus, names, exit_at_end_of_stream=exit_at_end_of_stream, resume_dir=resume_dir,
+                                  tracker=setup)
         if centrelines is not None:
             attrs = {**rig.tracker.attrs(), "input_file": str(rig.camera.replay.path) if rig.camera.replay else ""}
             services.insert(0, CentrelineFileService(bus, centrelines, attrs, exit_after_final=exit_at_end_of_stream))
@@ -133,9 +134,11 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
     return RigRun(code, services, report)
 
 
-def prepare_services(rig, names: list[str], say: Callable[[str], None] = lambda text: None) -> None:  # noqa: ANN001
+def prepare_services(rig, names: list[str], say: Callable[[str], None] = lambda text: None,  # noqa: ANN001
+                     *, tracker=None) -> None:  # noqa: ANN001
     """Do the slow one-off work of the services before they start, while nothing runs in real time
-    (``say`` tells the user when that includes loading or compiling kernels).
+    (``say`` tells the user when that includes loading or compiling kernels; ``tracker``: the rig's
+    tracker setup, if the caller already made it).
 
     - Compile (first run after installing: about a minute) or load the compiled kernels of the twin
       camera, the packets and the tracker: services that share this process would otherwise compile
@@ -157,7 +160,7 @@ def prepare_services(rig, names: list[str], say: Callable[[str], None] = lambda 
         if twin:
             fast_forward(open_camera(rig.camera), 0.05)
         if "tracker" in names:
-            warm_up_kernels(tracker_setup(rig).factory)
+            warm_up_kernels((tracker or tracker_setup(rig)).factory)
         if "supervisor" in names:
             load_figure_modules()
     except FlagtrackError:

@@ -101,14 +101,16 @@ def build_services(
     *,
     exit_at_end_of_stream: bool = False,
     resume_dir: Any = None,
+    tracker: TrackerSetup | None = None,
 ) -> list[Service]:
     """Instantiate the named services of ``rig`` on ``bus`` (subscribers before the camera).
 
     A simulated camera reads the wind speed from the simulated tunnel when the supervisor runs in
     this process, else from the tunnel state on the bus. A simulated point sensor reads the
-    simulated camera's flag, so both must run in this process.
+    simulated camera's flag, so both must run in this process. ``tracker``: the rig's
+    :func:`tracker_setup`, if the caller already made it.
     """
-    setup = tracker_setup(rig) if "tracker" in names else None
+    setup = (tracker or tracker_setup(rig)) if "tracker" in names else None
     services: list[Service] = []
     speed_source: Callable[[], float] | None = None
     if "supervisor" in names:
