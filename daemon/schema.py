@@ -394,15 +394,15 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     if not isinstance(meta, dict):
         raise SchemaError(f"{cls.__name__}: meta is not a JSON object", key=key)
     blob_values = _read_blobs(cls, meta.pop("_blobs", None), view[end:], key)
+    missing = _required_blobs(cls).difference(blob_values)
+    if missing:
+        raise SchemaError(f"{cls.__name__}: missing payload field '{sorted(missing)[0]}'", key=key)
     if _fast_scalars_ok(cls, meta):
         return cls(**meta, **blob_values)
     try:
         scalars = from_mapping(_scalar_view(cls), meta)
     except ConfigError as exc:
         raise SchemaError(f"{cls.__name__}: {exc}", key=key) from None
-    missing = [f.name for f in dataclasses.fields(cls) if _is_blob(f) and f.name not in blob_values and _required(f)]
-    if missing:
-        raise SchemaError(f"{cls.__name__}: missing payload field '{missing[0]}'", key=key)
     return cls(**{f.name: getattr(scalars, f.name) for f in dataclasses.fields(scalars)}, **blob_values)
 
 
@@ -416,20 +416,24 @@ def _read_blobs(cls: type, blobs: Any, payload: memoryview, key: str | None) -> 
         try:
             name, dtype, shape = item
             shape = tuple(map(int, shape))
-            if name not in blob_fields or min(shape, default=0) < 0 or (dtype == "bytes" and len(shape) != 1):
+            if name not in blob_fields or name in values or min(shape, default=0) < 0 \
+                    or (dtype == "bytes" and len(shape) != 1):
                 raise ValueError(name)
             np_dtype = None if dtype == "bytes" else _dtype(dtype)
-            if np_dtype is not None and np_dtype.hasobject:
-                raise ValueError(f"{name}: object arrays do not travel")
+            if np_dtype is not None and (np_dtype.hasobject or np_dtype.itemsize == 0 or np_dtype.shape):
+                raise ValueError(f"{name}: not a plain array type")
             size = shape[0] if np_dtype is None else math.prod(shape) * np_dtype.itemsize  # (np.prod: ~15 us)
-        except (ValueError, TypeError) as exc:
+        except (ValueError, TypeError, OverflowError, SyntaxError) as exc:  # (np.dtype(",") raises SyntaxError)
             raise SchemaError(f"{cls.__name__}: bad payload descriptor {item!r} ({exc})", key=key) from None
         if offset + size > len(payload):
             raise SchemaError(f"{cls.__name__}: payload '{name}' truncated", key=key)
-        if np_dtype is None:
-            value: Any = bytes(payload[offset:offset + size])
-        else:  # a read-only view of the message, as np.frombuffer gives, in one call
-            value = np.ndarray(shape, dtype=np_dtype, buffer=payload, offset=offset)
+        try:
+            if np_dtype is None:
+                value: Any = bytes(payload[offset:offset + size])
+            else:  # a read-only view of the message, as np.frombuffer gives, in one call
+                value = np.ndarray(shape, dtype=np_dtype, buffer=payload, offset=offset)
+        except (ValueError, TypeError) as exc:  # e.g. more than 64 dimensions, or one too large for numpy
+            raise SchemaError(f"{cls.__name__}: bad payload descriptor {item!r} ({exc})", key=key) from None
         values[name] = value
         offset += size
     if offset != len(payload):
@@ -441,6 +445,12 @@ def _read_blobs(cls: type, blobs: Any, payload: memoryview, key: str | None) -> 
 def _dtype(name: str) -> np.dtype:
     """``np.dtype(name)``, looked up once per name (a message carries several arrays)."""
     return np.dtype(name)
+
+
+@functools.cache
+def _required_blobs(cls: type) -> frozenset[str]:
+    """Names of the payload fields of ``cls`` without a default."""
+    return frozenset(f.name for f in dataclasses.fields(cls) if _is_blob(f) and _required(f))
 
 
 @functools.cache

@@ -117,14 +117,17 @@ def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed:
                                           "camera": {"adapter": "replay", "packet_us": packet_us,
                                                      "replay": {"path": str(recording), "speed": speed, "loop": loop,
                                                                 "slice_us": packet_us}}}))
-        procs = [_start("tracker", tracker_cfg)]
+        tracker_proc = _start("tracker", tracker_cfg)
+        procs = [tracker_proc]
         try:
             with Bus(BusConfig(namespace=f"flagtrack/{rig}", connect=(f"tcp/127.0.0.1:{port}",))) as bus:
                 lines = bus.subscribe(bus.keys.centrelines(), CentrelineMessage, capacity=10_000_000)
                 status = bus.subscribe(bus.keys.tracker_status(), TrackerStatus, capacity=10_000, ring=True)
                 if status.recv(timeout_s=60) is None:  # the tracker is up (it reports once a second)
                     raise RuntimeError("the tracker process did not start")
-                procs.append(_start("camera", camera_cfg))
+                camera_proc = _start("camera", camera_cfg)
+                procs.append(camera_proc)
+                watched = {"tracker": tracker_proc, "camera": camera_proc}  # their CPU use is reported
                 latencies, published, updates, first_ns, last_ns, complete = [], [], 0, None, None, False
                 cpu_start: dict[str, float] | None = None
                 deadline = time.monotonic() + 600
@@ -136,7 +139,7 @@ def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed:
                     if first_ns is None and wall_s:  # measure wall_s from the first centreline on
                         deadline = time.monotonic() + wall_s
                     if first_ns is None:
-                        cpu_start = _cpu_snapshot(procs)
+                        cpu_start = _cpu_snapshot(watched)
                     if first_ns is None and len(msg.source_ns):
                         first_ns = int(msg.source_ns.min())
                     last_ns = now
@@ -146,9 +149,9 @@ def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed:
                     if msg.final:
                         complete = True
                         break
-                cpu = _cpu_use(cpu_start, _cpu_snapshot(procs)) if cpu_start else {}
-                procs[-1].send_signal(signal.SIGINT)
-                procs[-1].communicate(timeout=30)
+                cpu = _cpu_use(cpu_start, _cpu_snapshot(watched)) if cpu_start else {}
+                camera_proc.send_signal(signal.SIGINT)
+                camera_proc.communicate(timeout=30)
                 time.sleep(1.2)
                 missing = 0
                 while (s := status.recv(timeout_s=0.1)) is not None:
@@ -171,10 +174,10 @@ def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed:
     }
 
 
-def _cpu_snapshot(procs: list[subprocess.Popen]) -> dict[str, float]:
-    """Wall time and CPU seconds so far of the tracker, the camera (if started) and this process."""
+def _cpu_snapshot(procs: dict[str, subprocess.Popen]) -> dict[str, float]:
+    """Wall time and CPU seconds so far of the named processes and of this one ("bench")."""
     snapshot = {"wall": time.monotonic(), "bench": time.process_time()}
-    for name, proc in zip(("tracker", "camera"), procs):
+    for name, proc in procs.items():
         seconds = _process_cpu_s(proc.pid)
         if seconds is not None:
             snapshot[name] = seconds

@@ -23,6 +23,7 @@ def test_bench_live_reports_rate_latency_and_cpu_without_loss(tmp_path: Path) ->
     for run in ("throughput_cpu_cores", "latency_cpu_cores"):
         cores = result[run]
         assert set(cores) == {"camera", "tracker", "bench"}
-        assert 0 < cores["tracker"] <= 4 and 0 < cores["camera"] <= 4 and 0 <= cores["bench"] <= 4
+        assert 0 < cores["tracker"] <= 4 and all(0 <= value <= 4 for value in cores.values())
+    assert result["latency_cpu_cores"]["camera"] > 0  # (as fast as possible, it may be done before the first line)
     # paced at a sixth of the camera's rate, the tracker works less than flat out
     assert result["latency_cpu_cores"]["tracker"] < result["throughput_cpu_cores"]["tracker"]

@@ -112,11 +112,19 @@ def _set(index: int, part: int, value: object):  # noqa: ANN202
     ("data", "words"),
     [
         (with_blobs(packet(), _set(0, 2, [])), "bad payload descriptor"),  # bytes without a length
-        (with_blobs(centreline_message(), _set(0, 1, "|O")), "object arrays"),
+        (with_blobs(centreline_message(), _set(0, 1, "|O")), "not a plain array type"),
         (with_blobs(centreline_message(), _set(0, 1, "<bogus")), "bad payload descriptor"),
         (with_blobs(centreline_message(), _set(0, 2, ["x"])), "bad payload descriptor"),
         (with_blobs(centreline_message(), _set(0, 2, [-4])), "bad payload descriptor"),
         (with_blobs(centreline_message(), _set(-1, 2, [10**6])), "truncated"),
+        (with_blobs(centreline_message(), _set(0, 2, [0] * 65)), "bad payload descriptor"),  # numpy: 64 dims at most
+        (with_blobs(centreline_message(), _set(0, 2, [0, 10**20])), "bad payload descriptor"),
+        (with_blobs(centreline_message(), _set(0, 2, [float("inf")])), "bad payload descriptor"),
+        (with_blobs(centreline_message(), _set(0, 1, ",")), "bad payload descriptor"),
+        (with_blobs(centreline_message(), _set(0, 1, "(2,3)<i4")), "not a plain array type"),
+        (with_blobs(centreline_message(), _set(0, 1, "|S0")), "not a plain array type"),
+        (with_blobs(centreline_message(), lambda blobs: blobs.append(list(blobs[0]))), "bad payload descriptor"),
+        (with_blobs(centreline_message(), lambda blobs: blobs.pop())[:-32], "missing payload field 'source_ns'"),
     ],
 )
 def test_malformed_payload_descriptors_raise_clear_errors(data: bytes, words: str) -> None:
