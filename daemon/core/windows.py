@@ -181,8 +181,7 @@ class UpdateClock:
         hi_list: list[int] = []
         for i in range(n_max):
             t_us = self._anchor_us + float(self._count + i) * dt_us
-            lo, hi = math.ceil(t_us - tau_us / 2), math.ceil(t_us + tau_us / 2)
-            ready = hi <= complete_before_us or (started_before_us is not None and lo <= started_before_us)
+            lo, hi, ready = _bounds(t_us, tau_us, complete_before_us, started_before_us)
             if not (ready and t_us <= self._stop_us and t_us < seg_end_us):
                 break
             t_list.append(t_us)
@@ -195,8 +194,12 @@ class UpdateClock:
         """Whether the next update can be taken (the cheap test that spares :meth:`take` its arrays
         when a chunk completed no window); the same rounding as :meth:`take`."""
         t_us, tau_us = self._peek()
-        if t_us > self._stop_us:
-            return False
-        lo = math.ceil(t_us - tau_us / 2)
-        hi = math.ceil(t_us + tau_us / 2)
-        return hi <= complete_before_us or (started_before_us is not None and lo <= started_before_us)
+        return t_us <= self._stop_us and _bounds(t_us, tau_us, complete_before_us, started_before_us)[2]
+
+
+def _bounds(t_us: float, tau_us: float, complete_before_us: int, started_before_us: int | None
+            ) -> tuple[int, int, bool]:
+    """Integer bounds [lo, hi) of the window centred at ``t_us``, and whether :meth:`UpdateClock.take`
+    takes it (complete, or started before the end of the stream); the rounding of its array path."""
+    lo, hi = math.ceil(t_us - tau_us / 2), math.ceil(t_us + tau_us / 2)
+    return lo, hi, hi <= complete_before_us or (started_before_us is not None and lo <= started_before_us)

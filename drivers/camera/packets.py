@@ -92,15 +92,15 @@ class Packetizer:
             self._triggers = np.concatenate([self._triggers, triggers])
         packet_us = self.params.packet_us
         n_held = len(self._cols.t)
-        run_starts, run_slots, run_maxima = (np.empty(n_held + 1, dtype=np.int64) for _ in range(3))
-        n_runs = slot_runs(self._cols.t, self._max_before, packet_us, run_starts, run_slots, run_maxima)
+        run_starts, run_slots, run_maxima = slot_table(self._cols.t, self._max_before, packet_us)
+        n_runs = len(run_slots)
         known_until = max(int(run_maxima[n_runs - 1]) if n_runs else -1, -1 if t_until_us is None else int(t_until_us))
         closed_slot = known_until // packet_us  # slots before this one are closed
-        n_closed_runs = int(np.searchsorted(run_slots[:n_runs], closed_slot, side="left"))
+        n_closed_runs = int(np.searchsorted(run_slots, closed_slot, side="left"))
         segments: list[tuple[int, int, int]] = []
         for q in range(n_closed_runs):
-            stop = int(run_starts[q + 1]) if q + 1 < n_runs else n_held
-            segments += self._slot_segments(int(run_starts[q]), stop, (int(run_slots[q]) + 1) * packet_us - 1)
+            segments += self._slot_segments(int(run_starts[q]), int(run_starts[q + 1]),
+                                            (int(run_slots[q]) + 1) * packet_us - 1)
         start = segments[-1][1] if segments else 0
         if not segments and t_until_us is not None and closed_slot * packet_us - 1 > (self._horizon_us or -1) \
                 and n_held == 0:
@@ -230,6 +230,20 @@ class _Columns:
 
     def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         return self.t, self.x, self.y, self.p
+
+
+def slot_table(t: np.ndarray, running_max: int, slot_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cut events into runs of one time slot: slot = (running maximum of t, from ``running_max`` on) // ``slot_us``.
+
+    Returns:
+        (first index of each run, followed by ``len(t)``; slot of each run; running maximum at
+        each run's last event).
+    """
+    n = len(t)
+    starts, slots, maxima = (np.empty(n + 1, dtype=np.int64) for _ in range(3))
+    n_runs = slot_runs(np.ascontiguousarray(t, dtype=np.int64), running_max, slot_us, starts, slots, maxima)
+    starts[n_runs] = n
+    return starts[:n_runs + 1], slots[:n_runs], maxima[:n_runs]
 
 
 def decode_packet(encoding: str, data: bytes, t_offset_us: int, *, source: str = "packet"

@@ -13,8 +13,8 @@ import numpy as np
 from flagtrack.daemon.core.events import empty_events, empty_triggers
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.camera.base import CameraData, CameraInfo, EndOfStream
+from flagtrack.drivers.camera.packets import slot_table
 from flagtrack.drivers.formats import open_events
-from flagtrack.drivers.formats._packet_kernels import slot_runs
 
 log = logging.getLogger(__name__)
 
@@ -144,7 +144,6 @@ class ReplayCamera:
         slice_us = self.cfg.slice_us
         held, held_tr, held_slot = empty_events(), empty_triggers(), -1  # the slice still open
         running_max = np.iinfo(np.int64).min
-        runs = _Runs()
         # small reads when paced: decoding a big chunk would hold back (and then burst) many slices
         with open_events(path, chunk_bytes=_PACED_CHUNK_BYTES) as reader:
             for chunk in reader:
@@ -153,7 +152,8 @@ class ReplayCamera:
                 if len(events) == 0:
                     held_tr = triggers
                     continue
-                starts, slots, running_max = runs.cut(events["t"], running_max, slice_us)
+                starts, slots, maxima = slot_table(events["t"], running_max, slice_us)
+                running_max = int(maxima[-1])
                 for q in range(len(slots)):
                     piece = events[starts[q]:starts[q + 1]]
                     slot = int(slots[q])
@@ -180,21 +180,3 @@ def _triggers_before(triggers: np.ndarray, t_until_us: int) -> tuple[np.ndarray,
     take = triggers["t"] < t_until_us
     return triggers[take], triggers[~take]
 
-
-class _Runs:
-    """Cuts a chunk's events into slices of one time slot (compiled; scratch kept across chunks)."""
-
-    def __init__(self) -> None:
-        self._starts = self._slots = self._maxima = np.empty(0, dtype=np.int64)
-
-    def cut(self, t: np.ndarray, running_max: int, slice_us: int) -> tuple[np.ndarray, np.ndarray, int]:
-        """(start indices of the runs plus the end, their slots, running maximum after the chunk);
-        a slot is the running maximum of t (from ``running_max`` on) over ``slice_us``."""
-        n = len(t)
-        if len(self._starts) < n + 1:
-            self._starts, self._slots, self._maxima = (np.empty(2 * n + 1, dtype=np.int64) for _ in range(3))
-        n_runs = slot_runs(np.ascontiguousarray(t, dtype=np.int64), running_max, slice_us, self._starts,
-                           self._slots, self._maxima)
-        starts = self._starts[:n_runs + 1].copy()
-        starts[n_runs] = n
-        return starts, self._slots[:n_runs].copy(), int(self._maxima[n_runs - 1])
