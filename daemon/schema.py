@@ -443,7 +443,8 @@ def _read_blobs(cls: type, blobs: Any, payload: memoryview, key: str | None) -> 
 
 @functools.lru_cache(maxsize=64)
 def _dtype(name: str) -> np.dtype:
-    """``np.dtype(name)``, looked up once per name (a message carries several arrays)."""
+    """``np.dtype(name)``, looked up once per name (a message carries several arrays; bounded, as the
+    names come off the wire)."""
     return np.dtype(name)
 
 
