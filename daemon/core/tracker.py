@@ -137,12 +137,22 @@ class Tracker:
         """The current chain (a copy)."""
         return ChainState(self._angles.copy())
 
-    def feed(self, events: np.ndarray) -> CentrelineBatch:
-        """Take a chunk of time-ordered events (EVENT_DTYPE); return the updates now complete."""
+    def feed(self, events: np.ndarray, complete_through_us: int | None = None) -> CentrelineBatch:
+        """Take a chunk of time-ordered events (EVENT_DTYPE); return the updates now complete.
+
+        A window is complete once a later event has come, or, sooner, once the source says that
+        every event up to ``complete_through_us`` has been fed (a live camera packet's horizon: the
+        window ending at the packet's end is published with that packet, not the next one). An
+        event that comes after its window was taken is counted as out of order and not used, as at
+        a chunk boundary offline.
+        """
         if self._finished:
             raise RuntimeError("feed() after finish()")
         self._ingest(events)
-        return self._run(self._t_max_us, None)
+        complete_before_us = self._t_max_us
+        if complete_through_us is not None:
+            complete_before_us = max(complete_before_us, int(complete_through_us) + 1)
+        return self._run(complete_before_us, None)
 
     def finish(self) -> CentrelineBatch:
         """End of stream: return the remaining updates whose windows started before the last event."""

@@ -72,6 +72,16 @@ class WindowSchedule:
         """Longest window of the schedule, seconds."""
         return max(seg.tau_s for seg in self.segments)
 
+    def window_ends_us(self, t_s: np.ndarray) -> np.ndarray:
+        """(n,) int64: the end ``ceil(t + tau/2)`` (exclusive, µs) of the windows centred at ``t_s``
+        (update times as a batch gives them, in seconds: the 1e-6 µs taken off undoes their rounding
+        through seconds, so a window ending on a whole µs ends there)."""
+        t_s = np.asarray(t_s, dtype=np.float64)
+        starts = np.array([seg.t_from_s for seg in self.segments])
+        taus_us = np.array([seg.tau_s for seg in self.segments]) * 1e6
+        index = np.maximum(np.searchsorted(starts, t_s, side="right") - 1, 0)
+        return np.ceil(t_s * 1e6 + taus_us[index] / 2 - 1e-6).astype(np.int64)
+
     def segment_at(self, t_s: float) -> int:
         """Index of the segment that applies at ``t_s``."""
         index = 0

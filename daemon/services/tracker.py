@@ -70,6 +70,18 @@ def warm_up_kernels(tracker_factory: Any) -> None:
         tracker.finish()
 
 
+def newest_packet_ns(window_ends_us: np.ndarray, horizons_us: np.ndarray, sent_ns: np.ndarray) -> np.ndarray:
+    """(n,) the ``sent_ns`` of the packet holding the last µs of each window (exclusive ends
+    ``window_ends_us``), among packets tracked together (horizons ``t_last_us``, in stream order).
+
+    The latency of an update counts from the arrival of the newest events it used, even when later
+    packets were tracked in the same call; a window beyond every horizon (the end of a stream) is
+    given the last packet.
+    """
+    newest = np.searchsorted(np.maximum.accumulate(horizons_us), np.asarray(window_ends_us) - 1, side="left")
+    return np.asarray(sent_ns, dtype=np.int64)[np.minimum(newest, len(sent_ns) - 1)]
+
+
 class TrackerService:
     """Tracks one camera live. ``tracker_factory`` builds a fresh core Tracker (one per stream)."""
 
@@ -111,7 +123,9 @@ class TrackerService:
         lag_s = 0.0
         try:
             while not stop.is_set():
-                packet = packets.recv(timeout_s=self.cfg.max_batch_delay_s)
+                # with updates pending, wake up in time to publish them; otherwise only for the status
+                packet = packets.recv(timeout_s=self.cfg.max_batch_delay_s if self._pending
+                                      else min(self.cfg.status_interval_s, 0.1))
                 if packet is not None:
                     batch = [packet]
                     while len(batch) < self.cfg.max_coalesce and not batch[-1].end_of_stream \
@@ -177,27 +191,40 @@ class TrackerService:
                     self.undecodable_packets += 1
                     log.warning("tracker: %s", exc)
         self.events += sum(len(c) for c in chunks)
-        self._track(chunks, run[-1].sent_ns, end_of_stream)
+        self._track(chunks, run, end_of_stream)
 
-    def _track(self, chunks: list, sent_ns: int, end_of_stream: bool) -> None:
-        batches = [self.tracker.feed(events) for events in chunks]
+    def _track(self, chunks: list, run: list[EventPacket], end_of_stream: bool) -> None:
+        """Feed the decoded chunks (the last with the run's horizon: the camera says every event up
+        to it has come, so the windows ending there are complete now) and queue the updates."""
+        tracker = self.tracker
+        batches = [tracker.feed(events, run[-1].t_last_us if i == len(chunks) - 1 else None)
+                   for i, events in enumerate(chunks)]
         if end_of_stream:
-            batches.append(self.tracker.finish())
+            batches.append(tracker.finish())
             self.streams_ended += 1
             self.tracker = self.tracker_factory()
             self._next_seq = None
         if batches:
-            self._add(batches[0] if len(batches) == 1 else CentrelineBatch.concatenate(batches), sent_ns)
+            batch = batches[0] if len(batches) == 1 else CentrelineBatch.concatenate(batches)
+            self._add(batch, self._source_ns(batch, run, tracker))
         if end_of_stream:
             self._publish_if_due(force=True, final=True)
 
-    def _add(self, batch: CentrelineBatch, sent_ns: int) -> None:
+    @staticmethod
+    def _source_ns(batch: CentrelineBatch, run: list[EventPacket], tracker: Any) -> np.ndarray:
+        """(n_t,) ``sent_ns`` of the packet that brought each update's newest events."""
+        if len(run) == 1 or len(batch) == 0:
+            return np.full(len(batch), run[-1].sent_ns, dtype=np.int64)
+        return newest_packet_ns(tracker.params.schedule.window_ends_us(batch.t_s),
+                                np.array([p.t_last_us for p in run]), np.array([p.sent_ns for p in run]))
+
+    def _add(self, batch: CentrelineBatch, source_ns: np.ndarray) -> None:
         if len(batch) == 0:
             return
         if not self._pending:
             self._pending_since = time.monotonic()
         self._pending.append(batch)
-        self._pending_ns.append(np.full(len(batch), sent_ns, dtype=np.int64))
+        self._pending_ns.append(source_ns)
         self.updates += len(batch)
         if sum(len(b) for b in self._pending) >= self.cfg.batch_updates:
             self._publish_if_due(force=True)

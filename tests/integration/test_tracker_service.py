@@ -120,3 +120,38 @@ def test_bad_packets_and_gaps_are_counted_and_tracking_goes_on(tmp_path: Path) -
             updates += len(msg.t_s)
     assert service.missing_packets == 1 and service.malformed_packets == 2
     assert updates > 120  # 4 updates per 1 ms packet, a few lost around the gaps
+
+
+def test_each_update_counts_its_latency_from_the_packet_of_its_newest_events() -> None:
+    """Packets that queued up are tracked together; each update still names the packet that held
+    its window's last µs (not the last packet of the call), and windows past every horizon the last."""
+    from flagtrack.daemon.services.tracker import newest_packet_ns
+
+    horizons = np.array([999, 1999, 2999])
+    sent = np.array([10, 20, 30])
+    ends = np.array([250, 1000, 1001, 1750, 2000, 3000, 3250])  # exclusive: 1000 ends in packet 0
+    np.testing.assert_array_equal(newest_packet_ns(ends, horizons, sent), [10, 10, 20, 20, 20, 30, 30])
+
+
+def test_the_window_ending_with_a_packet_is_published_with_that_packet() -> None:
+    """The packet's horizon completes the window that ends where the packet ends: its centreline
+    does not wait for the next packet (a millisecond later, live)."""
+    from flagtrack.daemon.schema import EventPacket
+    from flagtrack.drivers.camera.packets import PacketParams, Packetizer
+
+    events = np.concatenate(list(line_events(FLAG, 0, 6_000, 640, 480)))
+    events["t"] -= events["t"][0]  # windows of 250 µs from t = 0: every fourth ends with a 1 ms packet
+    packets = Packetizer("evt3", 640, 480, PacketParams(packet_us=1000)).push(events, None, t_until_us=6_000)
+    with running_tracker(CONFIG, "flagtrack/horizon") as (cam_bus, service, _):
+        lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=100_000)
+        pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
+        time.sleep(0.4)
+        for seq, packet in enumerate(packets[:5]):
+            pub.put(EventPacket("cam0", seq, packet.t_first_us, packet.t_last_us, packet.n_events, 640, 480,
+                                "evt3", time.time_ns(), packet.t_offset_us, data=packet.data))
+            assert wait_for(lambda: service.packets == seq + 1, timeout_s=10)
+            t_s = []
+            while (msg := lines.recv(timeout_s=0.3)) is not None:
+                t_s.extend(msg.t_s)
+            assert packet.t_last_us == 1000 * seq + 999
+            assert len(t_s) == 4 and t_s[-1] * 1e6 == pytest.approx(packet.t_last_us + 1 - 125)

@@ -227,3 +227,30 @@ def test_the_update_clock_gives_the_same_windows_however_often_it_is_asked() -> 
     for before, horizon, part in zip([-1, *horizons], horizons, parts):  # each window as soon as it is complete
         np.testing.assert_array_equal(part[2], hi[(hi > before) & (hi <= horizon)])
     assert sum(len(p[0]) == 0 for p in parts) > 1000  # most calls completed no window
+
+
+def test_a_source_horizon_completes_the_window_ending_there(events: np.ndarray) -> None:
+    """A live packet says every event up to its end has come: the window ending there is taken with
+    that packet, not with the next one, and packets fed with their horizons give the same updates."""
+    params = _params(tau=2.5e-4)
+    t0 = int(events["t"][0])
+    end = t0 + 40 * 250  # a window end (windows start at the first event and last 250 µs)
+    before = events[events["t"] < end]
+    without = Tracker(params).feed(before)
+    with_horizon = Tracker(params).feed(before, complete_through_us=end - 1)
+    assert len(with_horizon) == len(without) + 1 == 40
+    assert params.schedule.window_ends_us(with_horizon.t_s)[-1] == end
+    cuts = np.searchsorted(events["t"], np.arange(t0 + 1000, int(events["t"][-1]), 1000))  # 1 ms packets
+    tracker = Tracker(params)
+    fed = [tracker.feed(packet, int(packet["t"][0]) // 1000 * 1000 + 999)
+           for packet in np.split(events, cuts) if len(packet)]
+    _assert_same(track(events, params), CentrelineBatch.concatenate([*fed, tracker.finish()]))
+
+
+def test_window_ends_from_update_times_are_the_clocks() -> None:
+    from flagtrack.daemon.core.windows import UpdateClock
+
+    schedule = WindowSchedule((WindowSegment(0.0, 1.7e-4, 2.5e-4), WindowSegment(1.01, 4.1e-4, 3e-4)))
+    t_us, _, hi = UpdateClock(schedule, 1_000_003).take(1_040_000)
+    assert len(hi) > 100
+    np.testing.assert_array_equal(schedule.window_ends_us(t_us * 1e-6), hi)
