@@ -73,7 +73,7 @@ class Packetizer:
         self.encoding = encoding
         self.width, self.height = width, height
         self.params = params
-        self._cols = _Columns.empty()
+        self._cols = _HeldColumns()
         self._max_before = np.iinfo(np.int64).min  # running maximum of t before the held events
         self._triggers = empty_triggers()
         self._horizon_us: int | None = None  # t_last_us of the last packet emitted
@@ -87,11 +87,11 @@ class Packetizer:
              ) -> list[Packet]:
         """Add data (and, optionally, "complete before ``t_until_us``"); return the packets it closes."""
         if len(events):
-            self._cols = self._cols.append(_Columns.of(events))
+            self._cols.append(events)
         if triggers is not None and len(triggers):
             self._triggers = np.concatenate([self._triggers, triggers])
         packet_us = self.params.packet_us
-        n_held = len(self._cols.t)
+        n_held = self._cols.n
         run_starts, run_slots, run_maxima = slot_table(self._cols.t, self._max_before, packet_us)
         n_runs = len(run_slots)
         known_until = max(int(run_maxima[n_runs - 1]) if n_runs else -1, -1 if t_until_us is None else int(t_until_us))
@@ -108,18 +108,18 @@ class Packetizer:
         packets = self._packets(segments)
         if n_closed_runs:
             self._max_before = int(run_maxima[n_closed_runs - 1])
-        self._cols = self._cols.tail(start)
+        self._cols.drop_front(start)
         return packets
 
     def flush(self) -> list[Packet]:
         """Emit everything held (end of stream)."""
-        n_held = len(self._cols.t)
+        n_held = self._cols.n
         if n_held == 0 and len(self._triggers) == 0:
             return []
         t_last = max(max(self._max_before, int(self._cols.t.max())) if n_held else -1,
                      int(self._triggers["t"].max()) if len(self._triggers) else -1)
         packets = self._packets(self._slot_segments(0, n_held, t_last))
-        self._cols = _Columns.empty()
+        self._cols.drop_front(n_held)
         return packets
 
     def _slot_segments(self, start: int, stop: int, horizon_us: int) -> list[tuple[int, int, int]]:
@@ -140,7 +140,7 @@ class Packetizer:
             return []
         starts, stops, horizons = (np.array(column, dtype=np.int64) for column in zip(*segments))
         triggers, tr_bounds = self._take_triggers(horizons)
-        cols, n_packets = self._cols, len(segments)
+        cols, n_packets = self._cols.view(), len(segments)
         n_triggers = np.diff(tr_bounds)
         out_ends, t_offsets, n_on = (np.zeros(n_packets, dtype=np.int64) for _ in range(3))
         data: list[bytes] = []
@@ -207,29 +207,46 @@ class _Columns:
     y: np.ndarray
     p: np.ndarray
 
-    @staticmethod
-    def empty() -> _Columns:
-        return _Columns(np.zeros(0, np.int64), np.zeros(0, np.uint16), np.zeros(0, np.uint16), np.zeros(0, np.uint8))
-
-    @staticmethod
-    def of(events: np.ndarray) -> _Columns:
-        c = np.ascontiguousarray
-        return _Columns(c(events["t"], dtype=np.int64), c(events["x"], dtype=np.uint16),
-                        c(events["y"], dtype=np.uint16), c(events["p"], dtype=np.uint8))
-
-    def append(self, other: _Columns) -> _Columns:
-        if len(self.t) == 0:
-            return other
-        return _Columns(*(np.concatenate([a, b]) for a, b in zip(self.columns(), other.columns())))
-
     def slice(self, start: int, stop: int) -> _Columns:
         return _Columns(self.t[start:stop], self.x[start:stop], self.y[start:stop], self.p[start:stop])
 
-    def tail(self, start: int) -> _Columns:
-        return _Columns(*(a[start:].copy() for a in self.columns()))
 
-    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        return self.t, self.x, self.y, self.p
+class _HeldColumns:
+    """The events a packetizer holds, as contiguous columns in buffers that grow as needed: new
+    events are copied in field by field (no concatenation with those held), and the events packed
+    are dropped in place."""
+
+    def __init__(self) -> None:
+        self._buffers = (np.empty(0, np.int64), np.empty(0, np.uint16), np.empty(0, np.uint16), np.empty(0, np.uint8))
+        self.n = 0
+
+    @property
+    def t(self) -> np.ndarray:
+        return self._buffers[0][:self.n]
+
+    def view(self) -> _Columns:
+        """The held events (views: valid until the next append or drop)."""
+        return _Columns(*(buffer[:self.n] for buffer in self._buffers))
+
+    def append(self, events: np.ndarray) -> None:
+        need = self.n + len(events)
+        if need > len(self._buffers[0]):
+            capacity = max(need, 2 * len(self._buffers[0]), 4096)
+            grown = tuple(np.empty(capacity, dtype=buffer.dtype) for buffer in self._buffers)
+            for new, old in zip(grown, self._buffers):
+                new[:self.n] = old[:self.n]
+            self._buffers = grown
+        for buffer, name in zip(self._buffers, ("t", "x", "y", "p")):
+            buffer[self.n:need] = events[name]
+        self.n = need
+
+    def drop_front(self, start: int) -> None:
+        """Keep the events from ``start`` on, moved to the front."""
+        keep = self.n - start
+        if keep > 0 and start > 0:
+            for buffer in self._buffers:
+                buffer[:keep] = buffer[start:self.n]  # numpy copies overlapping ranges correctly
+        self.n = max(keep, 0)
 
 
 def slot_table(t: np.ndarray, running_max: int, slot_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
