@@ -254,3 +254,21 @@ def test_window_ends_from_update_times_are_the_clocks() -> None:
     t_us, _, hi = UpdateClock(schedule, 1_000_003).take(1_040_000)
     assert len(hi) > 100
     np.testing.assert_array_equal(schedule.window_ends_us(t_us * 1e-6), hi)
+
+
+def test_a_horizon_waits_for_the_steps_back_a_jittery_sensor_makes(events: np.ndarray) -> None:
+    """Times that step back by up to 5 µs: a packet (cut by the running maximum, as the packetizer
+    cuts) can hold events before the previous packet's horizon. The horizon is trusted only up to
+    the largest step back seen, so those events are still used: the same updates as offline."""
+    jittery = events.copy()
+    rng = np.random.default_rng(11)
+    jittery["t"] -= rng.integers(0, 6, len(jittery))
+    params = _params(tau=2.5e-4)
+    slots = np.maximum.accumulate(jittery["t"]) // 1000
+    cuts = np.flatnonzero(np.diff(slots)) + 1
+    packets = np.split(jittery, cuts)
+    horizons = [int(slot) * 1000 + 999 for slot in slots[np.concatenate([[0], cuts])]]
+    assert any(int(p["t"].min()) <= h for p, h in zip(packets[1:], horizons))  # late events cross packets
+    tracker = Tracker(params)
+    fed = [tracker.feed(packet, horizon) for packet, horizon in zip(packets, horizons)]
+    _assert_same(track(jittery, params), CentrelineBatch.concatenate([*fed, tracker.finish()]))
