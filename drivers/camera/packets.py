@@ -55,9 +55,11 @@ class Packetizer:
     A slot ``[k packet_us, (k+1) packet_us)`` closes when a later event arrives or when the camera
     says its stream is complete past the slot end (``t_until_us``, e.g. a still flag: no events,
     but time goes on). Each packet's ``t_last_us`` is its completeness horizon: every event with
-    ``t <= t_last_us`` is in it or in an earlier packet. When only time passes, an empty packet
-    carries the horizon forward. An event's slot is that of the latest time seen so far (sensors
-    step back by a few µs; a late event joins the current slot), so horizons never go back. Events
+    ``t <= t_last_us`` is in it or in an earlier packet, except the late events of a sensor whose
+    times step back. An event's slot is that of the latest time seen so far (sensors step back by
+    a few µs; a late event joins the current slot), so horizons never go back; the tracker allows
+    for the steps back it has seen. When only time passes, an empty packet carries the horizon
+    forward. Events
     are held as contiguous columns (the encoder runs about twice as fast on them as on the fields
     of an event array).
 
