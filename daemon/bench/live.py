@@ -16,7 +16,9 @@ centrelines and the tracker status.
 
 In both runs it also reports the cores each process used while the centrelines came (from
 ``/proc``, Linux only): the camera, the tracker and this process share the machine, and when
-together they keep it busy, packets wait for a core and the latency's tail grows.
+together they keep it busy, packets wait for a core and the latency's tail grows. Before both, it
+measures how late a 1 ms sleep of this process wakes up (p50, p99): the machine's own scheduling
+floor, which every hop of the pipeline pays.
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
         n_events = sum(len(chunk.events) for chunk in reader)
     file_rate = n_events / args.seconds
     tracker = {"root": list(ROOT), "length": LENGTH, "tau_s": args.tau}
+    wakeup = _wakeup_lateness_ms()
     throughput = _measure(recording, tracker, args.packet_us, speed=0.0, loop=False, wall_s=None)
     speed = args.latency_rate * 1e6 / file_rate
     latency = _measure(recording, tracker, args.packet_us, speed=speed, loop=True, wall_s=args.latency_seconds)
@@ -78,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
         "publish_latency_p50_ms": latency["publish_p50_ms"], "publish_latency_p99_ms": latency["publish_p99_ms"],
         "latency_missing_packets": latency["missing_packets"],
         "throughput_cpu_cores": throughput["cpu_cores"], "latency_cpu_cores": latency["cpu_cores"],
+        "wakeup_late_p50_ms": wakeup[0], "wakeup_late_p99_ms": wakeup[1],
     }
     if args.json:
         print(json.dumps(results))
@@ -93,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"    to publication by the tracker: p50 {latency['publish_p50_ms']:.2f} ms, "
               f"p99 {latency['publish_p99_ms']:.2f} ms")
         print(f"    to arrival at a subscriber:    p50 {latency['p50_ms']:.2f} ms, p99 {latency['p99_ms']:.2f} ms")
+        print(f"  this machine, idle: a 1 ms sleep wakes up p50 {wakeup[0]:.2f} ms, p99 {wakeup[1]:.2f} ms late "
+              f"(every hop of the pipeline waits for such a wake-up)")
         for label, cores in (("throughput run", throughput["cpu_cores"]), ("latency run", latency["cpu_cores"])):
             if cores:
                 used = ", ".join(f"{name} {value:.2f}" for name, value in cores.items())
@@ -172,6 +178,19 @@ def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed:
         "publish_p50_ms": float(np.percentile(pub, 50)) if len(pub) else float("nan"),
         "publish_p99_ms": float(np.percentile(pub, 99)) if len(pub) else float("nan"),
     }
+
+
+def _wakeup_lateness_ms(n: int = 1000) -> tuple[float, float]:
+    """(p50, p99) of how late a 1 ms sleep of this process returns, ms: the scheduling floor of the
+    machine (a VM's host can hold a core for milliseconds), measured before the pipeline runs."""
+    import numpy as np
+
+    late = np.empty(n)
+    for i in range(n):
+        start = time.perf_counter()
+        time.sleep(1e-3)
+        late[i] = (time.perf_counter() - start) * 1e3 - 1.0
+    return float(np.percentile(late, 50)), float(np.percentile(late, 99))
 
 
 def _cpu_snapshot(procs: dict[str, subprocess.Popen]) -> dict[str, float]:

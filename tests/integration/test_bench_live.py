@@ -19,6 +19,7 @@ def test_bench_live_reports_rate_latency_and_cpu_without_loss(tmp_path: Path) ->
     assert result["sustained_mev_s"] > 0.5
     assert result["latency_updates"] > 400  # 1 s at 1 Mev/s: ~0.16 s of camera time, ~650 updates of 250 us
     assert 0 < result["publish_latency_p50_ms"] <= result["publish_latency_p99_ms"]
+    assert 0 <= result["wakeup_late_p50_ms"] <= result["wakeup_late_p99_ms"] < 1000
     assert result["publish_latency_p50_ms"] < result["latency_p50_ms"]  # the hop back to a subscriber
     for run in ("throughput_cpu_cores", "latency_cpu_cores"):
         cores = result[run]
