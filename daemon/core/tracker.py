@@ -129,6 +129,8 @@ class Tracker:
         self._clock: UpdateClock | None = None
         self._t_max_us = np.iinfo(np.int64).min
         self._max_step_back_us = 0  # largest step back in time seen in the stream (sensor jitter)
+        # a window ending within this of the last event starts at or before it (see feed)
+        self._shortest_window_us = math.floor(min(seg.tau_s for seg in params.schedule.segments) * 1e6)
         self._finished = False
         self.s = params.s
         self.stats = TrackerStats()
@@ -143,7 +145,9 @@ class Tracker:
 
         A window is complete once a later event has come, or, sooner, once the source says that
         every event up to ``complete_through_us`` has been fed (a live camera packet's horizon: the
-        window ending at the packet's end is published with that packet, not the next one). A
+        window ending at the packet's end is published with that packet, not the next one). Only
+        windows that start at or before the last event are completed so: one that starts later
+        waits for the next event, and at the end of the stream is not emitted, as offline. A
         sensor whose times step back can still send an event before the horizon later: the
         horizon is trusted only up to the largest step back seen so far in the stream. An event
         that comes after its window was taken is counted as out of order and not used, as at a
@@ -154,7 +158,8 @@ class Tracker:
         self._ingest(events)
         complete_before_us = self._t_max_us
         if complete_through_us is not None:
-            complete_before_us = max(complete_before_us, int(complete_through_us) + 1 - self._max_step_back_us)
+            trusted_us = int(complete_through_us) + 1 - self._max_step_back_us
+            complete_before_us = max(complete_before_us, min(trusted_us, self._t_max_us + self._shortest_window_us))
         return self._run(complete_before_us, None)
 
     def finish(self) -> CentrelineBatch:
@@ -190,7 +195,10 @@ class Tracker:
     def _sort_buffer(self, t: np.ndarray) -> None:
         late = int(np.count_nonzero(t < self._t_max_us)) + int(np.count_nonzero(t[1:] < t[:-1]))
         latest_before = np.maximum.accumulate(np.concatenate([[max(self._t_max_us, int(t[0]))], t[:-1]]))
-        self._max_step_back_us = max(self._max_step_back_us, int((latest_before - t).max()))
+        step_back_us = int((latest_before - t).max())
+        if step_back_us > max(self._max_step_back_us, 1000):
+            log.info("event times stepped back by %d µs: windows wait that long past a source's horizon", step_back_us)
+        self._max_step_back_us = max(self._max_step_back_us, step_back_us)
         if self.stats.events_out_of_order == 0:
             log.warning("events out of time order; sorting them in (later ones are counted, not logged)")
         self.stats.events_out_of_order += late

@@ -124,8 +124,8 @@ class TrackerService:
         try:
             while not stop.is_set():
                 # with updates pending, wake up in time to publish them; otherwise only for the status
-                packet = packets.recv(timeout_s=self.cfg.max_batch_delay_s if self._pending
-                                      else min(self.cfg.status_interval_s, 0.1))
+                idle_wait_s = max(self.cfg.max_batch_delay_s, min(self.cfg.status_interval_s, 0.1))
+                packet = packets.recv(timeout_s=self.cfg.max_batch_delay_s if self._pending else idle_wait_s)
                 if packet is not None:
                     batch = [packet]
                     while len(batch) < self.cfg.max_coalesce and not batch[-1].end_of_stream \

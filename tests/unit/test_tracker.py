@@ -272,3 +272,14 @@ def test_a_horizon_waits_for_the_steps_back_a_jittery_sensor_makes(events: np.nd
     tracker = Tracker(params)
     fed = [tracker.feed(packet, horizon) for packet, horizon in zip(packets, horizons)]
     _assert_same(track(jittery, params), CentrelineBatch.concatenate([*fed, tracker.finish()]))
+
+
+def test_a_horizon_past_the_last_event_adds_no_window_that_starts_after_it(events: np.ndarray) -> None:
+    """A packet may reach past the last event (a trigger later, or time passing on a still flag):
+    windows that start after the last event are not completed by it, so the end of a stream gives
+    the offline updates, no more."""
+    params = _params(tau=2.5e-4)
+    part = events[:50_000]
+    tracker = Tracker(params)
+    live = CentrelineBatch.concatenate([tracker.feed(part, int(part["t"][-1]) + 3000), tracker.finish()])
+    _assert_same(track(part, params), live)
