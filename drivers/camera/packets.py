@@ -59,9 +59,8 @@ class Packetizer:
     times step back. An event's slot is that of the latest time seen so far (sensors step back by
     a few µs; a late event joins the current slot), so horizons never go back; the tracker allows
     for the steps back it has seen. When only time passes, an empty packet carries the horizon
-    forward. Events
-    are held as contiguous columns (the encoder runs about twice as fast on them as on the fields
-    of an event array).
+    forward. Events are held as contiguous columns (the encoder runs about twice as fast on them as
+    on the fields of an event array).
 
     Args:
         encoding: ``evt3`` or ``evt2``.
