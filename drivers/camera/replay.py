@@ -18,7 +18,7 @@ from flagtrack.drivers.formats import open_events
 
 log = logging.getLogger(__name__)
 
-_PACED_CHUNK_BYTES = 256 << 10
+_READ_CHUNK_BYTES = 256 << 10  # decoded events stay in cache for the packetizer; paced, no burst of slices
 
 
 @dataclass(frozen=True)
@@ -122,7 +122,7 @@ class ReplayCamera:
     @staticmethod
     def _file_chunks(path: Path) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
         """(events, triggers, t_until_us) per chunk of the file: complete before its last event's time."""
-        with open_events(path) as reader:
+        with open_events(path, chunk_bytes=_READ_CHUNK_BYTES) as reader:
             t_until = None
             for chunk in reader:
                 times = [int(a["t"].max()) for a in (chunk.events, chunk.triggers) if len(a)]
@@ -144,8 +144,8 @@ class ReplayCamera:
         slice_us = self.cfg.slice_us
         held, held_tr, held_slot = empty_events(), empty_triggers(), -1  # the slice still open
         running_max = np.iinfo(np.int64).min
-        # small reads when paced: decoding a big chunk would hold back (and then burst) many slices
-        with open_events(path, chunk_bytes=_PACED_CHUNK_BYTES) as reader:
+        # small reads: decoding a big chunk would hold back (and then burst) many slices
+        with open_events(path, chunk_bytes=_READ_CHUNK_BYTES) as reader:
             for chunk in reader:
                 triggers = np.concatenate([held_tr, chunk.triggers]) if len(chunk.triggers) else held_tr
                 events = chunk.events
