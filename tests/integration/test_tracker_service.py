@@ -150,8 +150,12 @@ def test_the_window_ending_with_a_packet_is_published_with_that_packet() -> None
             pub.put(EventPacket("cam0", seq, packet.t_first_us, packet.t_last_us, packet.n_events, 640, 480,
                                 "evt3", time.time_ns(), packet.t_offset_us, data=packet.data))
             assert wait_for(lambda: service.packets == seq + 1, timeout_s=10)
-            t_s = []
-            while (msg := lines.recv(timeout_s=0.3)) is not None:
+            t_s: list[float] = []
+            deadline = time.monotonic() + 10
+            while len(t_s) < 4 and time.monotonic() < deadline:  # this packet's four windows
+                if (msg := lines.recv(timeout_s=0.5)) is not None:
+                    t_s.extend(msg.t_s)
+            while (msg := lines.recv(timeout_s=0.3)) is not None:  # and no more before the next packet
                 t_s.extend(msg.t_s)
             assert packet.t_last_us == 1000 * seq + 999
             assert len(t_s) == 4 and t_s[-1] * 1e6 == pytest.approx(packet.t_last_us + 1 - 125)
