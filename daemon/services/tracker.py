@@ -121,10 +121,10 @@ class TrackerService:
         last_status = time.monotonic()
         window = {"events": 0, "updates": 0, "t": last_status}
         lag_s = 0.0
+        # with updates pending, wake up in time to publish them; otherwise only for the status
+        idle_wait_s = max(self.cfg.max_batch_delay_s, min(self.cfg.status_interval_s, 0.1))
         try:
             while not stop.is_set():
-                # with updates pending, wake up in time to publish them; otherwise only for the status
-                idle_wait_s = max(self.cfg.max_batch_delay_s, min(self.cfg.status_interval_s, 0.1))
                 packet = packets.recv(timeout_s=self.cfg.max_batch_delay_s if self._pending else idle_wait_s)
                 if packet is not None:
                     batch = [packet]

@@ -179,4 +179,3 @@ def _triggers_before(triggers: np.ndarray, t_until_us: int) -> tuple[np.ndarray,
         return triggers, triggers
     take = triggers["t"] < t_until_us
     return triggers[take], triggers[~take]
-
