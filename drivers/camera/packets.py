@@ -259,7 +259,9 @@ def slot_table(t: np.ndarray, running_max: int, slot_us: int) -> tuple[np.ndarra
     """
     n = len(t)
     starts, slots, maxima = (np.empty(n + 1, dtype=np.int64) for _ in range(3))
-    n_runs = slot_runs(np.ascontiguousarray(t, dtype=np.int64), running_max, slot_us, starts, slots, maxima)
+    if t.dtype != np.int64:
+        t = t.astype(np.int64)
+    n_runs = slot_runs(t, running_max, slot_us, starts, slots, maxima)  # strided (an event field) as it is
     starts[n_runs] = n
     return starts[:n_runs + 1], slots[:n_runs], maxima[:n_runs]
 

@@ -79,14 +79,18 @@ def slot_runs(t, running_max, packet_us, run_starts, run_slots, run_maxima):  # 
     the number of runs.
     """
     n_runs = 0
-    slot = -1
+    slot_end = running_max  # the running maximum only grows: a new slot starts when it reaches slot_end
     for i in range(len(t)):
+        before = running_max
         running_max = max(running_max, t[i])
-        s = running_max // packet_us
-        if n_runs == 0 or s != slot:
+        if n_runs == 0 or running_max >= slot_end:  # one division per run, not per event
+            s = running_max // packet_us
+            slot_end = (s + 1) * packet_us
+            if n_runs > 0:
+                run_maxima[n_runs - 1] = before
             run_starts[n_runs] = i
             run_slots[n_runs] = s
             n_runs += 1
-            slot = s
+    if n_runs > 0:
         run_maxima[n_runs - 1] = running_max
     return n_runs

@@ -7,7 +7,7 @@ import pytest
 
 from flagtrack.daemon.core.events import TRIGGER_DTYPE, make_events
 from flagtrack.daemon.errors import FormatError
-from flagtrack.drivers.camera.packets import PacketParams, Packetizer, decode_packet
+from flagtrack.drivers.camera.packets import PacketParams, Packetizer, decode_packet, slot_table
 from flagtrack.drivers.formats.codec import LOOP_US, Encoder
 
 
@@ -94,3 +94,24 @@ def test_packets_that_need_more_room_than_usual_are_still_encoded() -> None:
 def test_an_encoding_without_encoder_is_refused_up_front() -> None:
     with pytest.raises(FormatError, match="cannot encode 'evt21'"):
         Packetizer("evt21", 640, 480)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_slot_table_matches_the_running_maximum_rule(seed: int) -> None:
+    """Runs of one slot of the running maximum, on an event field as it is (strided), with steps back,
+    negative times, gaps of several slots and a maximum carried in from before."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 3000))
+    t = np.cumsum(rng.integers(-40, 60, n)) + int(rng.integers(-5000, 5000))
+    t[rng.integers(0, n, 5)] += rng.integers(0, 4000, 5)  # jumps over several slots
+    events = make_events(t, np.zeros(n), np.zeros(n), np.zeros(n))
+    slot_us = int(rng.choice([1, 7, 250, 1000]))
+    before = int(t[0]) + int(rng.integers(-300, 300))
+    starts, slots, maxima = slot_table(events["t"], before, slot_us)
+
+    running = np.maximum.accumulate(np.concatenate([[before], t]))[1:]
+    slot_of = running // slot_us
+    expected_starts = np.flatnonzero(np.concatenate([[True], slot_of[1:] != slot_of[:-1]]))
+    np.testing.assert_array_equal(starts, np.append(expected_starts, n))
+    np.testing.assert_array_equal(slots, slot_of[expected_starts])
+    np.testing.assert_array_equal(maxima, running[np.append(expected_starts[1:], n) - 1])
