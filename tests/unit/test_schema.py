@@ -60,6 +60,42 @@ def test_other_messages_round_trip(message: object) -> None:
     assert encode(got) == encode(message)
 
 
+@pytest.mark.parametrize(
+    "message",
+    [
+        packet(),
+        centreline_message(),
+        CameraStatus("cam0", "streaming", "simulated", 640, 480, "evt3", {"biases": {"bias_fo": 3}}, "dé\"jà"),
+        TunnelCommand("set", 5.5),
+        SensorSamples("om70", 1, "m", np.arange(5, dtype=np.int64)[::2], np.linspace(0, 1, 6).reshape(2, 3)[:, 1]),
+        CentrelineMessage.from_batch(CentrelineBatch(
+            t_s=np.zeros(0), s=np.linspace(0, 1, 3), x=np.zeros((0, 3)), y=np.zeros((0, 3)), joints_x=np.zeros((0, 2)),
+            joints_y=np.zeros((0, 2)), delta_rms=np.zeros(0), n_events=np.zeros(0, dtype=np.int64),
+        ), source="tracker", seq=0, units="m", source_ns=np.zeros(0, dtype=np.int64), final=True),
+    ],
+)
+def test_meta_is_the_json_that_json_dumps_writes(message: object) -> None:
+    """The encoder writes the blob descriptors as text: the meta must still be exactly ``json.dumps``
+    of the scalar fields then ``_blobs`` (the wire format other tools parse), and the payload the
+    arrays in C order (non-contiguous ones included)."""
+    data = encode(message)
+    meta_len = struct.unpack_from("<2sBBI", data)[3]
+    meta_bytes = data[8:8 + meta_len]
+    scalars, blobs, payload = {}, [], []
+    for f in dataclasses.fields(message):
+        value = getattr(message, f.name)
+        if isinstance(value, np.ndarray):
+            blobs.append([f.name, value.dtype.str, list(value.shape)])
+            payload.append(np.ascontiguousarray(value).tobytes())
+        elif isinstance(value, bytes):
+            blobs.append([f.name, "bytes", [len(value)]])
+            payload.append(value)
+        else:
+            scalars[f.name] = value
+    assert meta_bytes == json.dumps({**scalars, "_blobs": blobs}, separators=(",", ":")).encode()
+    assert data[8 + meta_len:] == b"".join(payload)
+
+
 def with_meta(meta: dict, type_id: int = schema.MessageType.EVENT_PACKET, payload: bytes = b"") -> bytes:
     body = json.dumps(meta).encode()
     return struct.pack("<2sBBI", b"FT", schema.VERSION, type_id, len(body)) + body + payload
