@@ -8,6 +8,7 @@ at most ``shutdown_timeout_s`` and says which services it abandoned.
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import os
 import signal
@@ -21,6 +22,24 @@ from typing import Protocol
 log = logging.getLogger(__name__)
 
 _SWITCH_INTERVAL_S = 0.0005
+# glibc mallopt parameters: M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD (the largest it takes, 32 MB)
+_MALLOC_SETTINGS = ((-1, 256 << 20), (-2, 16 << 20), (-3, 32 << 20))
+
+
+def keep_freed_memory() -> bool:
+    """Ask glibc's allocator to keep freed memory for reuse rather than hand it back to the OS at once.
+
+    Live services allocate and free the same few arrays for every packet. By default glibc returns
+    memory once 128 KB lie free at the top of its heap, and maps arrays of growing sizes afresh, so
+    the next packet's arrays page-fault again (3-4 faults per 1 ms packet in the replay camera, about
+    3.7 µs each on the development VM). With these settings the heap keeps up to 256 MB free for
+    reuse. Returns whether they took (False without glibc: nothing changes).
+    """
+    try:
+        mallopt = ctypes.CDLL("libc.so.6").mallopt
+    except (OSError, AttributeError):
+        return False
+    return all(mallopt(param, value) == 1 for param, value in _MALLOC_SETTINGS)
 
 
 class Service(Protocol):
@@ -152,6 +171,7 @@ def run_services(
     # Zenoh delivers on its own threads, which need the GIL to queue a message; with Python's default
     # 5 ms switch interval a busy service thread would hold messages back for up to 5 ms.
     sys.setswitchinterval(min(sys.getswitchinterval(), _SWITCH_INTERVAL_S))
+    keep_freed_memory()
     group = ServiceGroup(services, stop_when_any_finishes)
     if handle_signals and threading.current_thread() is threading.main_thread():
         install_signal_handlers(group, on_force)
