@@ -342,7 +342,13 @@ _META_ENCODER = json.JSONEncoder(separators=(",", ":"))  # what json.dumps(..., 
 
 @functools.lru_cache(maxsize=1024)
 def _blob_descriptor(name: str, dtype: np.dtype, shape: tuple[int, ...]) -> str:
-    """The JSON text of an array's ``[name, dtype, shape]`` descriptor (messages repeat a few shapes)."""
+    """The JSON text of an array's ``[name, dtype, shape]`` descriptor (messages repeat a few shapes).
+
+    Raises:
+        TypeError: arrays of Python objects or variable-width strings (their bytes are pointers).
+    """
+    if dtype.hasobject or dtype.kind == "T":
+        raise TypeError(f"{name}: {dtype} arrays cannot be sent (their bytes are not their values)")
     return f'["{name}","{dtype.str}",[{",".join(map(str, shape))}]]'
 
 
@@ -429,7 +435,9 @@ def _read_blobs(cls: type, blobs: Any, payload: memoryview, key: str | None) -> 
         try:
             name, dtype, shape = item
             try:
-                np_dtype, shape, size = _blob_layout(cls, name, dtype, tuple(shape))
+                dims = tuple(shape)
+                layout = _blob_layout if len(dims) <= _CACHED_DIMS else _blob_layout.__wrapped__
+                np_dtype, shape, size = layout(cls, name, dtype, dims)
             except TypeError:  # a part that cannot be a cache key, or a bad one: checked without the cache
                 np_dtype, shape, size = _blob_layout.__wrapped__(cls, name, dtype, shape)
             if name in values:
@@ -452,6 +460,9 @@ def _read_blobs(cls: type, blobs: Any, payload: memoryview, key: str | None) -> 
     return values
 
 
+_CACHED_DIMS = 8  # descriptors with more dimensions are checked without the cache (bounds its memory)
+
+
 @functools.lru_cache(maxsize=256)
 def _blob_layout(cls: type, name: Any, dtype: Any, shape: Any) -> tuple[np.dtype | None, tuple[int, ...], int]:
     """Checked layout of one payload descriptor: (numpy dtype, or None for bytes; shape; size in bytes).
@@ -459,6 +470,8 @@ def _blob_layout(cls: type, name: Any, dtype: Any, shape: Any) -> tuple[np.dtype
     Raises ValueError, TypeError, OverflowError or SyntaxError for a bad one. Cached: a stream
     repeats a few descriptors (bounded, as they come off the wire; errors are not cached).
     """
+    if not isinstance(dtype, str):  # numpy would also take a dict or a list as a structured type
+        raise TypeError(f"dtype {dtype!r} is not a string")
     shape = tuple(map(int, shape))
     if name not in _blob_fields(cls) or min(shape, default=0) < 0 or (dtype == "bytes" and len(shape) != 1):
         raise ValueError(name)

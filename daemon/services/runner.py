@@ -33,8 +33,11 @@ def keep_freed_memory() -> bool:
     memory once 128 KB lie free at the top of its heap, and maps arrays of growing sizes afresh, so
     the next packet's arrays page-fault again (3-4 faults per 1 ms packet in the replay camera, about
     3.7 µs each on the development VM). With these settings the heap keeps up to 256 MB free for
-    reuse. Returns whether they took (False without glibc: nothing changes).
+    reuse. Returns whether they took (False without glibc, or when the user set glibc's allocator
+    through ``MALLOC_*`` or ``GLIBC_TUNABLES``: nothing changes).
     """
+    if any(name.startswith("MALLOC_") for name in os.environ) or "glibc.malloc" in os.environ.get("GLIBC_TUNABLES", ""):
+        return False
     try:
         mallopt = ctypes.CDLL("libc.so.6").mallopt
     except (OSError, AttributeError):

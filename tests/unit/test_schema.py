@@ -154,6 +154,7 @@ def _set(index: int, part: int, value: object):  # noqa: ANN202
         (with_blobs(centreline_message(), _set(0, 2, [-4])), "bad payload descriptor"),
         (with_blobs(centreline_message(), _set(-1, 2, [10**6])), "truncated"),
         (with_blobs(centreline_message(), _set(0, 2, [0] * 65)), "bad payload descriptor"),  # numpy: 64 dims at most
+        (with_blobs(centreline_message(), _set(0, 1, {"names": ["a"], "formats": ["<f8"]})), "bad payload descriptor"),
         (with_blobs(centreline_message(), _set(0, 2, [0, 10**20])), "bad payload descriptor"),
         (with_blobs(centreline_message(), _set(0, 2, [float("inf")])), "bad payload descriptor"),
         (with_blobs(centreline_message(), _set(0, 1, ",")), "bad payload descriptor"),
@@ -205,3 +206,19 @@ def test_sensor_samples_of_the_first_layout_still_decode() -> None:
     assert got.missing == 0 and got.clock == "sensor" and len(got.trigger_t_us) == 0
     with pytest.raises(SchemaError, match="missing"):
         decode(with_meta({**meta, "missing": "many"}, schema.MessageType.SENSOR_SAMPLES, t_us.tobytes() + value.tobytes()))
+
+
+def test_descriptor_checks_cache_no_oversized_shape() -> None:
+    """A shape of a million zero dimensions is refused without being kept in the descriptor cache
+    (any publisher could otherwise make a service hold megabytes per message)."""
+    before = schema._blob_layout.cache_info().currsize
+    data = with_blobs(centreline_message(), _set(0, 2, [0] * 1_000_000))
+    with pytest.raises(SchemaError, match="bad payload descriptor"):
+        decode(data)
+    assert schema._blob_layout.cache_info().currsize == before
+
+
+def test_object_arrays_are_not_sent() -> None:
+    """Their bytes are pointers: encoding refuses them (as before), naming the field."""
+    with pytest.raises(TypeError, match="t_us"):
+        encode(SensorSamples("om70", 1, "m", np.array([1, "x"], dtype=object), np.linspace(0, 1, 2)))
