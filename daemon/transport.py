@@ -33,6 +33,9 @@ class BusConfig:
         listen: endpoints to listen on, e.g. ``tcp/127.0.0.1:7447``.
         connect: endpoints to connect to (a router, or another peer).
         multicast_scouting: discover peers by UDP multicast (off by default: loopback only).
+        shared_memory: let Zenoh pass large messages between processes of one host through shared
+            memory (off by default: its set-up on the first large message from each peer stalls the
+            receiver for 20-30 ms, see docs/live.md; off, every message goes through the socket).
     """
 
     namespace: str = "flagtrack/default"
@@ -40,6 +43,7 @@ class BusConfig:
     listen: tuple[str, ...] = ()
     connect: tuple[str, ...] = ()
     multicast_scouting: bool = False
+    shared_memory: bool = False
 
     def __post_init__(self) -> None:
         if not self.namespace or self.namespace != self.namespace.strip("/") or " " in self.namespace:
@@ -53,6 +57,7 @@ def zenoh_config(cfg: BusConfig) -> zenoh.Config:
     zcfg.insert_json5("scouting/multicast/enabled", json.dumps(cfg.multicast_scouting))
     zcfg.insert_json5("listen/endpoints", json.dumps(list(cfg.listen)))
     zcfg.insert_json5("connect/endpoints", json.dumps(list(cfg.connect)))
+    zcfg.insert_json5("transport/shared_memory/enabled", json.dumps(cfg.shared_memory))
     return zcfg
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import socket
 import time
 from collections.abc import Iterator
@@ -9,7 +10,7 @@ from collections.abc import Iterator
 import pytest
 
 from flagtrack.daemon.schema import EventPacket, TunnelCommand
-from flagtrack.daemon.transport import Bus, BusConfig, Channel
+from flagtrack.daemon.transport import Bus, BusConfig, Channel, zenoh_config
 
 
 def free_port() -> int:
@@ -79,3 +80,33 @@ def test_commands_in_one_process_session(two_buses: tuple[Bus, Bus]) -> None:
     sub = a.subscribe(a.keys.tunnel_command(), TunnelCommand)
     a.publisher(a.keys.tunnel_command()).put(TunnelCommand("set", 4.0))
     assert sub.recv(timeout_s=5.0) == TunnelCommand("set", 4.0)
+
+
+@pytest.mark.parametrize("shared_memory", [False, True])
+def test_large_packets_cross_with_and_without_shared_memory(shared_memory: bool) -> None:
+    """Zenoh passes messages above ~3 KB through shared memory when both sessions allow it (it is off
+    by default); either way a camera's 12 KB packets arrive whole and in order."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    cfg = {"namespace": "flagtrack/test", "shared_memory": shared_memory}
+    assert zenoh_config(BusConfig(**cfg)).get_json("transport/shared_memory/enabled") == json.dumps(shared_memory)
+    with Bus(BusConfig(listen=(endpoint,), **cfg)) as a, Bus(BusConfig(connect=(endpoint,), **cfg)) as b:
+        key = a.keys.camera_events("cam0")
+        sub = b.subscribe(key, EventPacket)
+        pub = a.publisher(key)
+        time.sleep(0.3)
+        sent = [bytes([seq]) * 12_000 for seq in range(50)]
+        for seq, data in enumerate(sent):
+            pub.put(EventPacket("cam0", seq, seq, seq, 0, 640, 480, "evt3", 0, data=data))
+        got = [sub.recv(timeout_s=5.0) for _ in sent]
+        assert [msg.data for msg in got if msg is not None] == sent
+
+
+def test_shared_memory_is_off_unless_asked(tmp_path) -> None:
+    from flagtrack.daemon.rig import load_rig
+
+    assert zenoh_config(BusConfig()).get_json("transport/shared_memory/enabled") == "false"
+    rig = tmp_path / "rig.yaml"
+    rig.write_text("rig: r1\nbus: {shared_memory: true}\n")
+    assert load_rig(rig).bus_config.shared_memory is True
+    rig.write_text("rig: r1\n")
+    assert load_rig(rig).bus_config.shared_memory is False
