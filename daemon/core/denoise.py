@@ -144,27 +144,47 @@ def _filter_mask(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, 
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _filter_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, stride: int, base_us: int,
-                 window_us: int, state: np.ndarray, block_us: int, k_min: int, k_max: int, noise_pass: float,
-                 comb: np.ndarray, out_t: np.ndarray, out_x: np.ndarray, out_y: np.ndarray, start: int) -> int:
-    """:func:`_filter_mask` and the copy of the kept events in one pass (the hot path): append them from
-    ``start``, return the index after the last. The adaptive state lives in locals during the loop."""
+def _filter_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, i: int, last: np.ndarray, width: int, height: int,
+                 base_us: int, window_us: int, state: np.ndarray, block_us: int, k_min: int, k_max: int,
+                 noise_pass: float, comb: np.ndarray, out_t: np.ndarray, out_x: np.ndarray, out_y: np.ndarray,
+                 j: int, latest: int) -> tuple[int, int, int, bool]:
+    """:func:`_filter_mask` and the copy of the kept events in one pass (the hot path), from event ``i``:
+    append the kept ones from ``j``, and follow the time order from ``latest`` (the latest time before).
+
+    Stops at the first event outside the ``width`` x ``height`` map or too far in time from ``base_us``
+    for the int32 map, which the caller makes room for before calling again from there.
+
+    Returns:
+        (index of the event it stopped at, or ``len(t)``; index after the last kept event; latest time;
+        whether the times never decreased). The adaptive state lives in locals during the loop.
+    """
     window = np.int32(window_us)
-    j = start
+    stride = width + 2
+    ordered = True
+    n = len(t)
     if k_max <= k_min:  # the classic filter: no block statistics
-        for i in range(len(t)):
-            ti = np.int64(t[i])
-            n = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
+        while i < n:
+            ti, xi, yi = np.int64(t[i]), np.int64(x[i]), np.int64(y[i])
+            if xi >= width or yi >= height or abs(ti - base_us) >= _REBASE_US:
+                break
+            ordered &= ti >= latest
+            latest = max(latest, ti)
+            count = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
             out_t[j] = ti  # written always, kept by advancing j: no branch
             out_x[j] = x[i]
             out_y[j] = y[i]
-            j += 1 if n >= k_min else 0
-        return j
+            j += 1 if count >= k_min else 0
+            i += 1
+        return i, j, latest, ordered
     block_now, k, isolated = state[_BLOCK], state[_K], state[_ISOLATED]
     max_x, max_y = state[_MAX_X], state[_MAX_Y]
     block_lo, block_hi = np.int64(1), np.int64(0)  # times of block_now: [lo, hi); empty: divide first
-    for i in range(len(t)):
+    while i < n:
         ti, xi, yi = np.int64(t[i]), np.int64(x[i]), np.int64(y[i])
+        if xi >= width or yi >= height or abs(ti - base_us) >= _REBASE_US:
+            break
+        ordered &= ti >= latest
+        latest = max(latest, ti)
         max_x, max_y = max(max_x, xi), max(max_y, yi)
         if ti < block_lo or ti >= block_hi:  # ti // block_us != block_now, without a division per event
             block = ti // block_us
@@ -179,14 +199,15 @@ def _filter_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, 
             else:  # first block, or blocks without events: no evidence of noise
                 k = k_min
             block_now, isolated = block, 0
-        n = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
-        isolated += 1 if n == 0 else 0
+        count = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
+        isolated += 1 if count == 0 else 0
         out_t[j] = ti
         out_x[j] = x[i]
         out_y[j] = y[i]
-        j += 1 if n >= k else 0
+        j += 1 if count >= k else 0
+        i += 1
     state[_BLOCK], state[_K], state[_ISOLATED], state[_MAX_X], state[_MAX_Y] = block_now, k, isolated, max_x, max_y
-    return j
+    return i, j, latest, ordered
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -252,10 +273,15 @@ class BackgroundActivityFilter:
             if self._base_us is None:
                 self._base_us = t0
             elif max(abs(t1 - self._base_us), abs(t0 - self._base_us)) >= _REBASE_US:
-                shift = t0 - self._base_us
-                self._last = np.maximum(self._last.astype(np.int64) - shift, _NEVER).astype(np.int32)
-                self._base_us = t0
+                self._rebase(t0)
         return ordered, latest
+
+    def _rebase(self, base_us: int) -> None:
+        """Move the time base of the int32 map to ``base_us`` (times older than the map can hold
+        become "never"; they are far older than any window)."""
+        shift = base_us - self._base_us
+        self._last = np.maximum(self._last.astype(np.int64) - shift, _NEVER).astype(np.int32)
+        self._base_us = base_us
 
     def filter_into(self, events: np.ndarray, out_t: np.ndarray, out_x: np.ndarray, out_y: np.ndarray,
                     start: int, latest_us: int = -(1 << 62)) -> tuple[int, bool, int]:
@@ -276,14 +302,25 @@ class BackgroundActivityFilter:
             end, ordered, latest = self.filter_into(events[:half], out_t, out_x, out_y, start, latest_us)
             end, ordered_2, latest = self.filter_into(events[half:], out_t, out_x, out_y, end, latest)
             return end, ordered and ordered_2, latest
-        ordered, latest = self._prepare(events, latest_us)
         t, x, y = events["t"], events["x"], events["y"]
         if self.params is None:
-            return _copy_into(t, x, y, out_t, out_x, out_y, start), ordered, latest
+            end, latest, ordered = _copy_into(t, x, y, out_t, out_x, out_y, start, latest_us)
+            return end, ordered, latest
         p = self.params
-        end = _filter_into(t, x, y, self._last, self._width + 2, self._base_us, p.window_us, self._state, p.block_us,
-                           p.min_neighbours, p.max_neighbours, p.noise_pass, self._comb, out_t, out_x, out_y, start)
-        return end, ordered, latest
+        if self._base_us is None:
+            self._base_us = int(t[0])
+        i, end, latest, ordered = 0, start, latest_us, True
+        while True:  # the kernel stops where the map needs to grow or its time base to move
+            i, end, latest, ordered_part = _filter_into(
+                t, x, y, i, self._last, self._width, self._height, self._base_us, p.window_us, self._state, p.block_us,
+                p.min_neighbours, p.max_neighbours, p.noise_pass, self._comb, out_t, out_x, out_y, end, latest)
+            ordered &= ordered_part
+            if i == len(t):
+                return end, ordered, latest
+            if x[i] >= self._width or y[i] >= self._height:
+                self._fit(int(x[i:].max()), int(y[i:].max()))
+            if abs(int(t[i]) - self._base_us) >= _REBASE_US:
+                self._rebase(int(t[i]))
 
     def keep_mask(self, events: np.ndarray) -> np.ndarray:
         """Boolean (n,) mask of the events the filter keeps (the filter state advances)."""
@@ -303,10 +340,15 @@ class BackgroundActivityFilter:
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _copy_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, out_t: np.ndarray, out_x: np.ndarray,
-               out_y: np.ndarray, start: int) -> int:
-    """Append every event (no filtering)."""
+               out_y: np.ndarray, start: int, latest: int) -> tuple[int, int, bool]:
+    """Append every event (no filtering); return (index after the last, latest time, whether the
+    times never decreased from ``latest`` on)."""
+    ordered = True
     for i in range(len(t)):
-        out_t[start + i] = t[i]
+        ti = np.int64(t[i])
+        ordered &= ti >= latest
+        latest = max(latest, ti)
+        out_t[start + i] = ti
         out_x[start + i] = x[i]
         out_y[start + i] = y[i]
-    return start + len(t)
+    return start + len(t), latest, ordered
