@@ -33,8 +33,9 @@ class DenoiseConfig:
 
     An event passes when ``k`` of its 8 neighbouring pixels fired within ``window_us`` before it;
     ``k`` adapts between ``min_neighbours`` and ``max_neighbours`` to the measured background noise
-    (``noise_pass``: the largest chance a noise event passes). ``max_neighbours: 1`` is the classic
-    filter (the robust method before the accuracy benchmark).
+    (``noise_pass``: the largest chance a noise event passes), measured over blocks of
+    ``block_us``. ``max_neighbours: 1`` is the classic filter (the robust method before the
+    accuracy benchmark).
     """
 
     enabled: bool = True
@@ -42,6 +43,7 @@ class DenoiseConfig:
     min_neighbours: int = 1
     max_neighbours: int = 3
     noise_pass: float = 0.03
+    block_us: int = 2_000
 
 
 @dataclass(frozen=True)
@@ -133,7 +135,7 @@ class TrackingConfig:
         if not paper and self.denoise.enabled:
             d = self.denoise
             denoise = _build(DenoiseParams, path, "denoise", window_us=d.window_us, min_neighbours=d.min_neighbours,
-                             max_neighbours=d.max_neighbours, noise_pass=d.noise_pass)
+                             max_neighbours=d.max_neighbours, noise_pass=d.noise_pass, block_us=d.block_us)
         if self.ds is not None and not self.ds > 0:
             raise ConfigError(f"must be positive, got {self.ds}", key=f"{SECTION}.ds", path=path)
         if self.max_gap_s is not None and not self.max_gap_s > 0:
@@ -141,16 +143,34 @@ class TrackingConfig:
         return TrackerParams(chain=chain, schedule=schedule, ds=self.ds, denoise=denoise, max_gap_s=self.max_gap_s)
 
     def attrs(self) -> dict[str, Any]:
-        """Every processing parameter as flat HDF5-friendly attributes (effective values)."""
+        """Every processing parameter as flat HDF5-friendly attributes (effective values).
+
+        ``dt_s``/``tau_s`` are those of the first schedule segment; ``schedule_t_from_s``,
+        ``schedule_dt_s`` and ``schedule_tau_s`` list every segment as numbers (MATLAB reads them
+        as vectors). ``link_lengths`` are the effective lengths (equal ones by default); ``s_step``
+        is the step of ``/s`` (``ds``, or a little less where ``L / ds`` is not a whole number).
+        """
+        from flagtrack.daemon.core.smoothing import REL_TOL, n_samples
+
         paper = self.method is Method.PAPER
         values = to_mapping(self)
         denoise = values.pop("denoise")
         values.update({f"denoise_{k}": v for k, v in denoise.items()})
+        values["denoise_neighbourhood"] = "3x3 without the event's own pixel"
         if paper:
             values.update(min_events=1, refine_deg=None, denoise_enabled=False)
-        values["dt_s"] = self.dt_s or self.tau_s
-        values["ds"] = self.ds if self.ds is not None else (self.length or 0.0) / 50
+        segments = self.schedule or (SegmentConfig(0.0, self.dt_s or self.tau_s, self.tau_s),)
+        values["dt_s"], values["tau_s"] = segments[0].dt_s, segments[0].tau_s
         values["schedule"] = [to_mapping(seg) for seg in self.schedule]
+        for name in ("t_from_s", "dt_s", "tau_s"):
+            values[f"schedule_{name}"] = [float(getattr(seg, name)) for seg in segments]
+        length = self.length or 0.0
+        values["ds"] = self.ds if self.ds is not None else length / 50
+        if length > 0 and values["ds"] > 0:  # the step of /s: L / (ceil(L / ds)), at most ds
+            values["s_step"] = length / (n_samples(length, values["ds"]) - 1)
+        if self.link_lengths is None and self.length is not None and self.joints > 0:
+            values["link_lengths"] = [self.length / self.joints] * self.joints
+        values["rel_tol"] = REL_TOL
         return values
 
 

@@ -85,7 +85,7 @@ def reconstruct_file(path: Path, output: Path, config: TrackingConfig, *, config
         info = reader.info
         size = (info.width or 0, info.height or 0)
         tracker = Tracker(params, mapping=mapping, sensor_size=size)
-        attrs = {**config.attrs(), "units": units, "input_file": str(path), "input_format": info.format}
+        attrs = {**config.attrs(), "units": units, "input_file": str(path.resolve()), "input_format": info.format}
         if config.calibration is not None:
             from flagtrack.calibration import calibration_attrs
 
