@@ -61,3 +61,14 @@ def test_a_camera_that_falls_behind_skips_ahead_and_stays_in_step_with_the_wall_
     assert data is not None and camera.skipped_us >= 300_000
     assert abs(data.t_until_us * 1e-6 - 0.5) < 0.15  # camera time caught up with the wall clock
     assert camera.state.t_s == pytest.approx(data.t_until_us * 1e-6)  # the flag moved on with it
+
+
+def test_bench_twin_reports_the_demo_twins_rate_and_its_scaling() -> None:
+    from flagtrack.daemon.bench.twin import measure
+
+    demo = measure(events_per_px2=2.0, speed_mps=6.0, seconds=0.5)
+    dense = measure(events_per_px2=6.0, speed_mps=6.0, seconds=0.5)
+    assert demo["flapping"] and dense["flapping"]
+    assert 0.8 < demo["camera_mev_s"] < 2.0  # the demo's twin: about 1 Mev/s of camera data
+    assert dense["events"] / demo["events"] == pytest.approx(3.0, rel=0.1)  # events scale with the density
+    assert demo["real_time_margin"] > 0 and demo["generated_mev_s"] > 0
