@@ -1,0 +1,96 @@
+"""Each service as its own process (`flagtrack camera|tracker|recorder|viewer -c rig.yaml`), joined by a
+router: the recorder keeps every event and centreline, the viewer writes its .rrd, the tracker's status
+reports its rates, lag and packet counts."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from flagtrack.daemon.schema import TrackerStatus
+from flagtrack.daemon.transport import Bus, BusConfig
+from flagtrack.drivers.formats import read_events
+from tests.integration.test_transport import free_port
+from tests.integration.test_up import TRACKER_ARGS, flagtrack, recording, start  # noqa: F401 (fixture)
+
+TAU_S = 0.0003
+SPEED = 0.1  # the 0.2 s recording replayed over 2 s: the tracker's 1 s status windows see it flow
+
+
+def _wait_alive(bus: Bus, services: list[str], timeout_s: float) -> bool:
+    watch = bus.watch_liveliness()
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if all(watch.is_alive(bus.keys.alive(name)) for name in services):
+            return True
+        time.sleep(0.1)
+    return False
+
+
+@pytest.mark.slow
+def test_each_service_alone_through_a_router(recording: Path, tmp_path: Path) -> None:  # noqa: F811
+    port = free_port()
+    rig = tmp_path / "rig.yaml"
+    rig.write_text(f"""
+rig: alone
+bus: {{mode: client, connect: ["tcp/127.0.0.1:{port}"]}}
+camera: {{adapter: replay, replay: {{path: {recording}, speed: {SPEED}}}}}
+tracker: {{root: [100, 240], length: 200, tau_s: {TAU_S}}}
+recorder: {{directory: {tmp_path / 'rec'}, path: run, centrelines: true}}
+viewer: {{sink: rrd, rrd_path: {tmp_path / 'view.rrd'}}}
+""")
+    router = start("router", "--listen", f"tcp/127.0.0.1:{port}")
+    services, camera = [], None
+    statuses: list[TrackerStatus] = []
+    try:
+        time.sleep(1.0)
+        services = [start(name, "-c", str(rig)) for name in ("tracker", "recorder", "viewer")]
+        with Bus(BusConfig(namespace="flagtrack/alone", mode="client", connect=(f"tcp/127.0.0.1:{port}",))) as bus:
+            status = bus.subscribe(bus.keys.tracker_status(), TrackerStatus)
+            assert _wait_alive(bus, ["tracker", "recorder", "viewer"], 90), "services did not come up"
+            time.sleep(1.0)  # their subscriptions reach the router
+            camera = start("camera", "-c", str(rig))
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline and (camera.poll() is None or len(statuses) < 3
+                                                   or statuses[-1].events_per_s > 0):
+                msg = status.recv(timeout_s=0.5)  # until the camera is done and a status saw no events
+                if msg is not None:
+                    statuses.append(msg)
+            assert camera.wait(timeout=10) == 0, camera.communicate()[1]
+    finally:
+        for proc in [*services, router]:
+            proc.send_signal(signal.SIGINT)
+        outs = [proc.communicate(timeout=60) for proc in [*services, router]]
+    assert [p.returncode for p in services] == [130, 130, 130], [err for _, err in outs]
+
+    offline = tmp_path / "offline.h5"
+    assert flagtrack("reconstruct", str(recording), "-o", str(offline), *TRACKER_ARGS, "--no-progress").returncode == 0
+    with h5py.File(offline) as f:
+        t_offline = f["t"][()]
+
+    # the recorder: every event of the file, and every centreline of the tracker
+    raw = tmp_path / "rec" / "run.raw"
+    np.testing.assert_array_equal(read_events(raw).events, read_events(recording).events)
+    sidecar = json.loads((tmp_path / "rec" / "run.json").read_text())
+    assert sidecar["sequence_gaps"] == [] and sidecar["missing_packets"] == 0 and sidecar["stopped"]
+    assert abs(sidecar["started_unix_s"] - time.time()) < 300
+    with h5py.File(tmp_path / "rec" / "run_centrelines.h5") as f:
+        np.testing.assert_allclose(f["t"][()], t_offline, atol=1e-9)
+
+    # the viewer wrote its file; the tracker's status counted every packet and its rates
+    assert (tmp_path / "view.rrd").stat().st_size > 10_000
+    tracking = [s for s in statuses if s.state == "tracking" and s.updates_per_s > 0]
+    assert tracking, statuses
+    busiest = max(tracking, key=lambda s: s.updates_per_s)
+    assert busiest.updates_per_s == pytest.approx(SPEED / TAU_S, rel=0.35)  # one update per tau of camera time
+    events = read_events(recording).events
+    camera_rate = len(events) / ((events["t"][-1] - events["t"][0]) * 1e-6)
+    assert busiest.events_per_s == pytest.approx(SPEED * camera_rate, rel=0.35)
+    assert statuses[-1].missing_packets == 0 and statuses[-1].malformed_packets == 0
+    assert 0.0 <= min(s.lag_s for s in tracking) < 0.5
