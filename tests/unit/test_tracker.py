@@ -7,7 +7,7 @@ import pytest
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.chain import ChainParams, ChainState
-from flagtrack.daemon.core.denoise import DenoiseParams
+from flagtrack.daemon.core.denoise import BackgroundActivityFilter, DenoiseParams
 from flagtrack.daemon.core.mapping import AffineMapping
 from flagtrack.daemon.core.tracker import Tracker, TrackerParams, track
 from flagtrack.daemon.core.windows import WindowSchedule, WindowSegment
@@ -146,13 +146,15 @@ def _polyline_d2(x: np.ndarray, y: np.ndarray, px: np.ndarray, py: np.ndarray) -
 
 
 def test_state_and_stats(events: np.ndarray) -> None:
-    tracker = Tracker(_params(), state=ChainState.straight(10, 5.0))
+    params = _params()
+    tracker = Tracker(params, state=ChainState.straight(10, 5.0))
     np.testing.assert_allclose(tracker.state.angles_rad, np.radians(5.0))
-    tracker.feed(events)
-    tracker.finish()
+    n_updates = len(tracker.feed(events)) + len(tracker.finish())
     assert tracker.stats.events_in == len(events)
-    assert 0.5 * len(events) < tracker.stats.events_kept < len(events)
-    assert tracker.stats.updates > 200
+    kept = int(BackgroundActivityFilter(params.denoise).keep_mask(events).sum())
+    assert tracker.stats.events_kept == kept and 0.5 * len(events) < kept < len(events)
+    # 250 µs windows from the first event, every one that starts at or before the last event
+    assert tracker.stats.updates == n_updates == int(events["t"][-1] - events["t"][0]) // 250 + 1
     assert not np.allclose(tracker.state.angles_rad, np.radians(5.0))
     with pytest.raises(RuntimeError):
         tracker.feed(events[:10])

@@ -65,7 +65,8 @@ tracker:
     - {t_from_s: 2.5, dt_s: 0.0003, tau_s: 0.0004}
 """)
     params = load_tracking_config(path).tracker_params()
-    assert [s.t_from_s for s in params.schedule.segments] == [0.0, 2.5]
+    assert [(s.t_from_s, s.dt_s, s.tau_s) for s in params.schedule.segments] == [(0.0, 0.005, 0.005),
+                                                                                  (2.5, 0.0003, 0.0004)]
 
 
 @pytest.mark.parametrize(
