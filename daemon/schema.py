@@ -7,8 +7,11 @@ Wire format of every message (little-endian)::
 The JSON meta holds the scalar fields; array fields (numpy) and byte fields travel in the payload,
 described in the meta under ``"_blobs"`` as ``[name, dtype, shape]`` (``dtype`` ``"bytes"`` for raw
 bytes), in order. :func:`decode` rejects a wrong magic, an unknown version or type, bad JSON,
-missing or mistyped fields and a payload whose size does not match, with a :class:`SchemaError`.
-This module imports no transport: see :mod:`flagtrack.daemon.transport` for Zenoh.
+missing or mistyped fields, a payload whose size does not match and arrays of one message whose
+shapes or types disagree (a centreline message's ``joints_x`` must be (n, N_j+1) for its n updates),
+with a :class:`SchemaError` that names the key and the field. :class:`ProblemLog` is how services
+count what they drop and log it rarely. This module imports no transport: see
+:mod:`flagtrack.daemon.transport` for Zenoh.
 """
 
 from __future__ import annotations
@@ -17,8 +20,10 @@ import dataclasses
 import enum
 import functools
 import json
+import logging
 import math
 import struct
+import time
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
 
@@ -173,9 +178,14 @@ class EventRate:
 class CentrelineMessage:
     """A batch of tracker updates: t, joints, smoothed centreline, tip, Δ_RMS, events used.
 
+    Shapes (checked by :func:`decode`): ``t_s``, ``tip_x``, ``tip_y``, ``delta_rms``, ``n_events``,
+    ``source_ns`` (n_t,); ``s`` (n_s,), n_s >= 1; ``x``, ``y`` (n_t, n_s); ``joints_x``, ``joints_y``
+    (n_t, N_j+1), N_j >= 1. ``n_events`` and ``source_ns`` are integers, the rest real numbers.
     ``source_ns`` (n_t,) is the ``sent_ns`` of the newest packet each update used (for latency).
     ``final`` marks the last message of a stream (after the camera's end of stream).
     ``published_ns`` is the wall-clock time (ns) the tracker published the message (0: not said).
+    ``stream`` numbers the camera streams the tracker has tracked (0 for the first; one more after
+    each end of stream or camera restart), so a recorder knows which stream's file the updates go to.
     """
 
     TYPE: ClassVar[MessageType] = MessageType.CENTRELINES
@@ -195,15 +205,17 @@ class CentrelineMessage:
     source_ns: np.ndarray
     final: bool = False
     published_ns: int = 0
+    stream: int = 0
 
     @classmethod
     def from_batch(
         cls, batch: CentrelineBatch, *, source: str, seq: int, units: str, source_ns: np.ndarray, final: bool = False,
-        published_ns: int = 0,
+        published_ns: int = 0, stream: int = 0,
     ) -> CentrelineMessage:
         """Wrap a tracker batch for the wire."""
         return cls(
-            final=final, published_ns=published_ns, source=source, seq=seq, units=units, t_s=batch.t_s, s=batch.s,
+            final=final, published_ns=published_ns, stream=stream, source=source, seq=seq, units=units, t_s=batch.t_s,
+            s=batch.s,
             x=batch.x, y=batch.y, joints_x=batch.joints_x, joints_y=batch.joints_y, tip_x=batch.tip_x,
             tip_y=batch.tip_y,
             delta_rms=batch.delta_rms, n_events=batch.n_events, source_ns=np.asarray(source_ns, np.int64),
@@ -219,7 +231,12 @@ class CentrelineMessage:
 
 @dataclass(frozen=True)
 class TrackerStatus:
-    """Tracker health, published about once a second."""
+    """Tracker health, published about once a second.
+
+    ``missing_packets``: sequence gaps; ``malformed_packets``: messages or EVT bytes that could not be
+    used; ``dropped_packets``: packets its full queue turned away (they also show as gaps);
+    ``restarts``: new camera streams that began without the end of the last one (a restarted camera).
+    """
 
     TYPE: ClassVar[MessageType] = MessageType.TRACKER_STATUS
     source: str
@@ -231,6 +248,8 @@ class TrackerStatus:
     missing_packets: int
     malformed_packets: int
     t_s: float = 0.0
+    dropped_packets: int = 0
+    restarts: int = 0
 
 
 @dataclass(frozen=True)
@@ -282,7 +301,8 @@ class RecorderCommand:
 
 @dataclass(frozen=True)
 class RecorderStatus:
-    """What the recorder is writing."""
+    """What the recorder is writing (counts of the recording ``path``; ``dropped_packets``: turned
+    away by the recorder's full queue since it started, whatever file was open)."""
 
     TYPE: ClassVar[MessageType] = MessageType.RECORDER_STATUS
     state: str  # idle | recording | error
@@ -292,6 +312,8 @@ class RecorderStatus:
     missing_packets: int = 0
     request_id: str = ""
     message: str = ""
+    malformed_packets: int = 0
+    dropped_packets: int = 0
 
 
 def _no_pulses() -> np.ndarray:
@@ -417,6 +439,9 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     missing = _required_blobs(cls).difference(blob_values)
     if missing:
         raise SchemaError(f"{cls.__name__}: missing payload field '{sorted(missing)[0]}'", key=key)
+    spec = _SHAPES.get(cls)
+    if spec is not None:
+        _check_shapes(cls, spec, blob_values, key)
     if _fast_scalars_ok(cls, meta):
         return cls(**meta, **blob_values)
     try:
@@ -458,6 +483,50 @@ def _read_blobs(cls: type, blobs: Any, payload: memoryview, key: str | None) -> 
     if offset != len(payload):
         raise SchemaError(f"{cls.__name__}: {len(payload) - offset} unexpected trailing payload bytes", key=key)
     return values
+
+
+# The arrays of a message must agree: (field, dimension names, numpy kinds). A name is bound by the
+# first field that has it; every later one must match. Sizes with a minimum are in _MIN_SIZE.
+_REAL, _INT = "fiu", "iu"
+_SHAPES: dict[type, tuple[tuple[str, tuple[str, ...], str], ...]] = {
+    CentrelineMessage: (
+        ("t_s", ("n",), _REAL), ("s", ("n_s",), _REAL), ("x", ("n", "n_s"), _REAL), ("y", ("n", "n_s"), _REAL),
+        ("joints_x", ("n", "N_j+1"), _REAL), ("joints_y", ("n", "N_j+1"), _REAL), ("tip_x", ("n",), _REAL),
+        ("tip_y", ("n",), _REAL), ("delta_rms", ("n",), _REAL), ("n_events", ("n",), _INT),
+        ("source_ns", ("n",), _INT),
+    ),
+    SensorSamples: (("t_us", ("n",), _INT), ("value", ("n",), _REAL), ("trigger_t_us", ("m",), _INT)),
+}
+_MIN_SIZE = {"n_s": 1, "N_j+1": 2}
+_KIND_NAMES = {_REAL: "real numbers", _INT: "integers"}
+
+
+def _check_shapes(cls: type, spec: tuple[tuple[str, tuple[str, ...], str], ...], values: dict[str, Any],
+                  key: str | None) -> None:
+    """Raise SchemaError naming the first field whose shape or type disagrees with ``spec`` (O(fields))."""
+    sizes: dict[str, int] = {}
+    for name, dims, kinds in spec:
+        array = values.get(name)
+        if array is None:  # an optional field left out
+            continue
+        shape = array.shape
+        ok = len(shape) == len(dims)
+        for dim, size in zip(dims, shape) if ok else ():
+            bound = sizes.get(dim)
+            if bound is None and size >= _MIN_SIZE.get(dim, 0):
+                sizes[dim] = size
+            elif bound != size:
+                ok = False
+                break
+        if not ok:
+            said = [f"{d} = {sizes[d]}" if d in sizes else f"{d} >= {_MIN_SIZE[d]}"
+                    for d in dims if d in sizes or d in _MIN_SIZE]
+            raise SchemaError(f"{cls.__name__}: field '{name}' has shape {shape}, expected ({', '.join(dims)}"
+                              f"{',' if len(dims) == 1 else ''}){' with ' + ', '.join(said) if said else ''}",
+                              key=key)
+        if array.dtype.kind not in kinds:
+            raise SchemaError(f"{cls.__name__}: field '{name}' holds {array.dtype}, expected {_KIND_NAMES[kinds]}",
+                              key=key)
 
 
 _CACHED_DIMS = 8  # descriptors with more dimensions are checked without the cache (bounds its memory)
@@ -544,3 +613,56 @@ def _fast_scalars_ok(cls: type, meta: dict[str, Any]) -> bool:
         if expected is None or type(value) is not expected:
             return False
     return True
+
+
+class ProblemLog:
+    """Counts the repeated problems of one service by kind and logs them rarely (STYLE.md).
+
+    The first problem of a kind is logged at once with its detail; later ones are only counted, and
+    summed up in one line at most every ``interval_s`` (by :meth:`add` as they come, or by
+    :meth:`flush`, which a service calls now and then and when it stops). O(1) per problem.
+
+    Args:
+        logger: where the lines go.
+        service: prefix of every line.
+        interval_s: at most one line per kind this often.
+        level: logging level of the lines.
+    """
+
+    def __init__(self, logger: logging.Logger, service: str, interval_s: float = 5.0,
+                 level: int = logging.WARNING) -> None:
+        self.logger = logger
+        self.service = service
+        self.interval_s = interval_s
+        self.level = level
+        self.totals: dict[str, int] = {}
+        self._unlogged: dict[str, int] = {}
+        self._latest: dict[str, object] = {}
+        self._logged_at: dict[str, float] = {}
+
+    def add(self, kind: str, detail: object, count: int = 1) -> None:
+        """Count ``count`` problems of ``kind`` (e.g. ``"malformed packets"``); ``detail`` (an exception,
+        or text) describes the latest one and is formatted only when logged."""
+        self.totals[kind] = self.totals.get(kind, 0) + count
+        self._unlogged[kind] = self._unlogged.get(kind, 0) + count
+        self._latest[kind] = detail
+        now = time.monotonic()
+        if now - self._logged_at.get(kind, -math.inf) >= self.interval_s:
+            self._log(kind, now)
+
+    def flush(self, force: bool = False) -> None:
+        """Log the summary of every kind with unlogged problems whose interval has passed (all: ``force``)."""
+        now = time.monotonic()
+        for kind, unlogged in self._unlogged.items():
+            if unlogged and (force or now - self._logged_at.get(kind, -math.inf) >= self.interval_s):
+                self._log(kind, now)
+
+    def _log(self, kind: str, now: float) -> None:
+        unlogged, total = self._unlogged[kind], self.totals[kind]
+        if unlogged == total:
+            self.logger.log(self.level, "%s: %s [%s: %d]", self.service, self._latest[kind], kind, total)
+        else:
+            self.logger.log(self.level, "%s: %d more %s in the last %.0f s (%d in all); latest: %s", self.service,
+                            unlogged, kind, now - self._logged_at[kind], total, self._latest[kind])
+        self._unlogged[kind] = 0
+        self._logged_at[kind] = now

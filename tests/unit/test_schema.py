@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import struct
 
 import numpy as np
@@ -222,3 +223,68 @@ def test_object_arrays_are_not_sent() -> None:
     """Their bytes are pointers: encoding refuses them (as before), naming the field."""
     with pytest.raises(TypeError, match="t_us"):
         encode(SensorSamples("om70", 1, "m", np.array([1, "x"], dtype=object), np.linspace(0, 1, 2)))
+
+
+def _replaced(message: object, **fields: object) -> bytes:
+    """``message`` with some fields replaced, encoded (encoding does not check shapes: a buggy or
+    foreign publisher's bytes)."""
+    return encode(dataclasses.replace(message, **fields))
+
+
+_MSG = centreline_message()  # 4 updates, 51 samples, 10 links
+
+
+@pytest.mark.parametrize(
+    ("data", "words"),
+    [
+        (_replaced(_MSG, joints_x=_MSG.joints_x[:, 0]), r"'joints_x' has shape \(4,\), expected \(n, N_j\+1\) with n = 4"),
+        (_replaced(_MSG, joints_y=_MSG.joints_y[:, :5]), r"'joints_y' has shape \(4, 5\).*N_j\+1 = 11"),
+        (_replaced(_MSG, joints_x=_MSG.joints_x[:, :1], joints_y=_MSG.joints_y[:, :1]), r"'joints_x'.*N_j\+1 >= 2"),
+        (_replaced(_MSG, x=_MSG.x[:, :3]), r"'x' has shape \(4, 3\), expected \(n, n_s\) with n = 4, n_s = 51"),
+        (_replaced(_MSG, y=_MSG.y[:3]), r"'y' has shape \(3, 51\)"),
+        (_replaced(_MSG, t_s=_MSG.t_s.reshape(2, 2)), r"'t_s' has shape \(2, 2\), expected \(n,\)"),
+        (_replaced(_MSG, s=np.zeros(0), x=np.zeros((4, 0)), y=np.zeros((4, 0))), r"'s' has shape \(0,\).*n_s >= 1"),
+        (_replaced(_MSG, delta_rms=_MSG.delta_rms[:2]), r"'delta_rms' has shape \(2,\)"),
+        (_replaced(_MSG, tip_x=_MSG.tip_x[:, None]), r"'tip_x'"),
+        (_replaced(_MSG, source_ns=np.arange(5)), r"'source_ns' has shape \(5,\)"),
+        (_replaced(_MSG, n_events=_MSG.n_events.astype(float)), r"'n_events' holds float64, expected integers"),
+        (_replaced(_MSG, t_s=np.array(["a", "b", "c", "d"])), r"'t_s' holds <U1, expected real numbers"),
+        (encode(SensorSamples("om70", 1, "m", np.arange(3, dtype=np.int64), np.ones(2))), r"'value' has shape \(2,\)"),
+        (encode(SensorSamples("om70", 1, "m", np.arange(3, dtype=np.int64), np.ones(3), np.ones((2, 2), np.int64))),
+         r"'trigger_t_us' has shape \(2, 2\), expected \(m,\)"),
+    ],
+)
+def test_arrays_that_disagree_are_refused_naming_key_and_field(data: bytes, words: str) -> None:
+    """A message that decodes but whose arrays disagree (a 1-D ``joints_x`` crashed the viewer) is
+    a SchemaError naming the key and the field, which services count and skip."""
+    with pytest.raises(SchemaError, match=words) as info:
+        decode(data, key="flagtrack/x/tracker/centreline")
+    assert "flagtrack/x/tracker/centreline" in str(info.value)
+
+
+def test_arrays_that_agree_decode_whatever_their_sizes() -> None:
+    """No updates, one sample, one link, and integer coordinates are all consistent."""
+    n_s, joints = 1, 2
+    empty = CentrelineMessage.from_batch(CentrelineBatch(
+        t_s=np.zeros(0), s=np.zeros(n_s), x=np.zeros((0, n_s)), y=np.zeros((0, n_s)), joints_x=np.zeros((0, joints)),
+        joints_y=np.zeros((0, joints)), delta_rms=np.zeros(0), n_events=np.zeros(0, dtype=np.int64),
+    ), source="tracker", seq=0, units="px", source_ns=np.zeros(0, dtype=np.int64), final=True, stream=3)
+    got = decode(encode(empty), CentrelineMessage)
+    assert got.final and got.stream == 3 and got.joints_x.shape == (0, 2)
+    ints = _replaced(_MSG, x=np.zeros((4, 51), dtype=np.int32), source_ns=np.arange(4, dtype=np.uint64))
+    assert decode(ints, CentrelineMessage).x.dtype == np.int32
+
+
+def test_problem_log_logs_the_first_at_once_then_rate_limited_summaries(caplog: pytest.LogCaptureFixture) -> None:
+    logger = logging.getLogger("flagtrack.test.problems")
+    problems = schema.ProblemLog(logger, "svc", interval_s=3600.0)
+    with caplog.at_level(logging.WARNING, logger="flagtrack.test.problems"):
+        for k in range(1000):
+            problems.add("gaps", f"gap {k}", 2)
+        problems.add("malformed", "bad bytes")
+        problems.flush()  # the interval has not passed: nothing more
+        assert [r.getMessage() for r in caplog.records] == ["svc: gap 0 [gaps: 2]", "svc: bad bytes [malformed: 1]"]
+        problems.flush(force=True)  # at the end: the summary of what was not logged
+    assert caplog.records[-1].getMessage().startswith("svc: 1998 more gaps in the last")
+    assert caplog.records[-1].getMessage().endswith("(2000 in all); latest: gap 999")
+    assert len(caplog.records) == 3 and problems.totals == {"gaps": 2000, "malformed": 1}
