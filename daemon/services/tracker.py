@@ -5,7 +5,14 @@ Packets are decoded one by one (each is self-contained), fed in order to a
 offline command, so a replayed file gives the same centrelines as ``flagtrack reconstruct``.
 Completed updates are published in batches (``batch_updates``, or sooner after
 ``max_batch_delay_s``); sequence gaps and malformed packets are counted and reported in the
-status (about once a second): events/s, updates/s, lag behind the newest event.
+status (about once a second): events/s, updates/s, lag behind the newest event; repeated problems
+are logged as rate-limited summaries, never one line per packet.
+
+A new camera stream starts a fresh core tracker: after the end of stream, or when the sequence
+number goes back (a camera restarted while the tracker ran; its packets number from 0 again), which
+is logged and counted in the status (``restarts``). No packet stops the service: one whose bytes do
+not decode is counted as malformed, and one the core cannot track (an exception) is counted too and
+a fresh core tracker takes over.
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ import numpy as np
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.events import empty_events
 from flagtrack.daemon.errors import FormatError
-from flagtrack.daemon.schema import CentrelineMessage, EventPacket, TrackerStatus
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, ProblemLog, TrackerStatus
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.camera.packets import decode_packet
 
@@ -99,6 +106,9 @@ class TrackerService:
         self.updates = 0
         self.events = 0
         self.streams_ended = 0
+        self.restarts = 0  # new streams that began without the end of the last one
+        self.stream = 0  # number of the stream being tracked (CentrelineMessage.stream)
+        self.problems = ProblemLog(log, "tracker")
         self._next_seq: int | None = None
         self._pending: list[CentrelineBatch] = []
         self._pending_ns: list[np.ndarray] = []
@@ -141,9 +151,11 @@ class TrackerService:
                     status_pub.put(self._status("tracking", window, now, lag_s))
                     window = {"events": self.events, "updates": self.updates, "t": now}
                     last_status = now
+                    self.problems.flush()
         finally:
             self._publish_if_due(force=True)
             status_pub.put(self._status("stopped", window, time.monotonic(), lag_s))
+            self.problems.flush(force=True)
 
     def handle(self, packets: list[EventPacket]) -> float:
         """Decode and track packets (in order); return the lag (s) from the last one's arrival at the camera.
@@ -154,12 +166,15 @@ class TrackerService:
         """
         run: list[EventPacket] = []
         for packet in packets:
-            if self._next_seq is not None and packet.seq > self._next_seq:
-                gap = packet.seq - self._next_seq
-                self.missing_packets += gap
-                log.warning("tracker: %d packet(s) missing before seq %d", gap, packet.seq)
+            if self._next_seq is not None and packet.seq != self._next_seq:
                 self._track_run(run)  # a gap breaks the stream: what came before is decoded apart
                 run = []
+                if packet.seq < self._next_seq:
+                    self._new_stream(packet)
+                else:
+                    gap = packet.seq - self._next_seq
+                    self.missing_packets += gap
+                    self.problems.add("packets missing", f"{gap} packet(s) missing before seq {packet.seq}", gap)
             self._next_seq = packet.seq + 1
             self.packets += 1
             if run and packet.encoding != run[0].encoding:
@@ -172,15 +187,37 @@ class TrackerService:
         self._track_run(run)
         return max(0.0, time.time_ns() - packets[-1].sent_ns) * 1e-9
 
+    def _new_stream(self, packet: EventPacket) -> None:
+        """The sequence number went back: the camera restarted. The updates of the old stream are
+        published, and a fresh core tracker takes the new one (the old one's unfinished windows,
+        cut short by the restart, are dropped)."""
+        self._publish_if_due(force=True)
+        self.restarts += 1
+        self.problems.add("camera restarts", f"seq went back from {self._next_seq - 1} to {packet.seq}: a new "
+                          f"stream of camera {packet.camera_id}, tracked afresh", 1)
+        self.tracker = self.tracker_factory()
+        self.stream += 1
+
     def _track_run(self, run: list[EventPacket], end_of_stream: bool = False) -> None:
         """Decode consecutive packets as one stream (one by one if that fails) and track them."""
         if not run:
             return
+        try:
+            chunks = self._decode(run)
+        except Exception as exc:  # noqa: BLE001 - a packet must not stop the service: counted, logged
+            chunks = []
+            self._failed(run, exc)
+        self.events += sum(len(c) for c in chunks)
+        self._track(chunks, run, end_of_stream)
+
+    def _decode(self, run: list[EventPacket]) -> list[np.ndarray]:
+        """The events of a run: decoded at once, or packet by packet if that fails (those whose
+        bytes do not decode are counted and left out)."""
         first = run[0]
         try:
             events, _ = decode_packet(first.encoding, b"".join(p.data for p in run), first.t_offset_us,
                                       source=f"packets {first.seq}-{run[-1].seq} of camera {first.camera_id}")
-            chunks = [events]
+            return [events]
         except FormatError:
             chunks = []
             for packet in run:
@@ -189,26 +226,44 @@ class TrackerService:
                                                 source=f"packet {packet.seq} of camera {packet.camera_id}")[0])
                 except FormatError as exc:
                     self.undecodable_packets += 1
-                    log.warning("tracker: %s", exc)
-        self.events += sum(len(c) for c in chunks)
-        self._track(chunks, run, end_of_stream)
+                    self.problems.add("undecodable packets", exc)
+            return chunks
 
     def _track(self, chunks: list, run: list[EventPacket], end_of_stream: bool) -> None:
         """Feed the decoded chunks (the last with the run's horizon: the camera says every event up
         to it has come, so the windows ending there are complete now) and queue the updates."""
         tracker = self.tracker
-        batches = [tracker.feed(events, run[-1].t_last_us if i == len(chunks) - 1 else None)
-                   for i, events in enumerate(chunks)]
+        batch: CentrelineBatch | None = None
+        source_ns = np.zeros(0, dtype=np.int64)
+        try:
+            batches = [tracker.feed(events, run[-1].t_last_us if i == len(chunks) - 1 else None)
+                       for i, events in enumerate(chunks)]
+            if end_of_stream:
+                batches.append(tracker.finish())
+            if batches:
+                batch = batches[0] if len(batches) == 1 else CentrelineBatch.concatenate(batches)
+                source_ns = self._source_ns(batch, run, tracker)
+        except Exception as exc:  # noqa: BLE001 - the core choked on this data: a fresh tracker goes on
+            batch = None
+            self._failed(run, exc)
+            self.tracker = self.tracker_factory()
         if end_of_stream:
-            batches.append(tracker.finish())
             self.streams_ended += 1
             self.tracker = self.tracker_factory()
             self._next_seq = None
-        if batches:
-            batch = batches[0] if len(batches) == 1 else CentrelineBatch.concatenate(batches)
-            self._add(batch, self._source_ns(batch, run, tracker))
+        if batch is not None:
+            self._add(batch, source_ns)
         if end_of_stream:
             self._publish_if_due(force=True, final=True)
+            self.stream += 1
+
+    def _failed(self, run: list[EventPacket], exc: Exception) -> None:
+        """Count the packets of a run that raised while decoded or tracked (a bug or data the core
+        cannot take); the first such error is logged with its traceback at DEBUG."""
+        self.undecodable_packets += len(run)
+        log.debug("tracker: packets %d-%d failed", run[0].seq, run[-1].seq, exc_info=exc)
+        self.problems.add("packets that failed to track", f"packets {run[0].seq}-{run[-1].seq}: "
+                          f"{type(exc).__name__}: {exc}", len(run))
 
     @staticmethod
     def _source_ns(batch: CentrelineBatch, run: list[EventPacket], tracker: Any) -> np.ndarray:
@@ -249,13 +304,18 @@ class TrackerService:
             lines = batch if len(starts) == 1 else batch.select(part)
             self._lines_pub.put(CentrelineMessage.from_batch(
                 lines, source=self.name, seq=self._seq_out, units=self.units, source_ns=source_ns[part],
-                final=final and start == starts[-1], published_ns=time.time_ns()))
+                final=final and start == starts[-1], published_ns=time.time_ns(), stream=self.stream))
             self._seq_out += 1
 
     @property
     def malformed_packets(self) -> int:
-        """Packets dropped as malformed: bad messages and messages whose EVT bytes do not decode."""
+        """Packets dropped as malformed: bad messages and packets whose EVT bytes do not decode or track."""
         return self.packets_sub.malformed + self.undecodable_packets
+
+    @property
+    def dropped_packets(self) -> int:
+        """Packets the full queue turned away (each also shows as a sequence gap)."""
+        return self.packets_sub.channel.dropped
 
     def _status(self, state: str, window: dict[str, float], now: float, lag_s: float) -> TrackerStatus:
         elapsed = max(now - window["t"], 1e-9)
@@ -263,4 +323,5 @@ class TrackerService:
             source=self.name, state=state, events_per_s=(self.events - window["events"]) / elapsed,
             updates_per_s=(self.updates - window["updates"]) / elapsed, lag_s=lag_s, packets=self.packets,
             missing_packets=self.missing_packets, malformed_packets=self.malformed_packets,
+            dropped_packets=self.dropped_packets, restarts=self.restarts,
         )

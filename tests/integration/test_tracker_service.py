@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -159,3 +160,77 @@ def test_the_window_ending_with_a_packet_is_published_with_that_packet() -> None
                 t_s.extend(msg.t_s)
             assert packet.t_last_us == 1000 * seq + 999
             assert len(t_s) == 4 and t_s[-1] * 1e6 == pytest.approx(packet.t_last_us + 1 - 125)
+
+
+def publish(pub, packets: list, seqs: list[int] | None = None, end: bool = False, data: dict | None = None) -> None:  # noqa: ANN001
+    """Publish packetizer packets as camera cam0 would (``seqs``: their numbers; ``end``: the last ends
+    the stream; ``data``: replaced EVT bytes by index)."""
+    from flagtrack.daemon.schema import EventPacket
+
+    for i, packet in enumerate(packets):
+        pub.put(EventPacket("cam0", i if seqs is None else seqs[i], packet.t_first_us, packet.t_last_us,
+                            packet.n_events, 640, 480, "evt3", time.time_ns(), packet.t_offset_us,
+                            end_of_stream=end and i == len(packets) - 1, data=(data or {}).get(i, packet.data)))
+
+
+def packets_of(events: np.ndarray, t_until_us: int) -> list:
+    from flagtrack.drivers.camera.packets import PacketParams, Packetizer
+
+    packetizer = Packetizer("evt3", 640, 480, PacketParams(packet_us=1000))
+    return packetizer.push(events, None, t_until_us=t_until_us) + packetizer.flush()
+
+
+def test_a_restarted_camera_is_tracked_afresh(tmp_path: Path) -> None:
+    """The camera restarts while the tracker runs (its packets number from 0 again, its times start
+    again): the tracker starts a fresh core tracker, and the new stream gives exactly the offline
+    centrelines; the restart is counted in the status and the messages say which stream they are of."""
+    first = np.concatenate(list(line_events(FLAG, 0, 30_000, 640, 480)))
+    second = np.concatenate(list(line_events(FLAG, 0, 60_000, 640, 480, QuickLineParams(noise_rate_hz=1e5))))
+    path = tmp_path / "second.raw"
+    write_events(path, second, width=640, height=480, encoding="evt3")
+    want = offline(path, CONFIG)
+    with running_tracker(CONFIG, "flagtrack/restart") as (cam_bus, service, stop_service):
+        lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=100_000)
+        status = cam_bus.subscribe(cam_bus.keys.tracker_status(), TrackerStatus, capacity=1000)
+        pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
+        time.sleep(0.4)
+        publish(pub, packets_of(first, 30_000)[:25])  # then the camera dies: no end of stream
+        assert wait_for(lambda: service.packets == 25, timeout_s=20)
+        publish(pub, packets_of(second, 60_000), end=True)
+        assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
+        messages = []
+        while (msg := lines.recv(timeout_s=1.0)) is not None:
+            messages.append(msg)
+        stop_service()
+        statuses = []
+        while (s := status.recv(timeout_s=0.5)) is not None:
+            statuses.append(s)
+    assert service.restarts == 1 and service.missing_packets == 0
+    assert statuses[-1].restarts == 1 and statuses[-1].missing_packets == 0
+    old = [m for m in messages if m.stream == 0 and len(m.t_s)]
+    new = CentrelineBatch.concatenate([m.batch() for m in messages if m.stream == 1])
+    assert sum(len(m.t_s) for m in old) > 80 and all(m.t_s[-1] < 0.025 for m in old)
+    assert [m.stream for m in messages] == sorted(m.stream for m in messages)  # the old stream's first
+    assert messages[-1].final and messages[-1].stream == 1
+    assert len(new) == len(want) > 200
+    for name in ("t_s", "x", "y", "joints_x", "joints_y", "delta_rms", "n_events"):
+        np.testing.assert_allclose(getattr(new, name), getattr(want, name), rtol=0, atol=1e-9, err_msg=name)
+
+
+def test_gaps_and_undecodable_packets_are_logged_as_counted_summaries(caplog: pytest.LogCaptureFixture) -> None:
+    """20 gaps and 10 corrupt packets: counted one by one, but logged in a few lines, not 30."""
+    events = np.concatenate(list(line_events(FLAG, 0, 60_000, 640, 480)))
+    packets = packets_of(events, 60_000)[:60]
+    corrupt = np.full(8, 0x9000, dtype="<u2").tobytes()  # a reserved EVT 3.0 word type
+    kept = [k for k in range(60) if k % 3 != 1]  # 20 lost on the way
+    with caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.tracker"), \
+            running_tracker(CONFIG, "flagtrack/quiet") as (cam_bus, service, stop_service):
+        pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
+        time.sleep(0.4)
+        publish(pub, [packets[k] for k in kept], seqs=kept, data={i: corrupt for i in range(0, 40, 4)})
+        assert wait_for(lambda: service.packets == 40, timeout_s=20)
+        stop_service()
+    assert service.missing_packets == 20 and service.malformed_packets == 10
+    lines = [r.getMessage() for r in caplog.records if r.name == "flagtrack.daemon.services.tracker"]
+    assert 2 <= len(lines) <= 4, lines  # the first of each kind, and a summary of each at the stop
+    assert any("more packets missing" in line and "(20 in all)" in line for line in lines), lines
