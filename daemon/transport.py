@@ -199,12 +199,19 @@ class Bus:
         except zenoh.ZError as exc:
             raise ConfigError(f"cannot open Zenoh session ({exc})", key="bus") from exc
         self._declared: list[Any] = []
+        self._alive: dict[str, list[Any]] = {}
+        self._lock = threading.Lock()
+
+    def _keep(self, entity: Any) -> None:
+        """Remember a declared entity, to undeclare it on :meth:`close` (services declare from their threads)."""
+        with self._lock:
+            self._declared.append(entity)
 
     def publisher(self, key: str, *, block: bool = True, express: bool = False) -> Publisher:
         """Declare a publisher; ``block`` makes it wait for slow subscribers rather than drop."""
         congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         pub = self.session.declare_publisher(key, congestion_control=congestion, express=express)
-        self._declared.append(pub)
+        self._keep(pub)
         return Publisher(pub, key)
 
     def subscribe(self, key: str, expected: type | None = None, *, capacity: int = 10_000, ring: bool = False) -> Subscription:
@@ -215,30 +222,47 @@ class Bus:
             channel.push(str(sample.key_expr), sample.payload.to_bytes())
 
         sub = self.session.declare_subscriber(key, on_sample)
-        self._declared.append(sub)
+        self._keep(sub)
         return Subscription(sub, channel, expected)
 
     def declare_alive(self, service: str) -> Any:
-        """Declare this service alive until the session closes (or the token is undeclared)."""
+        """Declare ``service`` alive until :meth:`undeclare_alive` (the runner calls it when the
+        service's loop ends, normally or not), the token is undeclared, or the session closes."""
         token = self.session.liveliness().declare_token(self.keys.alive(service))
-        self._declared.append(token)
+        with self._lock:
+            self._declared.append(token)
+            self._alive.setdefault(service, []).append(token)
         return token
+
+    def undeclare_alive(self, service: str) -> int:
+        """Withdraw the liveliness tokens of ``service`` (it has ended; the session stays); return how many."""
+        with self._lock:
+            tokens = self._alive.pop(service, [])
+            self._declared = [entity for entity in self._declared if not any(entity is t for t in tokens)]
+        for token in tokens:
+            try:
+                token.undeclare()
+            except Exception as exc:  # noqa: BLE001 - undeclared already (by its holder); nothing to do
+                log.debug("liveliness token of %s: %s", service, exc)
+        return len(tokens)
 
     def watch_liveliness(self) -> Liveliness:
         """Track the liveliness tokens of every service of the namespace (current ones included)."""
         state = Liveliness()
         sub = self.session.liveliness().declare_subscriber(self.keys.alive_all(), state.on_sample, history=True)
-        self._declared.append(sub)
+        self._keep(sub)
         return state
 
     def close(self) -> None:
         """Undeclare everything and close the session (idempotent)."""
-        for entity in reversed(self._declared):
+        with self._lock:
+            declared, self._declared = self._declared, []
+            self._alive.clear()
+        for entity in reversed(declared):
             try:
                 entity.undeclare()
             except Exception:  # noqa: BLE001 - already gone with the session; nothing to do
                 pass
-        self._declared.clear()
         if not self.session.is_closed():
             self.session.close()
 

@@ -86,19 +86,35 @@ class ServiceGroup:
         services: the services to run.
         stop_when_any_finishes: names of services whose normal end ends the group (e.g. a replay camera
             with ``--exit-at-eof``); by default the group runs until stopped.
+        on_service_end: called with a service's name in its thread as soon as its ``run`` returns or
+            raises, before the group reacts (the bus's ``undeclare_alive``: a service that ended is
+            seen gone at once, not when the process's session closes).
     """
 
-    def __init__(self, services: Sequence[Service], stop_when_any_finishes: Sequence[str] = ()) -> None:
+    def __init__(self, services: Sequence[Service], stop_when_any_finishes: Sequence[str] = (),
+                 on_service_end: Callable[[str], object] | None = None) -> None:
         self.services = list(services)
         self.stop = StopEvent()
         self.report = RunReport()
         self._finishers = set(stop_when_any_finishes)
+        self._on_end = on_service_end
         self._threads: dict[str, threading.Thread] = {}
         self._lock = threading.Lock()
 
+    def _ended(self, service: Service) -> None:
+        if self._on_end is None:
+            return
+        try:
+            self._on_end(service.name)
+        except Exception as exc:  # noqa: BLE001 - the service's own outcome matters more
+            log.warning("after service %s ended: %s", service.name, exc)
+
     def _run_one(self, service: Service) -> None:
         try:
-            service.run(self.stop)
+            try:
+                service.run(self.stop)
+            finally:
+                self._ended(service)
         except BaseException as exc:  # noqa: BLE001 - reported, and every other service is stopped
             log.error("service %s failed: %s", service.name, exc, exc_info=log.isEnabledFor(logging.DEBUG))
             with self._lock:
@@ -169,13 +185,17 @@ def run_services(
     shutdown_timeout_s: float = 10.0,
     handle_signals: bool = True,
     on_force: Callable[[], None] | None = None,
+    on_service_end: Callable[[str], object] | None = None,
 ) -> RunReport:
-    """Run services until a signal, a failure, or a finishing service; then shut down."""
+    """Run services until a signal, a failure, or a finishing service; then shut down.
+
+    ``on_service_end``: see :class:`ServiceGroup` (``up`` passes the bus's ``undeclare_alive``).
+    """
     # Zenoh delivers on its own threads, which need the GIL to queue a message; with Python's default
     # 5 ms switch interval a busy service thread would hold messages back for up to 5 ms.
     sys.setswitchinterval(min(sys.getswitchinterval(), _SWITCH_INTERVAL_S))
     keep_freed_memory()
-    group = ServiceGroup(services, stop_when_any_finishes)
+    group = ServiceGroup(services, stop_when_any_finishes, on_service_end)
     if handle_signals and threading.current_thread() is threading.main_thread():
         install_signal_handlers(group, on_force)
     group.start()

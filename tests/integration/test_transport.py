@@ -65,6 +65,21 @@ def test_liveliness_reports_a_service_going_away(two_buses: tuple[Bus, Bus]) -> 
     assert wait_for(lambda: not watch.is_alive(key) and key in watch.gone)
 
 
+def test_undeclare_alive_withdraws_one_services_tokens_while_the_session_stays(two_buses: tuple[Bus, Bus]) -> None:
+    a, b = two_buses
+    watch = b.watch_liveliness()
+    a.declare_alive("camera/cam0")
+    a.declare_alive("tracker")
+    camera, tracker = a.keys.alive("camera/cam0"), a.keys.alive("tracker")
+    assert wait_for(lambda: watch.is_alive(camera) and watch.is_alive(tracker))
+    assert a.undeclare_alive("camera/cam0") == 1
+    assert wait_for(lambda: camera in watch.gone)
+    assert not watch.is_alive(camera) and watch.is_alive(tracker) and not a.session.is_closed()
+    assert a.undeclare_alive("camera/cam0") == 0  # ended already: nothing left to withdraw
+    time.sleep(0.2)
+    assert watch.is_alive(tracker) and watch.gone == [camera]
+
+
 def test_ring_channel_keeps_newest_and_fifo_counts_drops() -> None:
     ring, fifo = Channel(3, ring=True), Channel(3, ring=False)
     for i in range(5):

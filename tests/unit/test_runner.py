@@ -106,3 +106,25 @@ def test_kept_freed_memory_stops_arrays_faulting_in_again() -> None:
     assert runs["keep"][0] == "True"
     assert runs["default"][1] > 100 * 30
     assert runs["keep"][1] < 100 * 10
+
+
+def test_end_hook_runs_as_each_service_ends_before_the_group_reacts() -> None:
+    """The hook (the bus's undeclare_alive in `up`) runs as soon as a service's run returns or raises,
+    before its end or failure stops the others."""
+    for ending in (Finishing("camera"), Failing("camera")):
+        seen: list[tuple[str, bool]] = []
+        group = ServiceGroup([Looping("tracker"), ending], stop_when_any_finishes=["camera"],
+                             on_service_end=lambda name: seen.append((name, group.stop.is_set())))
+        group.start()
+        group.wait(timeout_s=5.0)
+        assert group.stop.is_set()
+        group.shutdown(timeout_s=5.0)
+        assert seen == [("camera", False), ("tracker", True)], ending
+
+
+def test_a_failing_end_hook_does_not_hide_the_services_outcome() -> None:
+    def hook(name: str) -> None:
+        raise OSError("session closed")
+
+    report = run_services([Finishing("camera"), Failing("recorder")], handle_signals=False, on_service_end=hook)
+    assert report.finished == ["camera"] and isinstance(report.errors["recorder"], RuntimeError)
