@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import functools
+import os
 import types
 import typing
 from collections.abc import Mapping
@@ -76,6 +77,20 @@ def from_mapping(cls: type[T], data: Any, *, path: str | None = None, key: str =
         return cls(**values)
     except (ValueError, TypeError) as exc:
         raise ConfigError(str(exc), key=key or None, path=path) from exc
+    except ConfigError as exc:  # a section's own check names its key but cannot know the file
+        if exc.path is None and path is not None:
+            raise with_path(exc, path) from exc
+        raise
+
+
+def with_path(exc: ConfigError, path: str | None) -> ConfigError:
+    """``exc`` also naming the config file ``path`` (checks inside a section know their key, not the file)."""
+    if exc.path is not None or path is None:
+        return exc
+    text = str(exc)
+    prefix = f"key '{exc.key}': " if exc.key else ""
+    message = text[len(prefix):] if prefix and text.startswith(prefix) else text
+    return ConfigError(message, key=exc.key, path=path)
 
 
 @functools.cache
@@ -97,6 +112,64 @@ def to_mapping(obj: Any) -> Any:
     if isinstance(obj, dict):
         return {str(k): to_mapping(v) for k, v in obj.items()}
     return obj
+
+
+def require_file(value: str | Path, *, key: str, path: str | None) -> Path:
+    """Return ``value`` as a path if it names an existing file (nothing is opened).
+
+    Raises:
+        ConfigError: no such file, or a folder; naming ``key`` and the config file ``path``.
+    """
+    file = Path(value).expanduser()
+    try:
+        is_dir, is_file = file.is_dir(), file.is_file()
+    except OSError as exc:  # a folder on the way that may not be searched
+        raise ConfigError(f"cannot look at {file}: {exc.strerror}", key=key, path=path) from exc
+    if is_dir:
+        raise ConfigError(f"{file} is a folder, not a file", key=key, path=path)
+    if not is_file:
+        raise ConfigError(f"no such file: {file}", key=key, path=path)
+    return file
+
+
+def require_folder(value: str | Path, *, key: str, path: str | None) -> Path:
+    """Return ``value`` as a path if it is a writable folder or one that can be created (nothing is created).
+
+    Raises:
+        ConfigError: it (or the nearest existing folder above it) is a file or not writable; naming
+            ``key`` and the config file ``path``.
+    """
+    folder = Path(value).expanduser()
+    existing = folder
+    try:
+        while not existing.exists() and existing != existing.parent:
+            existing = existing.parent
+        is_dir = existing.is_dir()
+        read_only = is_dir and bool(os.statvfs(existing).f_flag & os.ST_RDONLY)
+    except OSError as exc:  # a folder on the way that may not be searched
+        raise ConfigError(f"cannot create folder {folder}: {exc.strerror}", key=key, path=path) from exc
+    if not is_dir:
+        raise ConfigError(f"cannot create folder {folder}: {existing} is a file", key=key, path=path)
+    if read_only or not os.access(existing, os.W_OK | os.X_OK):
+        verb = "cannot write in" if existing == folder else "cannot create"
+        why = "on a read-only file system" if read_only else "not writable"
+        raise ConfigError(f"{verb} folder {folder}: {existing} is {why}", key=key, path=path)
+    return folder
+
+
+def require_output_file(value: str | Path, *, key: str, path: str | None) -> Path:
+    """Return ``value`` as a path if that file can be written (its folder exists or can be created).
+
+    Raises:
+        ConfigError: it is a folder, or its folder cannot be created; naming ``key`` and ``path``.
+    """
+    file = Path(value).expanduser()
+    require_folder(file.parent, key=key, path=path)
+    if file.is_dir():
+        raise ConfigError(f"{file} is a folder, not a file", key=key, path=path)
+    if file.exists() and not os.access(file, os.W_OK):
+        raise ConfigError(f"cannot write {file}", key=key, path=path)
+    return file
 
 
 def _join(prefix: str, name: str) -> str:

@@ -15,11 +15,16 @@ Example (see ``deploy/rig-*.yaml``)::
 from __future__ import annotations
 
 import dataclasses
+import importlib
+import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from flagtrack.daemon.config import from_mapping, load_yaml, to_mapping
+from flagtrack.daemon.config import (
+    from_mapping, load_yaml, require_file, require_folder, require_output_file, to_mapping,
+)
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.services.recorder import RecorderConfig
 from flagtrack.daemon.services.supervisor.config import SupervisorConfig
@@ -33,6 +38,7 @@ from flagtrack.drivers.sensor.config import SensorConfig
 from flagtrack.drivers.tunnel.config import TunnelConfig
 
 SERVICE_NAMES = ("camera", "tracker", "recorder", "viewer", "supervisor", "sensor")
+HARDWARE_ADAPTERS = ("prophesee", "metavision", "inivation")
 
 
 @dataclass(frozen=True)
@@ -102,11 +108,17 @@ class RigConfig:
         return to_mapping(self)
 
 
-def load_rig(path: str | Path) -> RigConfig:
+def load_rig(path: str | Path, services: Sequence[str] | None = None) -> RigConfig:
     """Read and check a rig config; every error names the key and the file.
 
+    Args:
+        path: the YAML file.
+        services: the services whose files, folders and camera settings are checked (:func:`check_rig`);
+            default: the rig's own ``services:``; ``()`` for a caller that checks after changing the rig.
+
     Raises:
-        ConfigError: unreadable file, unknown key, bad value.
+        ConfigError: unreadable file, unknown key, bad value, a missing input file, an output folder
+            that cannot be made, a camera setting no camera of the adapter takes.
     """
     data = load_yaml(path)
     if "path" in data:
@@ -118,4 +130,45 @@ def load_rig(path: str | Path) -> RigConfig:
     rig = from_mapping(RigConfig, {**data, "path": str(path)}, path=str(path))
     from flagtrack.daemon.commands._tracking_args import resolve_calibration
 
-    return dataclasses.replace(rig, tracker=resolve_calibration(rig.tracker, Path(path).parent))
+    rig = dataclasses.replace(rig, tracker=resolve_calibration(rig.tracker, Path(path).parent))
+    check_rig(rig, rig.services if services is None else services)
+    return rig
+
+
+def check_rig(rig: RigConfig, services: Sequence[str]) -> None:
+    """Check what ``services`` need of ``rig`` that a file or a setting can say, opening and creating nothing.
+
+    Input files must exist (``camera.replay.path``, ``tracker.calibration``); output folders must
+    exist or be creatable (``recorder.directory`` and ``path``, the ``.rrd`` file's, ``supervisor.runs_dir``);
+    a hardware camera's settings are checked as far as they can be without the device (bias names,
+    ROI form); what only the device can tell (an ROI that fits its sensor) is checked when ``up``
+    opens it, before anything else (:func:`flagtrack.daemon.services.build.open_hardware_camera`).
+
+    Raises:
+        ConfigError: naming the key and the rig file.
+    """
+    where = rig.path
+    if "camera" in services:
+        if rig.camera.adapter == "replay" and rig.camera.replay is not None:
+            require_file(rig.camera.replay.path, key="camera.replay.path", path=where)
+        if rig.camera.adapter in HARDWARE_ADAPTERS:
+            module = importlib.import_module(f"flagtrack.drivers.camera.{rig.camera.adapter}")
+            module.check_config(rig.camera.hardware, path=where)
+    if "tracker" in services and rig.tracker.calibration is not None:
+        require_file(rig.tracker.calibration, key="tracker.calibration", path=where)
+    if "recorder" in services:
+        require_folder(rig.recorder.directory, key="recorder.directory", path=where)
+        if rig.recorder.path:
+            base = Path(rig.recorder.path).expanduser()
+            base = base if base.is_absolute() else Path(rig.recorder.directory).expanduser() / base
+            require_folder(base.parent, key="recorder.path", path=where)
+    if "viewer" in services and viewer_writes_file(rig.viewer):
+        require_output_file(rig.viewer.rrd_path, key="viewer.rrd_path", path=where)
+    if "supervisor" in services:
+        require_folder(rig.supervisor.runs_dir, key="supervisor.runs_dir", path=where)
+
+
+def viewer_writes_file(cfg: ViewerConfig) -> bool:
+    """Whether the viewer writes ``rrd_path``: sink ``rrd``, or ``auto`` with no display to show a window on."""
+    has_display = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return cfg.sink == "rrd" or (cfg.sink == "auto" and not has_display)

@@ -58,7 +58,8 @@ def rig_from_args(args: argparse.Namespace):  # noqa: ANN201 - (RigConfig, list[
 
     if args.config is None and args.replay is None:
         raise ConfigError("give a rig config (-c rig.yaml) or a recording to replay (--replay FILE)")
-    rig = load_rig(args.config) if args.config else RigConfig(services=("camera", "tracker"))
+    # files and folders are checked by run_rig, once the flags below have changed the rig
+    rig = load_rig(args.config, services=()) if args.config else RigConfig(services=("camera", "tracker"))
     names = list(rig.services)
     if args.replay is not None:
         if not args.replay.is_file():
@@ -91,7 +92,9 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
     Returns:
         A :class:`RigRun` (exit code, the services, the runner's report).
     """
-    from flagtrack.daemon.services.build import build_services, tracker_setup
+    from flagtrack.daemon.config import require_output_file
+    from flagtrack.daemon.rig import check_rig
+    from flagtrack.daemon.services.build import build_services, open_hardware_camera, tracker_setup
     from flagtrack.daemon.services.centreline_file import CentrelineFileService
     from flagtrack.daemon.services.runner import run_services
     from flagtrack.daemon.transport import Bus
@@ -100,7 +103,10 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
         if not quiet:
             print(f"flagtrack up: {text}", file=sys.stderr)
 
-    # bad tracker config: one clear line, before anything opens (the setup then serves every step)
+    # bad config: one clear line, before anything opens (the tracker setup then serves every step)
+    check_rig(rig, names)
+    if centrelines is not None:
+        require_output_file(centrelines, key="--centrelines", path=None)
     setup = tracker_setup(rig) if "tracker" in names else None
     if not prepared:
         prepare_services(rig, names, say, tracker=setup)
@@ -113,14 +119,21 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
         if ramp_s > shutdown_timeout_s:
             say(f"shutdown may take up to {ramp_s:.0f} s (the tunnel ramps down first)")
             shutdown_timeout_s = ramp_s
-    with Bus(rig.bus_config) as bus:
-        services = build_services(rig, bus, names, exit_at_end_of_stream=exit_at_end_of_stream, resume_dir=resume_dir,
-                                  tracker=setup)
-        if centrelines is not None:
-            attrs = {**rig.tracker.attrs(), "input_file": str(rig.camera.replay.path) if rig.camera.replay else ""}
-            services.insert(0, CentrelineFileService(bus, centrelines, attrs, exit_after_final=exit_at_end_of_stream))
-        say(f"{', '.join(s.name for s in services)} on {rig.bus_config.namespace}")
-        report = run_services(services, shutdown_timeout_s=shutdown_timeout_s, stop_when_any_finishes=finishers)
+    # a hardware camera opens first: what only the device can refuse stops the rig before anything else opens
+    camera = open_hardware_camera(rig) if "camera" in names else None
+    try:
+        with Bus(rig.bus_config) as bus:
+            services = build_services(rig, bus, names, exit_at_end_of_stream=exit_at_end_of_stream,
+                                      resume_dir=resume_dir, tracker=setup, camera=camera)
+            if centrelines is not None:
+                attrs = {**rig.tracker.attrs(), "input_file": str(rig.camera.replay.path) if rig.camera.replay else ""}
+                services.insert(0, CentrelineFileService(bus, centrelines, attrs,
+                                                         exit_after_final=exit_at_end_of_stream))
+            say(f"{', '.join(s.name for s in services)} on {rig.bus_config.namespace}")
+            report = run_services(services, shutdown_timeout_s=shutdown_timeout_s, stop_when_any_finishes=finishers)
+    finally:
+        if camera is not None and not camera.handed_over:
+            camera.close()  # the rig failed before the camera service took it
     for name, exc in report.errors.items():
         print(f"flagtrack up: {name} failed: {exc}", file=sys.stderr)
     if report.abandoned:

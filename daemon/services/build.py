@@ -7,15 +7,16 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
-from flagtrack.daemon.errors import ConfigError
-from flagtrack.daemon.rig import CameraConfig, RigConfig
+from flagtrack.daemon.config import with_path
+from flagtrack.daemon.errors import ConfigError, DriverError, FlagtrackError
+from flagtrack.daemon.rig import HARDWARE_ADAPTERS, CameraConfig, RigConfig
 from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
 from flagtrack.daemon.services.recorder import RecorderService
 from flagtrack.daemon.services.runner import Service
 from flagtrack.daemon.services.tracker import TrackerService
 from flagtrack.daemon.services.viewer import ViewerService
 from flagtrack.daemon.transport import Bus
-from flagtrack.drivers.camera.base import Camera
+from flagtrack.drivers.camera.base import Camera, CameraInfo
 
 log = logging.getLogger(__name__)
 
@@ -74,8 +75,61 @@ def open_camera(cfg: CameraConfig, speed_source: Callable[[], float] | None = No
         return module.open_from_config(cfg.hardware)
     except ConfigError as exc:
         if exc.path is None and rig_path is not None:
-            raise ConfigError(str(exc), path=rig_path) from exc
+            raise with_path(exc, rig_path) from exc
         raise
+
+
+class OpenedCamera:
+    """A camera opened ahead of its service: the service's ``open`` gets what the device said then
+    (``handed_over`` from then on: the service closes it)."""
+
+    def __init__(self, camera: Camera, info: CameraInfo) -> None:
+        self.camera = camera
+        self._info: CameraInfo | None = info
+        self.handed_over = False
+
+    def open(self) -> CameraInfo:
+        info, self._info = self._info, None
+        self.handed_over = True
+        return info if info is not None else self.camera.open()
+
+    def read(self, timeout_s: float) -> Any:
+        return self.camera.read(timeout_s)
+
+    def close(self) -> None:
+        self._info = None
+        self.camera.close()
+
+    def __getattr__(self, name: str) -> Any:  # the adapter's own attributes (dropped_packets, ...)
+        if name == "camera":
+            raise AttributeError(name)
+        return getattr(self.camera, name)
+
+
+def open_hardware_camera(rig: RigConfig) -> OpenedCamera | None:
+    """Open the rig's hardware camera now, before the bus and the other services (None for replay or simulated).
+
+    What only the device can check (a bias its model lacks, a value it refuses, an ROI that does
+    not fit its sensor) then stops the rig with one error naming the key and the rig file, before
+    anything else has opened; the camera service takes the open device as it is.
+
+    Raises:
+        ConfigError: a setting the device refuses (key and rig file named).
+        DriverError: the camera is missing, busy or fails.
+    """
+    if rig.camera.adapter not in HARDWARE_ADAPTERS:
+        return None
+    camera = open_camera(rig.camera, rig_path=rig.path)
+    try:
+        info = camera.open()
+    except ConfigError as exc:
+        raise with_path(exc, rig.path) from exc
+    except FlagtrackError:
+        raise
+    except Exception as exc:  # an SDK's own exception: still one line for the user
+        raise DriverError(f"cannot open the camera ({type(exc).__name__}: {exc})",
+                          device=f"camera adapter '{rig.camera.adapter}'") from exc
+    return OpenedCamera(camera, info)
 
 
 class BusSpeedSource:
@@ -102,13 +156,15 @@ def build_services(
     exit_at_end_of_stream: bool = False,
     resume_dir: Any = None,
     tracker: TrackerSetup | None = None,
+    camera: Camera | None = None,
 ) -> list[Service]:
     """Instantiate the named services of ``rig`` on ``bus`` (subscribers before the camera).
 
     A simulated camera reads the wind speed from the simulated tunnel when the supervisor runs in
     this process, else from the tunnel state on the bus. A simulated point sensor reads the
     simulated camera's flag, so both must run in this process. ``tracker``: the rig's
-    :func:`tracker_setup`, if the caller already made it.
+    :func:`tracker_setup`, if the caller already made it; ``camera``: the camera, if the caller opened
+    it (:func:`open_hardware_camera`).
     """
     setup = (tracker or tracker_setup(rig)) if "tracker" in names else None
     services: list[Service] = []
@@ -136,7 +192,10 @@ def build_services(
     if "viewer" in names:
         services.append(ViewerService(bus, replace(rig.viewer, camera_id=rig.camera.id),
                                       exit_after_final=exit_at_end_of_stream))
-    camera = open_camera(rig.camera, speed_source, rig.path) if "camera" in names else None
+    if "camera" not in names:
+        camera = None
+    elif camera is None:
+        camera = open_camera(rig.camera, speed_source, rig.path)
     if "sensor" in names:
         services.append(sensor_service(rig, bus, camera))
     if camera is not None:

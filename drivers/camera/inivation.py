@@ -75,6 +75,23 @@ class InivationConfig:
         object.__setattr__(self, "davis_biases", names)
 
 
+def check_config(hardware: dict[str, Any], path: str | None = None) -> InivationConfig:
+    """``camera.hardware`` checked as far as it can be without the device (when a rig is loaded).
+
+    Keys, types, the ROI's form and the DAVIS coarse / fine ranges (3 and 8 bits); the bias names,
+    the readout rate and whether the ROI fits the sensor are checked when the camera opens.
+
+    Raises:
+        ConfigError: naming ``camera.hardware.<key>`` and the rig file ``path``.
+    """
+    cfg = from_mapping(InivationConfig, hardware, path=path, key=KEY)
+    for name, (coarse, fine) in cfg.davis_biases.items():
+        if not (0 <= coarse <= 7 and 0 <= fine <= 255):
+            raise ConfigError(f"[coarse, fine] must be in [0..7, 0..255], got [{coarse}, {fine}]",
+                              key=f"{KEY}.davis_biases.{name}", path=path)
+    return cfg
+
+
 def open_from_config(hardware: dict[str, Any]) -> InivationCamera:
     """The camera ``camera.hardware`` describes (checked here; dv-processing is imported by ``open``).
 

@@ -67,6 +67,27 @@ class MetavisionConfig:
             raise ConfigError("must be >= 0", key=f"{KEY}.rate_limiter_events_per_s")
 
 
+KNOWN_BIASES = ("bias_diff", "bias_diff_on", "bias_diff_off", "bias_fo", "bias_hpf", "bias_pr", "bias_refr")
+"""HAL bias names of the sensors the adapter is written for (IMX636 / Gen4.1, Gen3.1; docs/cameras.md)."""
+
+
+def check_config(hardware: dict[str, Any], path: str | None = None) -> MetavisionConfig:
+    """``camera.hardware`` checked as far as it can be without the device (when a rig is loaded).
+
+    Keys, types, the ROI's form and each bias name against the HAL names of the known sensors;
+    whether the sensor in hand has that bias, takes its value and fits the ROI is checked when it opens.
+
+    Raises:
+        ConfigError: naming ``camera.hardware.<key>`` and the rig file ``path``.
+    """
+    cfg = from_mapping(MetavisionConfig, hardware, path=path, key=KEY)
+    for name in cfg.biases:
+        if name not in KNOWN_BIASES:
+            raise ConfigError(f"not a HAL bias name (known: {', '.join(KNOWN_BIASES)})", key=f"{KEY}.biases.{name}",
+                              path=path)
+    return cfg
+
+
 def open_from_config(hardware: dict[str, Any]) -> MetavisionCamera:
     """The camera ``camera.hardware`` describes (checked here; ``metavision_hal`` is imported by ``open``).
 

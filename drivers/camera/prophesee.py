@@ -78,6 +78,33 @@ class PropheseeConfig:
             raise ConfigError("must be >= 0 (0: never)", key=f"{KEY}.stall_timeout_s")
 
 
+MODEL_BIASES = {
+    "Prophesee EVK4": ("pr", "fo", "hpf", "diff_on", "diff", "diff_off", "inv", "refr", "reqpuy", "reqpux",
+                       "sendreqpdy", "unknown_1", "unknown_2"),
+    "Prophesee EVK3 HD": ("pr", "fo_p", "fo_n", "hpf", "diff_on", "diff", "diff_off", "refr", "reqpuy", "blk"),
+    "CenturyArks VGA": ("diff_on", "diff", "diff_off", "fo", "hpf", "pr", "refr"),
+}
+"""Bias names of each model, as neuromorphic-drivers (0.18) spells them (docs/cameras.md)."""
+KNOWN_BIASES = tuple(dict.fromkeys(name for names in MODEL_BIASES.values() for name in names))
+
+
+def check_config(hardware: dict[str, Any], path: str | None = None) -> PropheseeConfig:
+    """``camera.hardware`` checked as far as it can be without the device (when a rig is loaded).
+
+    Keys, types, the ROI's form and each bias name against the names of every known model; whether
+    the model in hand has that bias and whether the ROI fits its sensor are checked when it opens.
+
+    Raises:
+        ConfigError: naming ``camera.hardware.<key>`` and the rig file ``path``.
+    """
+    cfg = from_mapping(PropheseeConfig, hardware, path=path, key=KEY)
+    for name in cfg.biases:
+        if name not in KNOWN_BIASES:
+            raise ConfigError(f"no Prophesee-sensor camera has a bias {name!r} (known: {', '.join(KNOWN_BIASES)})",
+                              key=f"{KEY}.biases.{name}", path=path)
+    return cfg
+
+
 def open_from_config(hardware: dict[str, Any]) -> PropheseeCamera:
     """The camera ``camera.hardware`` describes (checked here; the SDK is imported by ``open``).
 

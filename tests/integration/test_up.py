@@ -18,6 +18,7 @@ from flagtrack.daemon.schema import CentrelineMessage
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.formats import write_events
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
+from tests.fakes.fixtures import fake_nd  # noqa: F401 - fixture
 from tests.integration.test_transport import free_port
 
 FLAG = WavyFlag(length=200.0, root=(100.0, 240.0))
@@ -206,3 +207,122 @@ def test_a_failing_preparation_is_one_clear_error(monkeypatch: pytest.MonkeyPatc
     monkeypatch.setattr(summary, "load_figure_modules", broken)
     with pytest.raises(FlagtrackError, match="preparing the services failed .*ImportError.*matplotlib"):
         prepare_services(RigConfig(), ["supervisor"])
+
+
+TRACKER = "tracker: {root: [100, 240], length: 200}\n"
+TRACKER_FORMAT = TRACKER.replace("{", "{{").replace("}", "}}")
+# (command, rig text with {tmp} for the test's folder, the key the error must name, words it must say)
+BAD_FILES = [
+    ("up", "camera: {{adapter: replay, replay: {{path: {tmp}/nope.raw}}}}\n" + TRACKER_FORMAT
+     + "viewer: {{sink: rrd, rrd_path: {tmp}/out/live.rrd}}\nservices: [viewer, camera, tracker]\n",
+     "camera.replay.path", "no such file"),
+    ("camera", "camera: {{adapter: replay, replay: {{path: {tmp}/nope.raw}}}}\n", "camera.replay.path", "no such file"),
+    ("up", "camera: {{adapter: simulated}}\ntracker: {{root: [100, 240], length: 200, calibration: cal/none.yaml}}\n"
+     "services: [camera, tracker]\n", "tracker.calibration", "no such file"),
+    ("tracker", "tracker: {{root: [100, 240], length: 200, calibration: {tmp}}}\n", "tracker.calibration",
+     "is a folder"),
+    ("up", "recorder: {{directory: {tmp}/blocker/rec}}\nservices: [recorder]\n", "recorder.directory", "is a file"),
+    ("recorder", "recorder: {{directory: {tmp}, path: blocker/run}}\n", "recorder.path", "is a file"),
+    ("up", "viewer: {{sink: rrd, rrd_path: {tmp}}}\nservices: [viewer]\n", "viewer.rrd_path", "is a folder"),
+    ("viewer", "viewer: {{sink: rrd, rrd_path: {tmp}/blocker/live.rrd}}\n", "viewer.rrd_path", "is a file"),
+    ("up", "tunnel: {{driver: simulated}}\nsupervisor: {{runs_dir: {tmp}/blocker/runs}}\nservices: [supervisor]\n",
+     "supervisor.runs_dir", "is a file"),
+    ("up", "camera: {{adapter: prophesee, hardware: {{biases: {{dif_on: 3}}}}}}\nservices: [camera]\n",
+     "camera.hardware.biases.dif_on", "no Prophesee-sensor camera has a bias"),
+    ("camera", "camera: {{adapter: metavision, hardware: {{biases: {{bias_fu: 3}}}}}}\n",
+     "camera.hardware.biases.bias_fu", "not a HAL bias name"),
+    ("camera", "camera: {{adapter: inivation, hardware: {{davis_biases: {{On: [9, 2]}}}}}}\n",
+     "camera.hardware.davis_biases.On", "must be in [0..7, 0..255]"),
+    ("up", "camera: {{adapter: prophesee, hardware: {{roi: {{x: -1, y: 0, width: 10, height: 10}}}}}}\n"
+     "services: [camera]\n", "camera.hardware.roi", "must be >= 0"),
+]
+
+
+@pytest.mark.parametrize(("command", "yaml_text", "key", "words"), BAD_FILES)
+def test_bad_paths_and_camera_settings_are_one_line_before_anything_opens(tmp_path: Path, command: str,
+                                                                          yaml_text: str, key: str, words: str) -> None:
+    (tmp_path / "blocker").write_text("a file where a folder should be")
+    config = tmp_path / "rig.yaml"
+    config.write_text(yaml_text.format(tmp=tmp_path))
+    before = sorted(tmp_path.rglob("*"))
+    result = flagtrack(command, "-c", str(config), cwd=tmp_path)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert lines[0].startswith(f"flagtrack {command}: error: file {config}, key '{key}': ") and words in lines[0]
+    assert sorted(tmp_path.rglob("*")) == before  # no .rrd, no folder: nothing was opened or made
+
+
+def test_files_are_checked_for_the_services_that_run_only(tmp_path: Path) -> None:
+    """A tracker host's copy of the rig does not need the camera host's recording."""
+    from flagtrack.daemon.errors import ConfigError
+    from flagtrack.daemon.rig import load_rig
+
+    config = tmp_path / "rig.yaml"
+    config.write_text(f"camera: {{adapter: replay, replay: {{path: {tmp_path}/nope.raw}}}}\n{TRACKER}"
+                      "services: [camera, tracker]\n")
+    assert load_rig(config, services=["tracker"]).camera.replay.path == tmp_path / "nope.raw"
+    with pytest.raises(ConfigError, match="no such file") as info:
+        load_rig(config)
+    assert info.value.key == "camera.replay.path" and info.value.path == str(config)
+
+
+def test_up_checks_its_centrelines_output_before_anything_opens(recording: Path, tmp_path: Path) -> None:
+    (tmp_path / "blocker").write_text("")
+    result = flagtrack("up", "--replay", str(recording), "--exit-at-eof", "--centrelines",
+                       str(tmp_path / "blocker" / "c.h5"), "--rrd", str(tmp_path / "v.rrd"), *TRACKER_ARGS)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and "key '--centrelines'" in lines[0], result.stderr
+    assert not (tmp_path / "v.rrd").exists()
+
+
+def hardware_rig(tmp_path: Path, hardware: str, services: str) -> Path:
+    config = tmp_path / "rig.yaml"
+    config.write_text(f"""
+rig: hw{os.getpid()}
+bus: {{listen: ["tcp/127.0.0.1:{free_port()}"]}}
+camera: {{id: cam0, adapter: prophesee, hardware: {hardware}}}
+viewer: {{sink: rrd, rrd_path: {tmp_path / 'live.rrd'}}}
+recorder: {{directory: {tmp_path / 'rec'}, path: run}}
+services: {services}
+""")
+    return config
+
+
+@pytest.mark.parametrize(("plugged", "hardware", "words"), [
+    (True, '{serial: "V1", roi: {x: 600, y: 0, width: 100, height: 10}}',
+     "key 'camera.hardware.roi': region {'x': 600, 'y': 0, 'width': 100, 'height': 10} does not fit the 640x480"),
+    (True, '{serial: "V1", biases: {inv: 3}}', "key 'camera.hardware.biases.inv': CenturyArks VGA has no bias 'inv'"),
+    (False, '{serial: "V1"}', "camera 'V1': no such Prophesee-sensor camera found"),
+])
+def test_what_only_the_device_can_refuse_stops_up_before_the_rest_opens(
+        fake_nd, tmp_path: Path, capsys: pytest.CaptureFixture, plugged: bool, hardware: str, words: str) -> None:
+    """The hardware camera opens before the bus and the other services: one line, exit 2, no .rrd."""
+    from flagtrack.daemon.cli import main
+
+    cam = fake_nd._fake.plug(fake_nd.FakeCamera(name=fake_nd.Name.CENTURYARKS_VGA, serial="V1")) if plugged else None
+    config = hardware_rig(tmp_path, hardware, "[camera, recorder, viewer]")
+    assert main(["up", "-c", str(config)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("flagtrack up: error: ") and words in lines[0], lines
+    if plugged:
+        assert f"file {config}" in lines[0] and cam.opened == cam.closed == 1  # released
+    assert not (tmp_path / "live.rrd").exists() and not (tmp_path / "rec").exists()
+
+
+def test_the_camera_opened_first_is_the_one_the_service_streams(fake_nd, tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture) -> None:
+    """`up` hands the device it opened to the camera service: every event the sensor produced up to
+    the last packet is recorded, then the stall ends the rig (exit 1) and the device is closed once."""
+    from flagtrack.daemon.cli import main
+    from flagtrack.drivers.formats import read_events
+
+    cam = fake_nd._fake.plug(fake_nd.FakeCamera(serial="E1", duration_us=150_000, seed=3))
+    hardware = '{serial: "E1", biases: {diff_off: 30}, stall_timeout_s: 0.5}'
+    config = hardware_rig(tmp_path, hardware, "[camera, recorder]")
+    assert main(["up", "-c", str(config)]) == 1
+    err = capsys.readouterr().err
+    assert "camera/cam0 failed: camera 'E1': camera stopped delivering data" in err
+    assert cam.opened == cam.closed == 1 and cam.applied.biases.diff_off == 30
+    recorded, sent = read_events(tmp_path / "rec" / "run.raw").events, cam.sent_events
+    assert len(recorded) > 0.9 * len(sent)
+    np.testing.assert_array_equal(recorded, sent[: len(recorded)])

@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import enum
+import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
 
-from flagtrack.daemon.config import from_mapping, load_yaml, to_mapping
+from flagtrack.daemon.config import (
+    from_mapping, load_yaml, require_file, require_folder, require_output_file, to_mapping,
+)
 from flagtrack.daemon.errors import ConfigError
 
 
@@ -71,3 +75,61 @@ def test_load_yaml_reports_line(tmp_path: Path) -> None:
         load_yaml(bad)
     with pytest.raises(ConfigError, match="cannot read"):
         load_yaml(tmp_path / "missing.yaml")
+
+
+@dataclass(frozen=True)
+class Window:
+    x: int = 0
+
+    def __post_init__(self) -> None:
+        if self.x < 0:
+            raise ConfigError("must be >= 0", key="camera.roi.x")  # a section's own check: key, no file
+
+
+@dataclass(frozen=True)
+class WithWindow:
+    roi: Window = field(default_factory=Window)
+
+
+def test_a_sections_own_error_also_names_the_file() -> None:
+    with pytest.raises(ConfigError) as info:
+        from_mapping(WithWindow, {"roi": {"x": -1}}, path="rig.yaml")
+    assert info.value.key == "camera.roi.x" and info.value.path == "rig.yaml"
+    assert str(info.value) == "file rig.yaml, key 'camera.roi.x': must be >= 0"
+
+
+def test_required_file_must_exist_and_be_a_file(tmp_path: Path) -> None:
+    (tmp_path / "run.raw").write_bytes(b"x")
+    assert require_file(tmp_path / "run.raw", key="camera.replay.path", path="rig.yaml") == tmp_path / "run.raw"
+    for value, words in ((tmp_path / "nope.raw", "no such file"), (tmp_path, "is a folder")):
+        with pytest.raises(ConfigError, match=words) as info:
+            require_file(value, key="camera.replay.path", path="rig.yaml")
+        assert info.value.key == "camera.replay.path" and info.value.path == "rig.yaml"
+        assert str(value) in str(info.value)
+
+
+def test_output_folders_are_checked_without_being_created(tmp_path: Path) -> None:
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file where a folder should go")
+    deep = tmp_path / "a" / "b" / "c"
+    assert require_folder(deep, key="recorder.directory", path="rig.yaml") == deep
+    assert require_output_file(deep / "live.rrd", key="viewer.rrd_path", path="rig.yaml") == deep / "live.rrd"
+    assert not (tmp_path / "a").exists()  # checked, not made
+    for check, value, key, words in (
+        (require_folder, blocker / "sub", "recorder.directory", f"{blocker} is a file"),
+        (require_folder, blocker, "supervisor.runs_dir", f"{blocker} is a file"),
+        (require_output_file, blocker / "live.rrd", "viewer.rrd_path", f"{blocker} is a file"),
+        (require_output_file, tmp_path, "viewer.rrd_path", "is a folder, not a file"),
+    ):
+        with pytest.raises(ConfigError, match=re.escape(words)) as info:
+            check(value, key=key, path="rig.yaml")
+        assert info.value.key == key and info.value.path == "rig.yaml"
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes anywhere")
+def test_a_folder_without_write_permission_is_refused(tmp_path: Path) -> None:
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    with pytest.raises(ConfigError, match="not writable") as info:
+        require_folder(locked / "rec", key="recorder.directory", path="rig.yaml")
+    assert info.value.key == "recorder.directory"
