@@ -130,7 +130,8 @@ def run_rig(rig, names: list[str], *, exit_at_end_of_stream: bool = False, centr
                 services.insert(0, CentrelineFileService(bus, centrelines, attrs,
                                                          exit_after_final=exit_at_end_of_stream))
             say(f"{', '.join(s.name for s in services)} on {rig.bus_config.namespace}")
-            report = run_services(services, shutdown_timeout_s=shutdown_timeout_s, stop_when_any_finishes=finishers)
+            report = run_services(services, shutdown_timeout_s=shutdown_timeout_s, stop_when_any_finishes=finishers,
+                                  on_service_end=bus.undeclare_alive)
     finally:
         if camera is not None and not camera.handed_over:
             camera.close()  # the rig failed before the camera service took it

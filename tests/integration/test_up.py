@@ -326,3 +326,36 @@ def test_the_camera_opened_first_is_the_one_the_service_streams(fake_nd, tmp_pat
     recorded, sent = read_events(tmp_path / "rec" / "run.raw").events, cam.sent_events
     assert len(recorded) > 0.9 * len(sent)
     np.testing.assert_array_equal(recorded, sent[: len(recorded)])
+
+
+def test_up_withdraws_a_services_liveliness_when_it_ends(recording: Path, tmp_path: Path) -> None:
+    """In `up`, the replay camera reaches the end of its file: a watcher in another process sees it gone
+    while the tracker of the same process (and session) is still alive; the stop then takes the tracker."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    config = tmp_path / "rig.yaml"
+    config.write_text(f"""
+rig: alive{os.getpid()}
+bus: {{connect: ["{endpoint}"]}}
+camera: {{adapter: replay, replay: {{path: {recording}, speed: 1.0}}}}
+tracker: {{root: [100, 240], length: 200, tau_s: 0.0003}}
+services: [camera, tracker]
+""")
+    with Bus(BusConfig(namespace=f"flagtrack/alive{os.getpid()}", listen=(endpoint,))) as bus:
+        watch = bus.watch_liveliness()
+        camera, tracker = bus.keys.alive("camera/cam0"), bus.keys.alive("tracker")
+        proc = start("up", "-c", str(config))
+        try:
+            deadline = time.monotonic() + 60
+            while camera not in watch.gone and proc.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.02)
+            assert camera in watch.gone and not watch.is_alive(camera)
+            time.sleep(0.5)
+            assert watch.is_alive(tracker) and proc.poll() is None  # the tracker runs on, its token stays
+        finally:
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=30)
+        assert proc.returncode == 130, err
+        deadline = time.monotonic() + 10
+        while tracker not in watch.gone and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert watch.gone == [camera, tracker]
