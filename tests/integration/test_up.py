@@ -359,3 +359,23 @@ services: [camera, tracker]
         while tracker not in watch.gone and time.monotonic() < deadline:
             time.sleep(0.02)
         assert watch.gone == [camera, tracker]
+
+
+def test_router_stops_on_the_first_signal_and_is_forced_by_a_second(tmp_path: Path) -> None:
+    """`flagtrack router` as the other services: one signal closes it (exit 0), a second one while it
+    closes forces it out (exit 130)."""
+    for signals, code, words in (((signal.SIGTERM,), 0, "flagtrack router: stopped"),
+                                 ((signal.SIGTERM, signal.SIGINT), 130, "forcing exit")):
+        port = free_port()
+        router = start("router", "--listen", f"tcp/127.0.0.1:{port}")
+        try:
+            assert "listening" in router.stderr.readline()
+            with Bus(BusConfig(namespace="flagtrack/r", mode="client", connect=(f"tcp/127.0.0.1:{port}",))):
+                pass  # the router serves
+            for sig in signals:  # two different signals: the second is not merged into the first
+                router.send_signal(sig)
+            _, err = router.communicate(timeout=30)
+        finally:
+            if router.poll() is None:
+                router.kill()
+        assert router.returncode == code and "stopping (again to force)" in err and words in err, err
