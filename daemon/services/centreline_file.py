@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
-from flagtrack.daemon.schema import CentrelineMessage
+from flagtrack.daemon.schema import CentrelineMessage, ProblemLog
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.formats.centreline import CentrelineWriter
 
@@ -18,6 +18,10 @@ log = logging.getLogger(__name__)
 
 class CentrelineFileService:
     """Appends every centreline message to ``path``; with ``exit_after_final`` it ends with the stream.
+
+    A message whose samples or joints differ from the file's (the first message sets them) cannot
+    go in the file: it is counted (``rejected``) and logged as a rate-limited summary, and the
+    service goes on.
 
     Args:
         bus: the bus.
@@ -35,10 +39,13 @@ class CentrelineFileService:
         self.exit_after_final = exit_after_final
         self.write_interval_s = 0.5  # appends are batched: one HDF5 append per interval
         self.updates = 0
+        self.rejected = 0
+        self.problems = ProblemLog(log, "centrelines")
         self.subscription = bus.subscribe(bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000)
 
     def run(self, stop: threading.Event) -> None:
         writer: CentrelineWriter | None = None
+        shape: tuple[int, int] | None = None  # (n_s, N_j + 1) of the file
         pending: list = []
         last_write = time.monotonic()
         try:
@@ -47,18 +54,25 @@ class CentrelineFileService:
                 if msg is not None:
                     if writer is None:
                         self.path.parent.mkdir(parents=True, exist_ok=True)
-                        writer = CentrelineWriter(self.path, msg.s, msg.joints_x.shape[1] - 1,
-                                                  {**self.attrs, "units": msg.units})
-                    pending.append(msg.batch())
-                    self.updates += len(msg.t_s)
+                        shape = (len(msg.s), msg.joints_x.shape[1])
+                        writer = CentrelineWriter(self.path, msg.s, shape[1] - 1, {**self.attrs, "units": msg.units})
+                    if (len(msg.s), msg.joints_x.shape[1]) == shape:
+                        pending.append(msg.batch())
+                        self.updates += len(msg.t_s)
+                    else:
+                        self.rejected += 1
+                        self.problems.add("messages not written", f"message {msg.seq} has {len(msg.s)} samples and "
+                                          f"{msg.joints_x.shape[1]} joints, the file {shape[0]} and {shape[1]}")
                 if pending and (time.monotonic() - last_write > self.write_interval_s or (msg is not None and msg.final)):
                     writer.append(CentrelineBatch.concatenate(pending))  # type: ignore[union-attr]
                     pending, last_write = [], time.monotonic()
                 if msg is not None and msg.final and self.exit_after_final:
                     break
+                self.problems.flush()
         finally:
             if writer is not None:
                 if pending:
                     writer.append(CentrelineBatch.concatenate(pending))
                 writer.close()
                 log.info("centrelines: %d updates written to %s", self.updates, self.path)
+            self.problems.flush(force=True)

@@ -5,6 +5,10 @@ Entities (stable paths), all on the ``camera`` timeline (seconds of the camera c
 ``tracker/tip_trail``, and time series under ``plots/`` (event rate, Δ_RMS, events per update,
 tip lateral position, wind speed). Centrelines and scalars are batched with ``send_columns``;
 point clouds and the trail are logged at most ``geometry_rate_hz`` times per second.
+
+No message stops the viewer: one that cannot be shown (EVT bytes that do not decode, times Rerun
+cannot place, ...) is counted (``ViewerService.unusable``) and logged as a rate-limited summary,
+and centreline messages of another tracker setup (other samples or joints) are sent apart.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ import numpy as np
 import rerun as rr
 
 from flagtrack.daemon.errors import ConfigError, FormatError
-from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, TunnelState
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, ProblemLog, TunnelState
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.camera.packets import decode_packet
 
@@ -94,9 +98,10 @@ class RerunLogger:
     of the recent-events window, so the viewer keeps up with kHz update rates.
     """
 
-    def __init__(self, rec: rr.RecordingStream, cfg: ViewerConfig) -> None:
+    def __init__(self, rec: rr.RecordingStream, cfg: ViewerConfig, problems: ProblemLog | None = None) -> None:
         self.rec = rec
         self.cfg = cfg
+        self.problems = problems or ProblemLog(log, "viewer")
         self._lines: list[CentrelineMessage] = []
         self._packets: deque[EventPacket] = deque()
         self._trail: deque[np.ndarray] = deque()  # (n, 3) arrays of t, tip x, tip y
@@ -104,8 +109,12 @@ class RerunLogger:
         self._camera_minus_wall_s: float | None = None
 
     def centrelines(self, msg: CentrelineMessage) -> None:
-        """Queue a batch of tracker updates."""
+        """Queue a batch of tracker updates (the queued ones are sent first if their samples or joints
+        differ: they are sent as one array)."""
         if len(msg.t_s):
+            if self._lines and (msg.x.shape[1], msg.joints_x.shape[1]) != (self._lines[0].x.shape[1],
+                                                                          self._lines[0].joints_x.shape[1]):
+                self._send_lines()
             self._lines.append(msg)
 
     def events(self, packet: EventPacket) -> None:
@@ -152,7 +161,7 @@ class RerunLogger:
             values = np.concatenate([np.asarray(getattr(m, field_name), float) for m in msgs])
             self.rec.send_columns(name, times, rr.Scalars.columns(scalars=values))
         self._trail.append(np.stack([t_s, x[:, -1], y[:, -1]], axis=1))
-        while len(self._trail) > 1 and self._trail[0][-1, 0] < t_s[-1] - self.cfg.trail_s:
+        while len(self._trail) > 1 and not self._trail[0][-1, 0] >= t_s[-1] - self.cfg.trail_s:  # (NaN too)
             self._trail.popleft()
         trail = np.concatenate(list(self._trail))
         trail = trail[trail[:, 0] >= t_s[-1] - self.cfg.trail_s]
@@ -168,14 +177,15 @@ class RerunLogger:
         t_newest = self._packets[-1].t_last_us
         while self._packets and self._packets[0].t_last_us < t_newest - horizon_us:
             self._packets.popleft()
+        packets = list(self._packets)
+        self._packets.clear()
         decoded = []
-        for packet in self._packets:
+        for packet in packets:
             try:
                 decoded.append(decode_packet(packet.encoding, packet.data, packet.t_offset_us,
                                              source=f"packet {packet.seq}")[0])
             except FormatError as exc:
-                log.debug("viewer: %s", exc)
-        self._packets.clear()
+                self.problems.add("undecodable packets", exc)
         if not decoded:
             return False
         recent = np.concatenate(decoded)
@@ -201,6 +211,8 @@ class ViewerService:
         self.description = ""
         self.frames = 0
         self.updates = 0
+        self.unusable = 0  # messages (or frames) that could not be logged
+        self.problems = ProblemLog(log, "viewer")
         keys = bus.keys
         self.subs: dict[str, Any] = {
             "centrelines": bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000),
@@ -214,25 +226,35 @@ class ViewerService:
         self.bus.declare_alive(self.name)
         rec, self.description = open_recording(self.cfg)
         log.info("viewer: %s", self.description)
-        logger = RerunLogger(rec, self.cfg)
+        logger = RerunLogger(rec, self.cfg, self.problems)
+        handlers = (("centrelines", logger.centrelines), ("events", logger.events), ("rate", logger.rate),
+                    ("tunnel", logger.tunnel))
         try:
             while not stop.is_set():
                 final = False
-                while (msg := subs["centrelines"].recv(timeout_s=0)) is not None:
-                    logger.centrelines(msg)
-                    self.updates += len(msg.t_s)
-                    final |= msg.final
-                while (packet := subs["events"].recv(timeout_s=0)) is not None:
-                    logger.events(packet)
-                while (msg := subs["rate"].recv(timeout_s=0)) is not None:
-                    logger.rate(msg)
-                while (msg := subs["tunnel"].recv(timeout_s=0)) is not None:
-                    logger.tunnel(msg)
-                self.frames += logger.frame(time.monotonic(), force=final)
+                for name, handler in handlers:
+                    while (msg := subs[name].recv(timeout_s=0)) is not None:
+                        self._show(handler, msg)
+                        if name == "centrelines":
+                            self.updates += len(msg.t_s)
+                            final |= msg.final
+                self.frames += bool(self._show(logger.frame, time.monotonic(), final))
+                self.problems.flush()
                 if final and self.exit_after_final:
                     break
                 stop.wait(0.25 / self.cfg.geometry_rate_hz)
-            logger.frame(time.monotonic(), force=True)
+            self._show(logger.frame, time.monotonic(), True)
         finally:
+            self.problems.flush(force=True)
             rec.flush()
             rec.disconnect()
+
+    def _show(self, step: Any, *args: Any) -> Any:
+        """Run one logging step; a message Rerun (or the logger) cannot take is counted, not fatal."""
+        try:
+            return step(*args)
+        except Exception as exc:  # noqa: BLE001 - one message must not stop the viewer
+            self.unusable += 1
+            log.debug("viewer: %s failed", getattr(step, "__name__", step), exc_info=exc)
+            self.problems.add("messages that could not be shown", f"{type(exc).__name__}: {exc}")
+            return None

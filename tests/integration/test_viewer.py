@@ -81,3 +81,57 @@ def test_the_rrd_holds_each_update_centreline_at_its_time(tmp_path: Path) -> Non
     for k, strip in enumerate(strips):
         assert len(strip) == 1  # one strip per update
         np.testing.assert_allclose(np.array(strip[0]), np.stack([x[k], -2 * x[k]], axis=-1))
+
+
+def centreline_batch(n_t: int, n_s: int, t0_s: float = 0.0) -> CentrelineBatch:
+    x = np.arange(n_t * n_s, dtype=float).reshape(n_t, n_s)
+    return CentrelineBatch(t0_s + np.arange(n_t) * 1e-3, np.linspace(0, 200, n_s), x, -x, np.zeros((n_t, 11)),
+                           np.zeros((n_t, 11)), np.ones(n_t), np.ones(n_t, dtype=np.int64))
+
+
+def test_messages_the_viewer_cannot_show_are_counted_and_it_goes_on(tmp_path: Path) -> None:
+    """A centreline message with a 1-D joints_x (it decoded, then crashed the viewer's frame), a
+    packet whose EVT bytes are corrupt, a wind speed at a time Rerun cannot place, and two tracker
+    setups (51 and 7 samples) in one frame: the viewer counts what it cannot show and logs the rest."""
+    import dataclasses
+
+    from flagtrack.daemon.schema import TunnelState, encode
+    from rerun.chunk import RrdReader
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    rrd = tmp_path / "bad.rrd"
+    with Bus(BusConfig(namespace="flagtrack/vbad", listen=(endpoint,))) as bus, \
+            Bus(BusConfig(namespace="flagtrack/vbad", connect=(endpoint,))) as source:
+        viewer = ViewerService(bus, ViewerConfig(sink="rrd", rrd_path=rrd, geometry_rate_hz=5.0))
+        stop = threading.Event()
+        thread = threading.Thread(target=viewer.run, args=(stop,))
+        thread.start()
+        try:
+            time.sleep(0.5)
+            events_pub = source.publisher(source.keys.camera_events("cam0"))
+            lines_pub = source.publisher(source.keys.centrelines())
+            tunnel_pub = source.publisher(source.keys.tunnel_state())
+            corrupt = np.full(8, 0x9000, dtype="<u2").tobytes()  # a reserved EVT 3.0 word type
+            events_pub.put(EventPacket("cam0", 0, 0, 999, 8, 640, 480, "evt3", time.time_ns(), data=corrupt))
+            zeros = np.zeros(4, dtype=np.int64)
+            good = CentrelineMessage.from_batch(centreline_batch(4, 51), source="tracker", seq=0, units="px",
+                                                source_ns=zeros)
+            lines_pub.put_bytes(encode(dataclasses.replace(good, joints_x=good.joints_x[:, 0])))
+            time.sleep(0.3)
+            tunnel_pub.put(TunnelState(3.0, 3.0, "steady", t_wall_s=float("nan")))
+            lines_pub.put(CentrelineMessage.from_batch(centreline_batch(20, 51), source="tracker", seq=1, units="px",
+                                                       source_ns=np.zeros(20, dtype=np.int64)))
+            lines_pub.put(CentrelineMessage.from_batch(centreline_batch(5, 7, 0.1), source="tracker", seq=2,
+                                                       units="px", source_ns=np.zeros(5, dtype=np.int64)))
+            assert wait_for(lambda: viewer.updates == 25 and viewer.unusable >= 1)
+            time.sleep(0.5)  # a frame or two after them
+            assert thread.is_alive()
+        finally:
+            stop.set()
+            thread.join(10)
+    assert not thread.is_alive()
+    assert viewer.subs["centrelines"].malformed == 1 and viewer.unusable == 1
+    assert viewer.problems.totals == {"undecodable packets": 1, "messages that could not be shown": 1}
+    strips = [strip for chunk in RrdReader(rrd).stream() if chunk.entity_path == "/tracker/centreline"
+              for strip in chunk.to_record_batch().column("LineStrips2D:strips").to_pylist()]
+    assert sorted(len(strip[0]) for strip in strips) == [7] * 5 + [51] * 20
