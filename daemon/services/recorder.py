@@ -6,6 +6,24 @@ callback, so the camera is never held up; the file is flushed every ``flush_inte
 fsynced every ``fsync_interval_s`` and on close, so a recording cut by a crash is readable up to its
 last flush. Sequence gaps are listed in the sidecar. Commands (start / stop / rotate) come on the
 recorder command key; centrelines can be recorded beside the events (DESIGN.md HDF5 layout).
+
+**One file per camera stream.** The packets of two streams do not make one valid stream (the
+second one's times start again), so when a new stream begins while recording to ``BASE`` (the
+sequence number goes back: the camera restarted; a packet after the end of stream; or another
+encoding or geometry) the recorder closes ``BASE.raw`` and goes on in ``BASE_stream2.raw`` (then
+``_stream3`` ...), with its own sidecar and centreline file. The sidecars link the parts
+(``continued_in``, ``continues``). The tracker's centrelines lag the packets, so the old part keeps
+taking those whose newest packet (``source_ns``) came before the new stream's first, until the
+tracker's first of the new stream, its final message, or ``drain_timeout_s`` without any.
+
+**Nothing one message holds stops the service.** A message that does not decode, a packet whose
+encoding or time offset cannot start a file, a centreline message that does not fit the file, a
+command that cannot be carried out: each is counted (sidecar ``malformed_packets``, status) and
+logged as a rate-limited summary.
+
+**End of stream.** With ``exit_at_end_of_stream``, the recorder stops after the camera's end of
+stream only once it has the tracker's last centreline message (``final``), or after
+``drain_timeout_s`` without any centreline message, so the last updates are in the file.
 """
 
 from __future__ import annotations
@@ -21,14 +39,27 @@ from typing import Any, BinaryIO
 
 from flagtrack.daemon import __version__
 from flagtrack.daemon.core.centreline import CentrelineBatch
-from flagtrack.daemon.errors import SchemaError
-from flagtrack.daemon.schema import CentrelineMessage, EventPacket, RecorderCommand, RecorderStatus, decode
+from flagtrack.daemon.errors import FormatError, SchemaError
+from flagtrack.daemon.schema import (
+    CentrelineMessage, EventPacket, ProblemLog, RecorderCommand, RecorderStatus, decode,
+)
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.camera.packets import stream_preamble
 from flagtrack.drivers.formats import raw_header
 from flagtrack.drivers.formats.centreline import CentrelineWriter
+from flagtrack.drivers.formats.codec import LOOP_US
 
 log = logging.getLogger(__name__)
+
+
+def packet_problem(packet: EventPacket) -> str | None:
+    """Why a decoded packet cannot go in a recording (its encoding or time offset), or None. O(1)."""
+    loop_us = LOOP_US.get(packet.encoding)
+    if loop_us is None:
+        return f"packet {packet.seq}: unknown encoding {packet.encoding!r}"
+    if packet.t_offset_us < 0 or packet.t_offset_us % loop_us:
+        return f"packet {packet.seq}: time offset {packet.t_offset_us} µs is not a whole number of {packet.encoding} loops"
+    return None
 
 
 @dataclass(frozen=True)
@@ -43,6 +74,8 @@ class RecorderConfig:
         flush_interval_s: hand written bytes to the OS at least this often.
         fsync_interval_s: force them to disk at least this often.
         max_queue_packets: packets held in memory while the disk catches up (beyond: counted as lost).
+        drain_timeout_s: after the end of a stream (or a restart), how long to wait for more of its
+            centrelines once none come.
     """
 
     camera_id: str = "cam0"
@@ -52,11 +85,16 @@ class RecorderConfig:
     flush_interval_s: float = 0.2
     fsync_interval_s: float = 2.0
     max_queue_packets: int = 1_000_000
+    drain_timeout_s: float = 5.0
 
 
 @dataclass
 class Recording:
-    """One open recording: the .raw file, its sidecar and, optionally, the centreline file."""
+    """One open recording: the .raw file, its sidecar and, optionally, the centreline file.
+
+    ``part`` numbers the files of one recording (one per camera stream, see the module docstring);
+    ``first_base`` is the base path of part 1.
+    """
 
     base: Path
     config: dict[str, Any]
@@ -69,10 +107,19 @@ class Recording:
     next_seq: int | None = None
     gaps: list[list[int]] = field(default_factory=list)
     malformed: int = 0
+    dropped: int = 0
     started_wall: float = field(default_factory=time.time)
     first_t_us: int | None = None
     last_t_us: int | None = None
     geometry: dict[str, Any] = field(default_factory=dict)
+    ended: bool = False
+    first_sent_ns: int | None = None
+    part: int = 1
+    first_base: Path | None = None
+    continues: str | None = None
+    continued_in: str | None = None
+    _stream_key: tuple[str, int, int] | None = None
+    _line_shape: tuple[int, int] | None = None
     _last_flush: float = field(default_factory=time.monotonic)
     _last_fsync: float = field(default_factory=time.monotonic)
     _pending_lines: list[CentrelineBatch] = field(default_factory=list)
@@ -89,17 +136,37 @@ class Recording:
     def centrelines_path(self) -> Path:
         return self.base.with_name(self.base.name + "_centrelines.h5")
 
+    def new_stream(self, packet: EventPacket) -> str | None:
+        """Why ``packet`` begins a new camera stream (it cannot go in this file), or None. O(1)."""
+        if self._stream_key is None:
+            return None
+        if self.ended:
+            return f"packet {packet.seq} after the end of stream"
+        if self.next_seq is not None and packet.seq < self.next_seq:
+            return f"seq went back from {self.next_seq - 1} to {packet.seq} (camera restarted)"
+        if (packet.encoding, packet.width, packet.height) != self._stream_key:
+            return f"packet {packet.seq} is {packet.encoding} {packet.width}x{packet.height}, the file " \
+                   f"{self._stream_key[0]} {self._stream_key[1]}x{self._stream_key[2]}"
+        return None
+
     def write_packet(self, packet: EventPacket) -> None:
-        """Append one packet (opening the file at the first one: its geometry and encoding)."""
+        """Append one packet (opening the file at the first one: its geometry and encoding).
+
+        Raises:
+            FormatError: the first packet cannot start a file (encoding, time offset, camera id in
+                the header); nothing is written then.
+        """
         if self.raw is None:
+            start = raw_header(packet.encoding, packet.width, packet.height,
+                               {"camera_id": packet.camera_id, "recorder": f"flagtrack-{__version__}"}) \
+                + stream_preamble(packet.encoding, packet.t_offset_us)
             self.raw_path.parent.mkdir(parents=True, exist_ok=True)
             self.raw = open(self.raw_path, "wb")  # noqa: SIM115 - closed in close()
             self.geometry = {"width": packet.width, "height": packet.height, "encoding": packet.encoding}
-            header = raw_header(packet.encoding, packet.width, packet.height,
-                                {"camera_id": packet.camera_id, "recorder": f"flagtrack-{__version__}"})
-            self.raw.write(header + stream_preamble(packet.encoding, packet.t_offset_us))
+            self._stream_key = (packet.encoding, packet.width, packet.height)
+            self.raw.write(start)
             self.write_sidecar()
-        if self.next_seq is not None and packet.seq != self.next_seq:
+        if self.next_seq is not None and packet.seq > self.next_seq:
             self.gaps.append([self.next_seq, packet.seq])
         self.next_seq = packet.seq + 1
         self.raw.write(packet.data)
@@ -107,16 +174,27 @@ class Recording:
         self.packets += 1
         self.events += packet.n_events
         self.first_t_us = packet.t_first_us if self.first_t_us is None else self.first_t_us
+        self.first_sent_ns = packet.sent_ns if self.first_sent_ns is None else self.first_sent_ns
         self.last_t_us = packet.t_last_us
+        self.ended = packet.end_of_stream
 
     def write_centrelines(self, msg: CentrelineMessage) -> None:
-        """Queue a batch of centrelines (written to HDF5 at the next sync, in one append)."""
+        """Queue a batch of centrelines (written to HDF5 at the next sync, in one append).
+
+        Raises:
+            SchemaError: the message's samples or joints differ from the file's (another tracker setup).
+        """
         if not self.want_centrelines or len(msg.t_s) == 0:
             return
-        if self.centrelines is None:
-            self.centrelines = CentrelineWriter(self.centrelines_path, msg.s, msg.joints_x.shape[1] - 1,
+        shape = (len(msg.s), msg.joints_x.shape[1])
+        if self._line_shape is None:
+            self.centrelines = CentrelineWriter(self.centrelines_path, msg.s, shape[1] - 1,
                                                 {"units": msg.units, "input_file": str(self.raw_path),
                                                  "source": msg.source})
+            self._line_shape = shape
+        elif shape != self._line_shape:
+            raise SchemaError(f"centreline message {msg.seq} has {shape[0]} samples and {shape[1]} joints, the file "
+                              f"{self._line_shape[0]} and {self._line_shape[1]}: not recorded")
         self._pending_lines.append(msg.batch())
 
     def _flush_centrelines(self) -> None:
@@ -144,7 +222,8 @@ class Recording:
             "flagtrack_version": __version__, **self.geometry, "packets": self.packets, "events": self.events,
             "bytes": self.bytes, "t_first_us": self.first_t_us, "t_last_us": self.last_t_us,
             "sequence_gaps": self.gaps, "missing_packets": sum(b - a for a, b in self.gaps),
-            "malformed_packets": self.malformed, "config": self.config,
+            "malformed_packets": self.malformed, "dropped_packets": self.dropped, "part": self.part,
+            "continues": self.continues, "continued_in": self.continued_in, "config": self.config,
             "centrelines_file": self.centrelines_path.name if self.centrelines is not None else None,
         }
         self.sidecar_path.parent.mkdir(parents=True, exist_ok=True)
@@ -152,16 +231,29 @@ class Recording:
         tmp.write_text(json.dumps(doc, indent=2))
         os.replace(tmp, self.sidecar_path)
 
-    def close(self) -> None:
-        """Flush, fsync and close everything; final sidecar."""
-        if self.raw is not None:
+    def close_raw(self) -> None:
+        """Flush, fsync and close the .raw file (the centreline file stays open)."""
+        if self.raw is not None and not self.raw.closed:
             self.raw.flush()
             os.fsync(self.raw.fileno())
             self.raw.close()
+
+    def close(self) -> None:
+        """Flush, fsync and close everything; final sidecar."""
+        self.close_raw()
         if self.centrelines is not None:
             self._flush_centrelines()
             self.centrelines.close()
         self.write_sidecar(stopped=True)
+
+    def next_part(self) -> Recording:
+        """The recording of the next camera stream: ``<first base>_stream<part + 1>``, linked to this one."""
+        first = self.first_base or self.base
+        part = Recording(base=first.with_name(f"{first.name}_stream{self.part + 1}"), config=self.config,
+                         want_centrelines=self.want_centrelines, part=self.part + 1, first_base=first,
+                         continues=self.raw_path.name)
+        self.continued_in = part.raw_path.name
+        return part
 
 
 class RecorderService:
@@ -179,6 +271,13 @@ class RecorderService:
         self.current: Recording | None = None
         self.finished: list[Path] = []
         self.lost_packets = 0
+        self.malformed_packets = 0  # whole run, recording or not
+        self.restarts = 0  # new camera streams while recording (each started a new file)
+        self.problems = ProblemLog(log, "recorder")
+        self._draining: Recording | None = None  # the previous stream's part, still taking its centrelines
+        self._last_line_s = 0.0  # monotonic time of the last centreline message (or of the end of stream)
+        self._final_seen = False
+        self._dropped_before = 0  # the queue's drop count when the current part began
 
         keys = bus.keys
         self._packets = bus.subscribe(keys.camera_events(cfg.camera_id), EventPacket, capacity=cfg.max_queue_packets)
@@ -187,7 +286,7 @@ class RecorderService:
 
     def run(self, stop: threading.Event) -> None:
         keys = self.bus.keys
-        packets, lines, commands = self._packets, self._lines, self._commands
+        packets, commands = self._packets, self._commands
         self.status_pub = self.bus.publisher(keys.recorder_status())
         self.bus.declare_alive(self.name)
         if self.cfg.path:
@@ -203,69 +302,169 @@ class RecorderService:
                     self._write_raw_packet(*item)
                     for item in packets.channel.drain():
                         self._write_raw_packet(*item)
-                if self._stream_ended and self.exit_at_end_of_stream:
+                now = time.monotonic()
+                self._take_lines(now)
+                if self._stream_ended and self.exit_at_end_of_stream and self._lines_done(now):
                     break
-                if self.current is None or not self.current.want_centrelines:
-                    lines.channel.drain()  # not recording them: no need to decode
-                else:
-                    while (msg := lines.recv(timeout_s=0)) is not None:
-                        self.current.write_centrelines(msg)
                 self.lost_packets = packets.channel.dropped
                 if self.current is not None:
+                    self.current.dropped = self.lost_packets - self._dropped_before
                     self.current.sync(self.cfg)
+                if self._draining is not None and now - self._last_line_s >= self.cfg.drain_timeout_s:
+                    self._close_draining()
+                self.problems.flush()
             for item in packets.channel.drain():  # what arrived before the stop
                 self._write_raw_packet(*item)
+            self._take_lines(time.monotonic())
         finally:
             self.stop_recording()
+            self.problems.flush(force=True)
 
     def handle(self, command: RecorderCommand) -> None:
-        """Carry out a start / stop / rotate command and publish the resulting status."""
-        if command.action in ("start", "rotate"):
-            if not command.path:
-                self._status("error", message=f"{command.action} needs a path", request_id=command.request_id)
-                return
-            self.stop_recording(request_id=command.request_id if self.current is not None else "")
-            self.start(command.path, command.centrelines, request_id=command.request_id)
-        elif command.action == "stop":
-            self.stop_recording(request_id=command.request_id)
-        else:
-            self._status("error", message=f"unknown action {command.action!r}", request_id=command.request_id)
+        """Carry out a start / stop / rotate command and publish the resulting status (an error
+        status if it cannot be carried out, e.g. a path that cannot be written)."""
+        try:
+            if command.action in ("start", "rotate"):
+                if not command.path:
+                    self._status("error", message=f"{command.action} needs a path", request_id=command.request_id)
+                    return
+                self.stop_recording(request_id=command.request_id if self.current is not None else "")
+                self.start(command.path, command.centrelines, request_id=command.request_id)
+            elif command.action == "stop":
+                self.stop_recording(request_id=command.request_id)
+            else:
+                self._status("error", message=f"unknown action {command.action!r}", request_id=command.request_id)
+        except (OSError, ValueError) as exc:  # e.g. a path under a file, or not allowed
+            self.problems.add("commands that failed", f"{command.action} {command.path!r}: {exc}")
+            self._status("error", message=f"{command.action} failed: {exc}", request_id=command.request_id)
 
     def start(self, path: str, centrelines: bool, request_id: str = "") -> None:
         """Begin a recording at ``path`` (no extension; relative to the configured directory)."""
         base = Path(path).expanduser()
         if not base.is_absolute():
             base = Path(self.cfg.directory).expanduser() / base
-        self.current = Recording(base=base, config=self.config_snapshot,
-                                 want_centrelines=centrelines or self.cfg.centrelines)
-        self.current.write_sidecar()
-        log.info("recorder: recording to %s", self.current.raw_path)
-        self._status("recording", request_id=request_id)
+        self._begin(Recording(base=base, config=self.config_snapshot,
+                              want_centrelines=centrelines or self.cfg.centrelines), request_id)
+
+    def _begin(self, recording: Recording, request_id: str = "", message: str = "") -> None:
+        recording.write_sidecar()
+        self.current = recording
+        self._dropped_before = self._packets.channel.dropped
+        log.info("recorder: recording to %s", recording.raw_path)
+        self._status("recording", request_id=request_id, message=message)
 
     def stop_recording(self, request_id: str = "") -> None:
         """Close the current recording (if any)."""
+        self._close_draining()
         if self.current is None:
             if request_id:
                 self._status("idle", request_id=request_id)
             return
         recording, self.current = self.current, None
+        self._close(recording)
+        self._status("idle", recording=recording, request_id=request_id)
+
+    def _close(self, recording: Recording) -> None:
         recording.close()
         self.finished.append(recording.raw_path)
         log.info("recorder: closed %s (%d packets, %d bytes, %d gaps)", recording.raw_path, recording.packets,
                  recording.bytes, len(recording.gaps))
-        self._status("idle", recording=recording, request_id=request_id)
+
+    def _close_draining(self) -> None:
+        if self._draining is not None:
+            recording, self._draining = self._draining, None
+            self._close(recording)
 
     def _write_raw_packet(self, key: str, payload: bytes) -> None:
         try:
             packet = decode(payload, EventPacket, key=key)
         except SchemaError as exc:
-            if self.current is not None:
-                self.current.malformed += 1
-            log.debug("recorder: %s", exc)
+            self._malformed(exc)
             return
-        self._stream_ended |= packet.end_of_stream
+        problem = packet_problem(packet)
+        if problem is not None:
+            self._malformed(SchemaError(problem, key=key))
+            return
         if self.current is not None:
-            self.current.write_packet(packet)
+            reason = self.current.new_stream(packet)
+            if reason is not None:
+                self._next_part(reason, packet)
+            try:
+                self.current.write_packet(packet)
+            except FormatError as exc:  # the first packet cannot start the file: nothing was written
+                self._malformed(exc)
+                return
+        if packet.end_of_stream:
+            self._stream_ended = True
+            self._last_line_s = time.monotonic()  # the tracker's last centrelines come after this
+
+    def _malformed(self, exc: Exception) -> None:
+        self.malformed_packets += 1
+        if self.current is not None:
+            self.current.malformed += 1
+        self.problems.add("malformed packets", exc)
+
+    def _next_part(self, reason: str, packet: EventPacket) -> None:
+        """A new camera stream (from ``packet`` on) while recording: close this part's .raw file and
+        go on in the next part; this part keeps the old stream's centrelines until the tracker moves
+        on (or times out)."""
+        old = self.current
+        assert old is not None
+        new = old.next_part()
+        new.first_sent_ns = packet.sent_ns
+        if not old.ended:
+            self.restarts += 1
+        self.problems.add("new camera streams", f"{reason}: {old.raw_path.name} continues in {new.raw_path.name}")
+        self._close_draining()
+        old.close_raw()
+        if old.want_centrelines:
+            self._draining = old
+            self._last_line_s = time.monotonic()
+        else:
+            self._close(old)
+        self._begin(new, message=f"new camera stream ({reason}), continued from {old.raw_path.name}")
+
+    def _take_lines(self, now: float) -> None:
+        """Route the centreline messages that came: to the previous part while they are of its stream,
+        else to the current recording (read and dropped undecoded when nothing records them)."""
+        lines = self._lines
+        if self._draining is None and (self.current is None or not self.current.want_centrelines):
+            lines.channel.drain()  # not recording them: no need to decode
+            return
+        while (msg := lines.recv(timeout_s=0)) is not None:
+            self._last_line_s = now
+            self._final_seen |= msg.final
+            target, draining = self.current, self._draining
+            if draining is not None:
+                if self._of_previous_stream(msg):
+                    target = draining
+                else:  # the tracker is on the new stream: the old one's centrelines are all in
+                    self._close_draining()
+            if target is not None:
+                try:
+                    target.write_centrelines(msg)
+                except SchemaError as exc:
+                    self.problems.add("centreline messages not recorded", exc)
+            if msg.final and target is draining is not None:
+                self._close_draining()
+
+    def _of_previous_stream(self, msg: CentrelineMessage) -> bool:
+        """Whether ``msg`` (while a previous part drains) comes from packets older than the current
+        part's first (an empty one, such as a final message, goes with the previous part). O(1)."""
+        first_ns = self.current.first_sent_ns if self.current is not None else None
+        return len(msg.source_ns) == 0 or first_ns is not None and 0 < msg.source_ns[-1] < first_ns
+
+    def _lines_done(self, now: float) -> bool:
+        """At the end of a stream: whether the tracker's last centrelines are in (or will not come)."""
+        if self._draining is None and (self.current is None or not self.current.want_centrelines):
+            return True
+        if self._final_seen:
+            return True
+        if now - self._last_line_s >= self.cfg.drain_timeout_s:
+            log.warning("recorder: no final centreline message within %.1f s after the end of stream; closing",
+                        self.cfg.drain_timeout_s)
+            return True
+        return False
 
     def _status(self, state: str, *, recording: Recording | None = None, message: str = "", request_id: str = "") -> None:
         rec = recording or self.current
@@ -274,5 +473,6 @@ class RecorderService:
         self.status_pub.put(RecorderStatus(
             state=state, path=str(rec.raw_path) if rec else "", bytes=rec.bytes if rec else 0,
             packets=rec.packets if rec else 0, missing_packets=sum(b - a for a, b in rec.gaps) if rec else 0,
-            request_id=request_id, message=message,
+            request_id=request_id, message=message, malformed_packets=rec.malformed if rec else 0,
+            dropped_packets=self._packets.channel.dropped,
         ))

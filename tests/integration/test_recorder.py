@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import shutil
 import threading
 import time
@@ -10,14 +11,17 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 
-from flagtrack.daemon.schema import EventPacket, RecorderCommand, RecorderStatus
+from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, RecorderCommand, RecorderStatus
 from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
 from flagtrack.daemon.services.recorder import RecorderConfig, RecorderService
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.camera.replay import ReplayCamera, ReplayConfig
 from flagtrack.drivers.formats import read_events, write_events
-from flagtrack.drivers.sim.quickline import WavyFlag, line_events
+from flagtrack.drivers.formats.centreline import read_centrelines
+from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
 from tests.integration.test_transport import free_port, wait_for
 
 
@@ -124,3 +128,183 @@ def test_malformed_packets_are_counted_not_written(tmp_path: Path) -> None:
         assert recorder.current.malformed == 1
         stop.set()
         thread.join(10)
+
+
+def packets_of(events: np.ndarray, t_until_us: int) -> list:
+    from flagtrack.drivers.camera.packets import PacketParams, Packetizer
+
+    packetizer = Packetizer("evt3", 640, 480, PacketParams(packet_us=1000))
+    return packetizer.push(events, None, t_until_us=t_until_us) + packetizer.flush()
+
+
+def publish(pub, packets: list, first_seq: int = 0, end: bool = False, **fields) -> None:  # noqa: ANN001, ANN003
+    for i, packet in enumerate(packets):
+        pub.put(EventPacket(fields.get("camera_id", "cam0"), first_seq + i, packet.t_first_us, packet.t_last_us,
+                            packet.n_events, 640, 480, "evt3", time.time_ns(),
+                            fields.get("t_offset_us", packet.t_offset_us),
+                            end_of_stream=end and i == len(packets) - 1, data=packet.data))
+
+
+def recorder_lines(caplog: pytest.LogCaptureFixture) -> list[str]:
+    return [r.getMessage() for r in caplog.records if r.name == "flagtrack.daemon.services.recorder"
+            and r.levelno >= logging.WARNING]
+
+
+def test_packets_and_commands_that_cannot_be_carried_out_stop_nothing(tmp_path: Path,
+                                                                      caplog: pytest.LogCaptureFixture) -> None:
+    """A first packet whose time offset is not a whole loop (stream_preamble refused it, uncaught), one
+    whose camera id cannot go in a RAW header, 50 undecodable messages and a start command to a path
+    that cannot be written: each counted and logged in a few lines; the recording goes on, exact."""
+    events = np.concatenate(list(line_events(WavyFlag(), 0, 20_000, 640, 480)))
+    packets = packets_of(events, 20_000)
+    blocked = tmp_path / "a-file"
+    blocked.write_text("not a folder")
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.recorder"), \
+            Bus(BusConfig(namespace="flagtrack/rec", listen=(endpoint,))) as bus:
+        recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, path="m"))
+        statuses = bus.subscribe(bus.keys.recorder_status(), RecorderStatus)
+        stop = threading.Event()
+        thread = threading.Thread(target=recorder.run, args=(stop,))
+        thread.start()
+        try:
+            time.sleep(0.3)
+            pub = bus.publisher(bus.keys.camera_events("cam0"))
+            publish(pub, packets[:1], t_offset_us=123)
+            publish(pub, packets[:1], camera_id="cam\n0")
+            for _ in range(50):
+                pub.put_bytes(b"FT\x01\x01garbage")
+            publish(pub, packets)
+            assert wait_for(lambda: recorder.current is not None and recorder.current.packets == len(packets))
+            bus.publisher(bus.keys.recorder_command()).put(RecorderCommand("start", path=str(blocked / "x"),
+                                                                           request_id="bad"))
+            replies = []
+            while (msg := statuses.recv(timeout_s=5.0)) is not None and len(replies) < 2:
+                replies += [msg] if msg.request_id == "bad" else []
+            assert [r.state for r in replies] == ["idle", "error"] and "a-file" in replies[1].message
+            assert thread.is_alive()
+        finally:
+            stop.set()
+            thread.join(10)
+    assert not thread.is_alive() and recorder.malformed_packets == 52
+    np.testing.assert_array_equal(read_events(tmp_path / "m.raw", strict=True).events, events)
+    sidecar = json.loads((tmp_path / "m.json").read_text())
+    assert sidecar["malformed_packets"] == 52 and sidecar["sequence_gaps"] == [] and sidecar["stopped"]
+    lines = recorder_lines(caplog)
+    assert 2 <= len(lines) <= 5, lines  # first malformed packet, its summary, the failed command
+    assert any("time offset 123" in line for line in lines) and any("(52 in all)" in line for line in lines)
+
+
+def offline(path: Path, config) -> CentrelineBatch:  # noqa: ANN001
+    from tests.integration.test_tracker_service import offline as reconstruct
+
+    return reconstruct(path, config)
+
+
+def test_a_restarted_camera_goes_to_a_new_file_and_the_last_centrelines_are_kept(tmp_path: Path) -> None:
+    """The camera restarts mid-recording (its packets number from 0 again, its times too): the first
+    stream stays in run.raw, the second goes to run_stream2.raw, each exactly as sent, with clean
+    sidecars linked to each other; each stream's centrelines go to its own file, and the recorder,
+    exiting at the end of stream, waits for the tracker's last ones: the second file holds every
+    update of the offline reconstruction."""
+    from flagtrack.daemon.core.tracker import Tracker
+    from flagtrack.daemon.services.tracker import TrackerService, TrackerServiceConfig
+    from tests.integration.test_tracker_service import CONFIG, FLAG
+
+    first = np.concatenate(list(line_events(FLAG, 0, 30_000, 640, 480)))
+    second = np.concatenate(list(line_events(FLAG, 0, 80_000, 640, 480, QuickLineParams(noise_rate_hz=1e5))))
+    first_packets, second_packets = packets_of(first, 30_000)[:25], packets_of(second, 80_000)
+    source = tmp_path / "second.raw"
+    write_events(source, second, width=640, height=480, encoding="evt3")
+    want = offline(source, CONFIG)
+    params = CONFIG.tracker_params()
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with Bus(BusConfig(namespace="flagtrack/rs", listen=(endpoint,))) as svc_bus, \
+            Bus(BusConfig(namespace="flagtrack/rs", connect=(endpoint,))) as cam_bus:
+        tracker = TrackerService(svc_bus, TrackerServiceConfig(), lambda: Tracker(params, sensor_size=(640, 480)))
+        recorder = RecorderService(svc_bus, RecorderConfig(directory=tmp_path / "out", path="run", centrelines=True),
+                                   exit_at_end_of_stream=True)
+        lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=100_000)
+        stop = threading.Event()
+        threads = [threading.Thread(target=s.run, args=(stop,)) for s in (tracker, recorder)]
+        for thread in threads:
+            thread.start()
+        try:
+            time.sleep(1.0)  # the tracker warms its kernels up
+            pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
+            publish(pub, first_packets)  # then the camera dies: no end of stream
+            assert wait_for(lambda: recorder.current is not None and recorder.current.packets == 25, timeout_s=20)
+            publish(pub, second_packets, end=True)
+            threads[1].join(30)  # the recorder ends by itself
+            assert not threads[1].is_alive()
+        finally:
+            stop.set()
+            for thread in threads:
+                thread.join(10)
+        old_updates = 0
+        while (msg := lines.recv(timeout_s=0.5)) is not None:
+            old_updates += len(msg.t_s) if msg.stream == 0 else 0
+    out = tmp_path / "out"
+    n_first = int(sum(p.n_events for p in first_packets))
+    np.testing.assert_array_equal(read_events(out / "run.raw", strict=True).events, first[:n_first])
+    np.testing.assert_array_equal(read_events(out / "run_stream2.raw", strict=True).events, second)
+    one, two = (json.loads((out / name).read_text()) for name in ("run.json", "run_stream2.json"))
+    assert one["continued_in"] == "run_stream2.raw" and two["continues"] == "run.raw" and two["part"] == 2
+    for sidecar, n in ((one, 25), (two, len(second_packets))):
+        assert sidecar["stopped"] and sidecar["packets"] == n
+        assert sidecar["sequence_gaps"] == [] and sidecar["missing_packets"] == 0
+    assert recorder.restarts == 1 and tracker.restarts == 1
+    got, _ = read_centrelines(out / "run_stream2_centrelines.h5")
+    assert len(got) == len(want) > 300
+    for name in ("t_s", "x", "y", "joints_x", "joints_y", "delta_rms", "n_events"):
+        np.testing.assert_allclose(getattr(got, name), getattr(want, name), rtol=0, atol=1e-9, err_msg=name)
+    old, _ = read_centrelines(out / "run_centrelines.h5")
+    assert len(old) == old_updates > 80 and old.t_s.max() < 0.025
+
+
+def test_up_replay_exit_at_eof_records_every_centreline(tmp_path: Path) -> None:
+    """``flagtrack up --replay F --speed 0 --exit-at-eof --centrelines OUT.h5 --record BASE`` with the
+    recorder taking centrelines: the file as fast as possible, so the tracker's last centrelines come
+    well after the camera's end of stream; the recorder waits for them (it stopped at the end packet
+    before), and its file holds exactly what the centreline file (and reconstruct) has."""
+    import subprocess
+    import sys
+
+    from tests.integration.test_tracker_service import CONFIG, FLAG
+
+    events = np.concatenate(list(line_events(FLAG, 0, 200_000, 640, 480, QuickLineParams(noise_rate_hz=1e5))))
+    source = tmp_path / "flag.raw"
+    write_events(source, events, width=640, height=480, encoding="evt3")
+    rig = tmp_path / "rig.yaml"
+    rig.write_text("rig: drain\nservices: [camera, tracker, recorder]\nrecorder: {centrelines: true}\n")
+    live, base = tmp_path / "live.h5", tmp_path / "rec" / "run"
+    up = subprocess.run([sys.executable, "-m", "flagtrack.daemon", "up", "-c", str(rig), "--replay", str(source),
+                         "--speed", "0", "--exit-at-eof", "--centrelines", str(live), "--record", str(base),
+                         "--root", "100", "240", "--length", "200", "--tau", "0.00025"],
+                        capture_output=True, text=True, timeout=300)
+    assert up.returncode == 0, up.stderr
+    want, _ = read_centrelines(live)
+    got, attrs = read_centrelines(tmp_path / "rec" / "run_centrelines.h5")
+    assert len(want) > 700 and len(got) == len(want)
+    for name in ("t_s", "x", "y", "joints_x", "joints_y", "delta_rms", "n_events"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+    np.testing.assert_allclose(got.x, offline(source, CONFIG).x, rtol=0, atol=1e-9)
+    sidecar = json.loads((tmp_path / "rec" / "run.json").read_text())
+    assert sidecar["stopped"] and sidecar["events"] == len(events) and sidecar["centrelines_file"] == "run_centrelines.h5"
+
+
+def test_centrelines_of_another_tracker_setup_are_refused_not_mixed_in(tmp_path: Path) -> None:
+    """The centreline file takes the samples and joints of its first message; a message with
+    others raises a SchemaError (counted by the service) and the file keeps the rest."""
+    from flagtrack.daemon.errors import SchemaError
+    from flagtrack.daemon.services.recorder import Recording
+    from tests.integration.test_centreline_file_service import message
+
+    recording = Recording(base=tmp_path / "r", config={}, want_centrelines=True)
+    recording.write_centrelines(message(0, 4, 51))
+    with pytest.raises(SchemaError, match="7 samples and 11 joints, the file 51 and 11"):
+        recording.write_centrelines(message(1, 5, 7))
+    recording.write_centrelines(message(2, 3, 51))
+    recording.close()
+    got, _ = read_centrelines(tmp_path / "r_centrelines.h5")
+    np.testing.assert_array_equal(got.t_s, np.r_[np.arange(4) * 1e-3, 2 + np.arange(3) * 1e-3])
