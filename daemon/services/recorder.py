@@ -306,7 +306,11 @@ class RecorderService:
                 self._take_lines(now)
                 if self._stream_ended and self.exit_at_end_of_stream and self._lines_done(now):
                     break
-                self.lost_packets = packets.channel.dropped
+                if packets.channel.dropped > self.lost_packets:
+                    self.problems.add("packets dropped by the full queue", "the queue dropped "
+                                      f"{packets.channel.dropped} packet(s) in all (the disk falls behind)",
+                                      packets.channel.dropped - self.lost_packets)
+                    self.lost_packets = packets.channel.dropped
                 if self.current is not None:
                     self.current.dropped = self.lost_packets - self._dropped_before
                     self.current.sync(self.cfg)

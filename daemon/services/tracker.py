@@ -109,6 +109,7 @@ class TrackerService:
         self.restarts = 0  # new streams that began without the end of the last one
         self.stream = 0  # number of the stream being tracked (CentrelineMessage.stream)
         self.problems = ProblemLog(log, "tracker")
+        self._drops_logged = 0
         self._next_seq: int | None = None
         self._pending: list[CentrelineBatch] = []
         self._pending_ns: list[np.ndarray] = []
@@ -151,10 +152,12 @@ class TrackerService:
                     status_pub.put(self._status("tracking", window, now, lag_s))
                     window = {"events": self.events, "updates": self.updates, "t": now}
                     last_status = now
+                    self._count_drops()
                     self.problems.flush()
         finally:
             self._publish_if_due(force=True)
             status_pub.put(self._status("stopped", window, time.monotonic(), lag_s))
+            self._count_drops()
             self.problems.flush(force=True)
 
     def handle(self, packets: list[EventPacket]) -> float:
@@ -316,6 +319,14 @@ class TrackerService:
     def dropped_packets(self) -> int:
         """Packets the full queue turned away (each also shows as a sequence gap)."""
         return self.packets_sub.channel.dropped
+
+    def _count_drops(self) -> None:
+        """Log the packets the queue dropped since the last call (a rate-limited summary)."""
+        dropped = self.dropped_packets
+        if dropped > self._drops_logged:
+            self.problems.add("packets dropped by the full queue", f"the queue dropped {dropped} packet(s) in all "
+                              "(the tracker falls behind the camera)", dropped - self._drops_logged)
+            self._drops_logged = dropped
 
     def _status(self, state: str, window: dict[str, float], now: float, lag_s: float) -> TrackerStatus:
         elapsed = max(now - window["t"], 1e-9)

@@ -308,3 +308,34 @@ def test_centrelines_of_another_tracker_setup_are_refused_not_mixed_in(tmp_path:
     recording.close()
     got, _ = read_centrelines(tmp_path / "r_centrelines.h5")
     np.testing.assert_array_equal(got.t_s, np.r_[np.arange(4) * 1e-3, 2 + np.arange(3) * 1e-3])
+
+
+def test_packets_a_full_queue_drops_are_in_the_sidecar_and_logged(tmp_path: Path,
+                                                                   caplog: pytest.LogCaptureFixture) -> None:
+    """60 packets come while the recorder's loop is not reading and its queue holds 10: the 10 are
+    recorded, the 50 dropped are in the sidecar (dropped_packets) and in one warning."""
+    events = np.concatenate(list(line_events(WavyFlag(), 0, 60_000, 640, 480)))
+    packets = packets_of(events, 60_000)[:60]
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.recorder"), \
+            Bus(BusConfig(namespace="flagtrack/rfull", listen=(endpoint,))) as bus:
+        recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, max_queue_packets=10))
+        recorder.start("q", centrelines=False)
+        time.sleep(0.3)
+        publish(bus.publisher(bus.keys.camera_events("cam0")), packets)
+        assert wait_for(lambda: recorder._packets.channel.dropped == 50)
+        stop = threading.Event()
+        thread = threading.Thread(target=recorder.run, args=(stop,))
+        thread.start()
+        try:
+            assert wait_for(lambda: recorder.current is not None and recorder.current.packets == 10)
+            time.sleep(0.1)
+        finally:
+            stop.set()
+            thread.join(10)
+    sidecar = json.loads((tmp_path / "q.json").read_text())
+    assert sidecar["dropped_packets"] == 50 and sidecar["packets"] == 10 and sidecar["stopped"]
+    n_kept = sum(p.n_events for p in packets[:10])
+    np.testing.assert_array_equal(read_events(tmp_path / "q.raw", strict=True).events, events[:n_kept])
+    assert [line for line in recorder_lines(caplog) if "dropped by the full queue" in line] == [
+        "recorder: the queue dropped 50 packet(s) in all (the disk falls behind) [packets dropped by the full queue: 50]"]

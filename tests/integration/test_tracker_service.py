@@ -234,3 +234,34 @@ def test_gaps_and_undecodable_packets_are_logged_as_counted_summaries(caplog: py
     lines = [r.getMessage() for r in caplog.records if r.name == "flagtrack.daemon.services.tracker"]
     assert 2 <= len(lines) <= 4, lines  # the first of each kind, and a summary of each at the stop
     assert any("more packets missing" in line and "(20 in all)" in line for line in lines), lines
+
+
+def test_packets_a_full_queue_drops_are_counted_reported_and_logged(caplog: pytest.LogCaptureFixture) -> None:
+    """60 packets come while the tracker is not reading yet and its queue holds 10: the 50 it turns
+    away are in the status (dropped_packets) and in one warning, and the 10 it kept are tracked."""
+    events = np.concatenate(list(line_events(FLAG, 0, 60_000, 640, 480)))
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    params = CONFIG.tracker_params()
+    with caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.tracker"), \
+            Bus(BusConfig(namespace="flagtrack/full", listen=(endpoint,))) as trk_bus, \
+            Bus(BusConfig(namespace="flagtrack/full", connect=(endpoint,))) as cam_bus:
+        service = TrackerService(trk_bus, TrackerServiceConfig(status_interval_s=0.2, queue_packets=10),
+                                 lambda: Tracker(params, sensor_size=(640, 480)))
+        status = cam_bus.subscribe(cam_bus.keys.tracker_status(), TrackerStatus, capacity=1000)
+        time.sleep(0.4)
+        publish(cam_bus.publisher(cam_bus.keys.camera_events("cam0")), packets_of(events, 60_000)[:60])
+        assert wait_for(lambda: service.dropped_packets == 50)
+        stop = threading.Event()
+        thread = threading.Thread(target=service.run, args=(stop,))
+        thread.start()
+        try:
+            assert wait_for(lambda: service.packets == 10, timeout_s=20)
+            reported = None
+            while (msg := status.recv(timeout_s=2.0)) is not None and reported is None:
+                reported = msg if msg.dropped_packets else None
+        finally:
+            stop.set()
+            thread.join(10)
+    assert reported is not None and reported.dropped_packets == 50 and reported.packets == 10
+    lines = [r.getMessage() for r in caplog.records if "dropped by the full queue" in r.getMessage()]
+    assert len(lines) == 1 and "50 packet(s)" in lines[0], lines
