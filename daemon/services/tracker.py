@@ -33,6 +33,7 @@ from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.camera.packets import decode_packet
 
 log = logging.getLogger(__name__)
+_NO_NS = np.zeros(0, dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -237,7 +238,7 @@ class TrackerService:
         to it has come, so the windows ending there are complete now) and queue the updates."""
         tracker = self.tracker
         batch: CentrelineBatch | None = None
-        source_ns = np.zeros(0, dtype=np.int64)
+        source_ns = _NO_NS
         try:
             batches = [tracker.feed(events, run[-1].t_last_us if i == len(chunks) - 1 else None)
                        for i, events in enumerate(chunks)]
