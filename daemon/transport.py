@@ -67,24 +67,41 @@ class Channel:
     Args:
         capacity: maximum samples held.
         ring: when full, drop the oldest (live views); otherwise drop the newest and count it.
+        max_bytes: maximum payload bytes held (None: no bound but ``capacity``); a sample that would
+            go beyond is dropped (``ring``: the oldest make room), counted in ``dropped`` and
+            ``dropped_bytes``. ``bytes`` is what it holds now.
     """
 
-    def __init__(self, capacity: int, ring: bool) -> None:
+    def __init__(self, capacity: int, ring: bool, max_bytes: int | None = None) -> None:
         self._items: collections.deque[tuple[str, bytes]] = collections.deque()
         self._capacity = capacity
         self._ring = ring
+        self._max_bytes = max_bytes
         self._ready = threading.Condition()
+        self.bytes = 0
         self.dropped = 0
+        self.dropped_bytes = 0
+
+    def _full(self, size: int) -> bool:
+        return len(self._items) >= self._capacity or (self._max_bytes is not None and self.bytes + size > self._max_bytes)
 
     def push(self, key: str, payload: bytes) -> None:
-        """Called from Zenoh's thread: never blocks beyond a short lock."""
+        """Called from Zenoh's thread: never blocks beyond a short lock. O(1) amortised."""
+        size = len(payload)
         with self._ready:
-            if len(self._items) >= self._capacity:
-                self.dropped += 1
-                if not self._ring:
+            if self._full(size):
+                if self._ring and (self._max_bytes is None or size <= self._max_bytes):
+                    while self._items and self._full(size):
+                        old = len(self._items.popleft()[1])
+                        self.bytes -= old
+                        self.dropped += 1
+                        self.dropped_bytes += old
+                else:  # a FIFO keeps what it holds; a ring too, for a sample larger than max_bytes alone
+                    self.dropped += 1
+                    self.dropped_bytes += size
                     return
-                self._items.popleft()
             self._items.append((key, payload))
+            self.bytes += size
             self._ready.notify()
 
     def get(self, timeout_s: float | None = None) -> tuple[str, bytes] | None:
@@ -92,13 +109,16 @@ class Channel:
         with self._ready:
             if not self._items and not self._ready.wait_for(lambda: bool(self._items), timeout_s):
                 return None
-            return self._items.popleft()
+            item = self._items.popleft()
+            self.bytes -= len(item[1])
+            return item
 
     def drain(self) -> list[tuple[str, bytes]]:
         """Return and remove everything queued."""
         with self._ready:
             items = list(self._items)
             self._items.clear()
+            self.bytes = 0
             return items
 
     def __len__(self) -> int:
@@ -214,9 +234,11 @@ class Bus:
         self._keep(pub)
         return Publisher(pub, key)
 
-    def subscribe(self, key: str, expected: type | None = None, *, capacity: int = 10_000, ring: bool = False) -> Subscription:
-        """Subscribe to ``key`` into a channel (FIFO by default, ring for live views)."""
-        channel = Channel(capacity, ring)
+    def subscribe(self, key: str, expected: type | None = None, *, capacity: int = 10_000, ring: bool = False,
+                  max_bytes: int | None = None) -> Subscription:
+        """Subscribe to ``key`` into a channel (FIFO by default, ring for live views; at most
+        ``capacity`` samples and ``max_bytes`` payload bytes, see :class:`Channel`)."""
+        channel = Channel(capacity, ring, max_bytes)
 
         def on_sample(sample: Any) -> None:
             channel.push(str(sample.key_expr), sample.payload.to_bytes())

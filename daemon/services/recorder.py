@@ -73,7 +73,10 @@ class RecorderConfig:
         centrelines: also record tracker centrelines to ``<path>_centrelines.h5``.
         flush_interval_s: hand written bytes to the OS at least this often.
         fsync_interval_s: force them to disk at least this often.
-        max_queue_packets: packets held in memory while the disk catches up (beyond: counted as lost).
+        max_queue_packets: packets held in memory while the disk catches up (beyond: dropped, counted).
+        max_queue_bytes: bytes of packets held in memory while the disk catches up (beyond: the
+            oldest are dropped, counted in the sidecar's ``dropped_packets`` and listed as a sequence
+            gap; the newest, and so the end of stream, are kept); the camera is never held up.
         drain_timeout_s: after the end of a stream (or a restart), how long to wait for more of its
             centrelines once none come.
     """
@@ -85,6 +88,7 @@ class RecorderConfig:
     flush_interval_s: float = 0.2
     fsync_interval_s: float = 2.0
     max_queue_packets: int = 1_000_000
+    max_queue_bytes: int = 512 << 20
     drain_timeout_s: float = 5.0
 
 
@@ -280,7 +284,8 @@ class RecorderService:
         self._dropped_before = 0  # the queue's drop count when the current part began
 
         keys = bus.keys
-        self._packets = bus.subscribe(keys.camera_events(cfg.camera_id), EventPacket, capacity=cfg.max_queue_packets)
+        self._packets = bus.subscribe(keys.camera_events(cfg.camera_id), EventPacket, capacity=cfg.max_queue_packets,
+                                      max_bytes=cfg.max_queue_bytes, ring=True)
         self._lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000)
         self._commands = bus.subscribe(keys.recorder_command(), RecorderCommand, capacity=1000)
 

@@ -46,7 +46,12 @@ class TrackerServiceConfig:
         max_batch_delay_s: publish a smaller batch after this long (when no packet is waiting, the
             updates are published at once).
         status_interval_s: period of the status message.
-        queue_packets: packets held while the tracker catches up (beyond: counted as dropped).
+        queue_packets: packets held while the tracker catches up (beyond: the oldest are dropped, counted).
+        queue_bytes: bytes of packets held (beyond: the oldest are dropped, counted, and the tracker
+            goes on from the newest). 256 MB is about 20 s of a 6 Mev/s camera (EVT 3.0 takes ~2
+            bytes per event): a live tracker that far behind shows it in its status' lag; a long
+            file replayed as fast as possible (``up --replay --speed 0``) into a tracker slower than
+            the replay could go beyond it, and then loses packets (counted as dropped).
         exit_at_end_of_stream: stop after the camera's end of stream (a replayed file).
         max_coalesce: packets already queued are tracked together, up to this many.
     """
@@ -56,6 +61,7 @@ class TrackerServiceConfig:
     max_batch_delay_s: float = 0.002
     status_interval_s: float = 1.0
     queue_packets: int = 1_000_000
+    queue_bytes: int = 256 << 20
     exit_at_end_of_stream: bool = False
     max_coalesce: int = 64
 
@@ -117,7 +123,7 @@ class TrackerService:
         self._pending_since = 0.0
         self._seq_out = 0
         self.packets_sub = bus.subscribe(bus.keys.camera_events(cfg.camera_id), EventPacket,
-                                         capacity=cfg.queue_packets)
+                                         capacity=cfg.queue_packets, max_bytes=cfg.queue_bytes, ring=True)
 
     def warm_up(self) -> None:
         """Load the compiled kernels before the first packet (see :func:`warm_up_kernels`)."""

@@ -312,8 +312,8 @@ def test_centrelines_of_another_tracker_setup_are_refused_not_mixed_in(tmp_path:
 
 def test_packets_a_full_queue_drops_are_in_the_sidecar_and_logged(tmp_path: Path,
                                                                    caplog: pytest.LogCaptureFixture) -> None:
-    """60 packets come while the recorder's loop is not reading and its queue holds 10: the 10 are
-    recorded, the 50 dropped are in the sidecar (dropped_packets) and in one warning."""
+    """60 packets come while the recorder's loop is not reading and its queue holds 10: the newest 10
+    are recorded, the 50 dropped are in the sidecar (dropped_packets) and in one warning."""
     events = np.concatenate(list(line_events(WavyFlag(), 0, 60_000, 640, 480)))
     packets = packets_of(events, 60_000)[:60]
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -335,7 +335,45 @@ def test_packets_a_full_queue_drops_are_in_the_sidecar_and_logged(tmp_path: Path
             thread.join(10)
     sidecar = json.loads((tmp_path / "q.json").read_text())
     assert sidecar["dropped_packets"] == 50 and sidecar["packets"] == 10 and sidecar["stopped"]
-    n_kept = sum(p.n_events for p in packets[:10])
-    np.testing.assert_array_equal(read_events(tmp_path / "q.raw", strict=True).events, events[:n_kept])
+    n_kept = sum(p.n_events for p in packets[-10:])  # the queue keeps the newest
+    np.testing.assert_array_equal(read_events(tmp_path / "q.raw", strict=True).events, events[len(events) - n_kept:])
     assert [line for line in recorder_lines(caplog) if "dropped by the full queue" in line] == [
         "recorder: the queue dropped 50 packet(s) in all (the disk falls behind) [packets dropped by the full queue: 50]"]
+
+
+def test_the_recorder_queue_is_bounded_by_bytes(tmp_path: Path) -> None:
+    """A queue of 100 KB under 60 packets of ~3 KB while the loop is not reading: the newest that
+    fit are recorded, exactly, and the dropped ones are counted in the sidecar."""
+    from flagtrack.daemon.schema import encode
+
+    events = np.concatenate(list(line_events(WavyFlag(), 0, 60_000, 640, 480)))
+    packets = packets_of(events, 60_000)[:60]
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with Bus(BusConfig(namespace="flagtrack/rbytes", listen=(endpoint,))) as bus:
+        recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, max_queue_bytes=100_000))
+        recorder.start("b", centrelines=False)
+        time.sleep(0.3)
+        pub = bus.publisher(bus.keys.camera_events("cam0"))
+        sizes = []
+        for seq, p in enumerate(packets):
+            message = EventPacket("cam0", seq, p.t_first_us, p.t_last_us, p.n_events, 640, 480, "evt3",
+                                  time.time_ns(), p.t_offset_us, data=p.data)
+            sizes.append(len(encode(message)))
+            pub.put(message)
+        kept = int(np.searchsorted(np.cumsum(sizes[::-1]), 100_000, side="right"))
+        assert 10 < kept < 50 and wait_for(lambda: recorder._packets.channel.dropped == 60 - kept)
+        stop = threading.Event()
+        thread = threading.Thread(target=recorder.run, args=(stop,))
+        thread.start()
+        try:
+            assert wait_for(lambda: recorder.current is not None and recorder.current.packets == kept)
+            time.sleep(0.1)
+        finally:
+            stop.set()
+            thread.join(10)
+    sidecar = json.loads((tmp_path / "b.json").read_text())
+    assert sidecar["dropped_packets"] == 60 - kept and sidecar["packets"] == kept
+    from flagtrack.drivers.camera.packets import decode_packet
+
+    want = np.concatenate([decode_packet("evt3", p.data, p.t_offset_us)[0] for p in packets[-kept:]])
+    np.testing.assert_array_equal(read_events(tmp_path / "b.raw", strict=True).events, want)

@@ -265,3 +265,40 @@ def test_packets_a_full_queue_drops_are_counted_reported_and_logged(caplog: pyte
     assert reported is not None and reported.dropped_packets == 50 and reported.packets == 10
     lines = [r.getMessage() for r in caplog.records if "dropped by the full queue" in r.getMessage()]
     assert len(lines) == 1 and "50 packet(s)" in lines[0], lines
+
+
+def test_the_tracker_queue_is_bounded_by_bytes_and_keeps_the_newest() -> None:
+    """A queue of 100 KB under 60 packets of ~3 KB that come while the tracker is not reading: it
+    keeps the newest that fit (the end of stream among them, so the stream still ends), drops and
+    counts the others."""
+    from flagtrack.daemon.schema import EventPacket, encode
+
+    events = np.concatenate(list(line_events(FLAG, 0, 60_000, 640, 480)))
+    packets = packets_of(events, 60_000)[:60]
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    params = CONFIG.tracker_params()
+    with Bus(BusConfig(namespace="flagtrack/bytes", listen=(endpoint,))) as trk_bus, \
+            Bus(BusConfig(namespace="flagtrack/bytes", connect=(endpoint,))) as cam_bus:
+        service = TrackerService(trk_bus, TrackerServiceConfig(queue_bytes=100_000),
+                                 lambda: Tracker(params, sensor_size=(640, 480)))
+        time.sleep(0.4)
+        pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
+        sizes = []
+        for seq, p in enumerate(packets):
+            message = EventPacket("cam0", seq, p.t_first_us, p.t_last_us, p.n_events, 640, 480, "evt3",
+                                  time.time_ns(), p.t_offset_us, end_of_stream=seq == 59, data=p.data)
+            sizes.append(len(encode(message)))
+            pub.put(message)
+        kept = int(np.searchsorted(np.cumsum(sizes[::-1]), 100_000, side="right"))
+        assert 10 < kept < 50
+        assert wait_for(lambda: service.dropped_packets == 60 - kept)
+        assert service.packets_sub.channel.bytes == sum(sizes[-kept:]) <= 100_000
+        stop = threading.Event()
+        thread = threading.Thread(target=service.run, args=(stop,))
+        thread.start()
+        try:
+            assert wait_for(lambda: service.streams_ended == 1, timeout_s=20)
+        finally:
+            stop.set()
+            thread.join(10)
+    assert service.packets == kept and service.dropped_packets == 60 - kept

@@ -125,3 +125,19 @@ def test_shared_memory_is_off_unless_asked(tmp_path) -> None:
     assert load_rig(rig).bus_config.shared_memory is True
     rig.write_text("rig: r1\n")
     assert load_rig(rig).bus_config.shared_memory is False
+
+
+def test_channels_bounded_by_bytes_drop_and_count() -> None:
+    """With max_bytes, a FIFO turns away what would go beyond it (a smaller sample may still fit
+    later), and a ring drops the oldest to make room (but not for a sample larger than the bound
+    alone); both count samples and bytes."""
+    fifo, ring = Channel(1000, ring=False, max_bytes=10), Channel(1000, ring=True, max_bytes=10)
+    for size in (4, 4, 4, 2, 20):
+        fifo.push("k", bytes(size))
+        ring.push("k", bytes(size))
+    assert [len(p) for _, p in fifo.drain()] == [4, 4, 2] and (fifo.dropped, fifo.dropped_bytes) == (2, 24)
+    assert fifo.bytes == 0
+    assert [len(p) for _, p in ring.drain()] == [4, 4, 2] and (ring.dropped, ring.dropped_bytes) == (2, 24)
+    ring.push("k", bytes(6))
+    ring.push("k", bytes(6))
+    assert ring.bytes == 6 and ring.get(timeout_s=0) is not None and ring.bytes == 0
