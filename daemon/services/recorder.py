@@ -4,7 +4,9 @@ The file is a valid RAW stream in the camera's native encoding (header, a time-b
 packets' bytes as they came). Packets are appended by this service's own loop, never in Zenoh's
 callback, so the camera is never held up; the file is flushed every ``flush_interval_s`` and
 fsynced every ``fsync_interval_s`` and on close, so a recording cut by a crash is readable up to its
-last flush. Sequence gaps are listed in the sidecar. Commands (start / stop / rotate) come on the
+last flush. The queue between Zenoh and that loop holds up to ``max_queue_bytes`` (512 MB: a disk
+that falls that far behind loses the oldest packets, counted in the sidecar's ``dropped_packets``).
+Sequence gaps are listed in the sidecar. Commands (start / stop / rotate) come on the
 recorder command key; centrelines can be recorded beside the events (DESIGN.md HDF5 layout).
 
 **One file per camera stream.** The packets of two streams do not make one valid stream (the
