@@ -9,7 +9,7 @@ kernel that runs Horner's steps on blocks of points.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 
 _BLOCK = 256
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 
 _F = np.float32
 LANES = 16

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 
 _NEVER = np.int32(-(1 << 31) + 1)  # "never fired", in the int32 map of times relative to a base
 _REBASE_US = 1 << 30  # move the base forward when times get this far from it (~18 minutes)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 
 from flagtrack.daemon.core.delta_rms import LANES, lanes_end, window_delta
 from flagtrack.daemon.core.smoothing import smooth_one

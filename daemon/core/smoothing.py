@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 
 REL_TOL = 1e-9
 """Default tolerance of the length correction, relative to L (the issue asks 1e-6)."""

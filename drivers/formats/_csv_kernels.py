@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 
 OK = 0
 FULL = 1

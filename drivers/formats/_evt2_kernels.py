@@ -19,7 +19,7 @@ Decoder state (int64[16]): 0 base set, 1 base µs, 2 loops. Encoder state: 0 sta
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 
 from flagtrack.drivers.formats._timebase import (
     BAD_VALUE,

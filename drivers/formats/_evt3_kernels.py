@@ -21,7 +21,7 @@ Decoder state (int64[16]): 0 base set, 1 base µs, 2 loops, 3 current time µs, 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 
 from flagtrack.drivers.formats._timebase import (
     BAD_VALUE,

@@ -9,7 +9,7 @@ cost more than the encoding itself on 1 ms packets.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 
 from flagtrack.drivers.formats._evt2_kernels import encode_evt2
 from flagtrack.drivers.formats._evt3_kernels import encode_evt3

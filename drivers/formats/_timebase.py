@@ -13,7 +13,7 @@ Status codes returned by every kernel of this package are defined here.
 
 from __future__ import annotations
 
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 
 LOOP_THRESHOLD_UNITS = 10
 """OpenEB's LoopThreshold, in TIME_HIGH units."""

@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 
 from flagtrack.daemon.core.events import EVENT_DTYPE
 

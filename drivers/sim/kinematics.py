@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 from scipy.optimize import brentq
 
 _N_FINE = 256  # Simpson intervals along the flag; position error ~1e-9 L

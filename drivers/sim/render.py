@@ -15,7 +15,7 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from numba import njit
+from flagtrack.daemon.core.jit import njit
 
 from flagtrack.drivers.sim.dvs import EventCamera, advance_pixels
 from flagtrack.drivers.sim.kinematics import FlagKinematics
