@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import time
+
+from flagtrack.daemon.bench._cores import one_core
 
 COMMAND = "calibration"
 HELP = "events/s of the calibration mapping (pixels -> metres), alone and inside the tracker"
@@ -134,16 +135,9 @@ class _TimedMapping:
 
 def run(args: argparse.Namespace) -> int:
     """Time the mapping alone and inside the tracker; print the figures."""
-    pin = not args.all_cores and hasattr(os, "sched_setaffinity")
-    cores = os.sched_getaffinity(0) if pin else set()
-    try:
-        if pin:
-            os.sched_setaffinity(0, {max(cores)})
+    with one_core(not args.all_cores) as pin:
         maps = _map_rates(args.events, args.chunk, args.repeat)
         tracker = _tracker_rates(args.tracker_seconds, args.degree)
-    finally:
-        if pin:
-            os.sched_setaffinity(0, cores)
     if args.json:
         print(json.dumps({"map": maps, "tracker": tracker, "degree_in_tracker": args.degree, "one_core": pin},
                          indent=1))

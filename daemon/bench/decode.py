@@ -18,6 +18,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from flagtrack.daemon.bench._cores import one_core
+
 COMMAND = "decode"
 HELP = "events/s decoding EVT 2.0 / 3.0 files: flagtrack's streaming reader vs the fastest PyPI decoder"
 DESCRIPTION = __doc__
@@ -175,16 +177,9 @@ def _measure(encoding: str, path: Path, events, repeat: int) -> dict:  # noqa: A
 
 def run(args: argparse.Namespace) -> int:
     """Make (or reuse) the recordings, time every decoder, print the table."""
-    pin = not args.all_cores and hasattr(os, "sched_setaffinity")
-    cores = os.sched_getaffinity(0) if pin else set()
-    try:
-        if pin:
-            os.sched_setaffinity(0, {max(cores)})  # one core, as the target says
+    with one_core(not args.all_cores):  # one core, as the target says
         events, paths = _files(args.events, _cache_dir(args.cache))
         rows = [_measure(encoding, path, events, args.repeat) for encoding, path in paths.items()]
-    finally:
-        if pin:
-            os.sched_setaffinity(0, cores)
     _print(rows, args.json)
     return 0 if all(r["flagtrack_exact"] for r in rows) else 1
 

@@ -23,6 +23,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from flagtrack.daemon.bench._cores import one_core
+
 COMMAND = "reconstruct"
 HELP = "events/s of flagtrack reconstruct end to end (and of the tracker core) on a flapping-line recording"
 DESCRIPTION = __doc__
@@ -116,25 +118,17 @@ def run(args: argparse.Namespace) -> int:
     cache = args.cache or Path(tempfile.gettempdir()) / "flagtrack-bench"
     path = _recording(cache, args.seconds, args.format)
     tiny = _recording(cache, 0.1, args.format)
-    pin = not args.all_cores and hasattr(os, "sched_setaffinity")
-    cores = os.sched_getaffinity(0) if pin else set()
-    try:
-        if pin:
-            os.sched_setaffinity(0, {max(cores)})  # children inherit the affinity
-        with tempfile.TemporaryDirectory() as tmp:
-            out = Path(tmp) / "out.h5"
-            # warm-up, as any earlier run of the command would: fills numba's cache and writes Python's
-            # bytecode cache even where PYTHONDONTWRITEBYTECODE is set (without .pyc files, ~60
-            # modules compile on each run: ~0.1 s)
-            warm_env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
-            _command(tiny, out, args.method, warm_env)
-            startup = min(_command(tiny, out, args.method)[0] for _ in range(args.repeat))
-            runs = [_command(path, out, args.method) for _ in range(args.repeat)]
+    with one_core(not args.all_cores) as pin, tempfile.TemporaryDirectory() as tmp:  # children inherit it
+        out = Path(tmp) / "out.h5"
+        # warm-up, as any earlier run of the command would: fills numba's cache and writes Python's
+        # bytecode cache even where PYTHONDONTWRITEBYTECODE is set (without .pyc files, ~60
+        # modules compile on each run: ~0.1 s)
+        warm_env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+        _command(tiny, out, args.method, warm_env)
+        startup = min(_command(tiny, out, args.method)[0] for _ in range(args.repeat))
+        runs = [_command(path, out, args.method) for _ in range(args.repeat)]
         wall, rss, events = min(runs)
         core_rate, core_events = _core(path, args.method, args.core_events, args.repeat)
-    finally:
-        if pin:
-            os.sched_setaffinity(0, cores)
     result = {
         "file": str(path), "format": args.format, "file_bytes": path.stat().st_size, "events": events,
         "method": args.method, "command_s": wall, "command_mev_s": events / wall / 1e6,

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import time
+
+from flagtrack.daemon.bench._cores import one_core
 
 COMMAND = "twin"
 HELP = "event rate of the simulated camera and how fast one core renders it (real-time margin)"
@@ -49,15 +50,8 @@ def measure(events_per_px2: float, speed_mps: float, seconds: float) -> dict[str
 
 def run(args: argparse.Namespace) -> int:
     """Measure each density on one core and print the figures."""
-    pin = not args.all_cores and hasattr(os, "sched_setaffinity")
-    cores = os.sched_getaffinity(0) if pin else set()
-    try:
-        if pin:
-            os.sched_setaffinity(0, {max(cores)})
+    with one_core(not args.all_cores) as pin:
         rows = [measure(density, args.speed_mps, args.seconds) for density in args.events_per_px2]
-    finally:
-        if pin:
-            os.sched_setaffinity(0, cores)
     if args.json:
         print(json.dumps({"one_core": pin, "rows": rows}, indent=1))
         return 0
