@@ -34,7 +34,11 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import ConfigError, SchemaError
 
 MAGIC = b"FT"
-VERSION = 1
+VERSION = 2
+"""Written in every message. 2 (2026-11-24) added optional fields (EventPacket.stream_id,
+CentrelineMessage.stream, status counters); version 1 messages decode with their defaults, and
+scalar fields this build does not know are ignored, so later additions need no new version."""
+READABLE_VERSIONS = frozenset({1, 2})
 _HEADER = struct.Struct("<2sBBI")
 M = TypeVar("M")
 
@@ -124,7 +128,9 @@ class EventPacket:
     ``sent_ns`` is the wall-clock time (ns) at which the adapter received the data, for latency.
     ``t_last_us`` is the completeness horizon: every event with ``t <= t_last_us`` is in this packet
     or an earlier one (an empty packet carries it forward while the scene is still).
-    ``end_of_stream`` marks the last packet of a stream (end of a replayed file).
+    ``end_of_stream`` marks the last packet of a stream (end of a replayed file). ``stream_id``
+    names the stream (drawn when the camera service starts; 0 from older peers): packets of
+    another id are a restarted camera, a lower ``seq`` with the same id a duplicate or late packet.
     """
 
     TYPE: ClassVar[MessageType] = MessageType.EVENT_PACKET
@@ -140,6 +146,7 @@ class EventPacket:
     t_offset_us: int = 0
     n_triggers: int = 0
     end_of_stream: bool = False
+    stream_id: int = 0
     data: bytes = b""
 
 
@@ -235,7 +242,8 @@ class TrackerStatus:
 
     ``missing_packets``: sequence gaps; ``malformed_packets``: messages or EVT bytes that could not be
     used; ``dropped_packets``: packets its full queue turned away (they also show as gaps);
-    ``restarts``: new camera streams that began without the end of the last one (a restarted camera).
+    ``restarts``: new camera streams that began without the end of the last one (a restarted camera);
+    ``late_packets``: duplicates and late packets of the stream, dropped.
     """
 
     TYPE: ClassVar[MessageType] = MessageType.TRACKER_STATUS
@@ -250,6 +258,7 @@ class TrackerStatus:
     t_s: float = 0.0
     dropped_packets: int = 0
     restarts: int = 0
+    late_packets: int = 0
 
 
 @dataclass(frozen=True)
@@ -418,8 +427,9 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     magic, version, type_id, meta_len = _HEADER.unpack_from(view)
     if magic != MAGIC:
         raise SchemaError(f"bad magic {bytes(magic)!r}, not a flagtrack message", key=key)
-    if version != VERSION:
-        raise SchemaError(f"unsupported schema version {version} (this build reads {VERSION})", key=key)
+    if version not in READABLE_VERSIONS:
+        raise SchemaError(f"unsupported schema version {version} (this build reads "
+                          f"{', '.join(map(str, sorted(READABLE_VERSIONS)))})", key=key)
     try:
         cls = MESSAGE_TYPES[MessageType(type_id)]
     except ValueError:
@@ -444,8 +454,12 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
         _check_shapes(cls, spec, blob_values, key)
     if _fast_scalars_ok(cls, meta):
         return cls(**meta, **blob_values)
+    view_cls = _scalar_view(cls)
+    known = _scalar_names(view_cls)
+    if not known.issuperset(meta):  # fields of a later version: ignored (additions are optional)
+        meta = {name: value for name, value in meta.items() if name in known}
     try:
-        scalars = from_mapping(_scalar_view(cls), meta)
+        scalars = from_mapping(view_cls, meta)
     except ConfigError as exc:
         raise SchemaError(f"{cls.__name__}: {exc}", key=key) from None
     return cls(**{f.name: getattr(scalars, f.name) for f in dataclasses.fields(scalars)}, **blob_values)
@@ -587,6 +601,12 @@ def _scalar_view(cls: type) -> type:
     view = dataclasses.make_dataclass(f"{cls.__name__}Meta", specs, frozen=True)
     view.__module__ = __name__  # so string annotations resolve against this module
     return view
+
+
+@functools.cache
+def _scalar_names(view_cls: type) -> frozenset[str]:
+    """The field names of a scalar view."""
+    return frozenset(f.name for f in dataclasses.fields(view_cls))
 
 
 _SIMPLE = {"str": str, "int": int, "float": float, "bool": bool}

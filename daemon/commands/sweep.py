@@ -40,16 +40,19 @@ def run(args: argparse.Namespace) -> int:
     if args.config is None and args.resume is None:
         raise ConfigError("give a rig config (-c rig.yaml) or a run to resume (--resume RUN_DIR)")
     if args.config is not None:
-        rig = load_rig(args.config)
+        rig = load_rig(args.config, services=())  # checked by run_rig once --runs-dir has changed it
     else:
         stored = dict(read_run(args.resume).start.get("config", {}))
         stored.pop("sweep", None)
         stored.pop("path", None)
         rig = from_mapping(RigConfig, stored, path=str(args.resume / "run.jsonl"), key="config")
-    supervisor = dataclasses.replace(rig.supervisor, mode="sweep", exit_when_done=True,
-                                     runs_dir=args.runs_dir or rig.supervisor.runs_dir)
-    if args.resume is None and supervisor.sweep is None:
+    if args.resume is None and rig.supervisor.sweep is None:
         raise ConfigError("needs a 'sweep:' plan", key="supervisor.sweep", path=str(args.config))
+    try:
+        supervisor = dataclasses.replace(rig.supervisor, mode="sweep", exit_when_done=True,
+                                         runs_dir=args.runs_dir or rig.supervisor.runs_dir)
+    except ValueError as exc:
+        raise ConfigError(str(exc), key="supervisor", path=str(args.config or args.resume)) from exc
     rig = dataclasses.replace(rig, supervisor=supervisor)
     names = [*dict.fromkeys([*rig.services, "supervisor"])]
     result = run_rig(rig, names, shutdown_timeout_s=args.shutdown_timeout, resume_dir=args.resume)

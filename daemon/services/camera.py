@@ -11,6 +11,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
+from typing import Any
 
 from flagtrack.daemon.core.events import make_events
 from flagtrack.daemon.schema import CameraStatus, EventPacket, EventRate
@@ -75,6 +76,8 @@ class CameraService:
         self.name = f"camera/{cfg.id}"
         self.packets = 0
         self.events = 0
+        self.stream_id = 0  # drawn when the stream starts (EventPacket.stream_id)
+        self.reached_eof = False
         self.ended = threading.Event()
 
     def run(self, stop: threading.Event) -> None:
@@ -83,35 +86,42 @@ class CameraService:
         status_pub = self.bus.publisher(keys.camera_status(self.cfg.id))
         rate_pub = self.bus.publisher(keys.event_rate(self.cfg.id))
         self.bus.declare_alive(self.name)
-        info = self.camera.open()
-        log.info("camera %s: %s %dx%d %s", self.cfg.id, info.adapter, info.width, info.height, info.encoding)
-        status_pub.put(self._status(info, "streaming"))
-        packetizer = Packetizer(info.encoding, info.width, info.height,
-                                PacketParams(self.cfg.packet_us, self.cfg.max_packet_events))
-        Packetizer(info.encoding, 1, 1).push(make_events([0, 1], [0, 0], [0, 0], [1, 0]), t_until_us=5000)  # load the encoder
-        rates = RateCounter(int(self.cfg.rate_interval_s * 1e6))
+        self.stream_id = time.time_ns()  # names this stream: a restarted camera is another one
+        info: CameraInfo | None = None
         state, message = "stopped", ""
-        try:
-            while not stop.is_set():
-                try:
-                    data = self.camera.read(self.cfg.read_timeout_s)
-                except EndOfStream:
-                    last = packetizer.flush() or [Packet(b"", packetizer.horizon_us, packetizer.horizon_us,
-                                                         0, 0, 0, 0)]
-                    self._publish(last, 0, info, events_pub, rate_pub, rates, end_of_stream=True)
-                    state = "eof"
-                    break
-                if data is not None:
-                    packets = packetizer.push(data.events, data.triggers, data.t_until_us)
-                    self._publish(packets, data.arrival_ns, info, events_pub, rate_pub, rates)
+        try:  # from the open on: whatever fails, the camera is closed and the status says so
+            info = self.camera.open()
+            log.info("camera %s: %s %dx%d %s", self.cfg.id, info.adapter, info.width, info.height, info.encoding)
+            status_pub.put(self._status(info, "streaming"))
+            self._stream(info, stop, events_pub, rate_pub)
+            state = "eof" if self.reached_eof else state
         except Exception as exc:
             state, message = "error", str(exc)
             raise
         finally:
             self.camera.close()
-            status_pub.put(self._status(info, state, message))
+            if info is not None:
+                status_pub.put(self._status(info, state, message))
             self.ended.set()
             log.info("camera %s %s after %d packets, %d events", self.cfg.id, state, self.packets, self.events)
+
+    def _stream(self, info: CameraInfo, stop: threading.Event, events_pub: Any, rate_pub: Any) -> None:
+        """Read, packetize and publish until stopped or the end of the recording (``reached_eof``)."""
+        packetizer = Packetizer(info.encoding, info.width, info.height,
+                                PacketParams(self.cfg.packet_us, self.cfg.max_packet_events))
+        Packetizer(info.encoding, 1, 1).push(make_events([0, 1], [0, 0], [0, 0], [1, 0]), t_until_us=5000)  # load the encoder
+        rates = RateCounter(int(self.cfg.rate_interval_s * 1e6))
+        while not stop.is_set():
+            try:
+                data = self.camera.read(self.cfg.read_timeout_s)
+            except EndOfStream:
+                last = packetizer.flush() or [Packet(b"", packetizer.horizon_us, packetizer.horizon_us, 0, 0, 0, 0)]
+                self._publish(last, 0, info, events_pub, rate_pub, rates, end_of_stream=True)
+                self.reached_eof = True
+                return
+            if data is not None:
+                packets = packetizer.push(data.events, data.triggers, data.t_until_us)
+                self._publish(packets, data.arrival_ns, info, events_pub, rate_pub, rates)
 
     def _publish(self, packets: list[Packet], arrival_ns: int, info: CameraInfo, events_pub, rate_pub,
                  rates: RateCounter, end_of_stream: bool = False) -> None:  # noqa: ANN001
@@ -120,7 +130,7 @@ class CameraService:
                 camera_id=self.cfg.id, seq=self.packets, t_first_us=packet.t_first_us, t_last_us=packet.t_last_us,
                 n_events=packet.n_events, width=info.width, height=info.height, encoding=info.encoding,
                 sent_ns=arrival_ns or time.time_ns(), t_offset_us=packet.t_offset_us, n_triggers=packet.n_triggers,
-                end_of_stream=end_of_stream and i == len(packets) - 1, data=packet.data,
+                end_of_stream=end_of_stream and i == len(packets) - 1, stream_id=self.stream_id, data=packet.data,
             ))
             self.packets += 1
             self.events += packet.n_events

@@ -41,7 +41,8 @@ class CentrelineFileService:
         self.updates = 0
         self.rejected = 0
         self.problems = ProblemLog(log, "centrelines")
-        self.subscription = bus.subscribe(bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000)
+        self.subscription = bus.subscribe(bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000,
+                                          max_bytes=512 << 20)  # a few minutes of kHz updates behind the disk
 
     def run(self, stop: threading.Event) -> None:
         writer: CentrelineWriter | None = None

@@ -45,23 +45,13 @@ from flagtrack.daemon.errors import FormatError, SchemaError
 from flagtrack.daemon.schema import (
     CentrelineMessage, EventPacket, ProblemLog, RecorderCommand, RecorderStatus, decode,
 )
+from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.camera.packets import stream_preamble
 from flagtrack.drivers.formats import raw_header
 from flagtrack.drivers.formats.centreline import CentrelineWriter
-from flagtrack.drivers.formats.codec import LOOP_US
 
 log = logging.getLogger(__name__)
-
-
-def packet_problem(packet: EventPacket) -> str | None:
-    """Why a decoded packet cannot go in a recording (its encoding or time offset), or None. O(1)."""
-    loop_us = LOOP_US.get(packet.encoding)
-    if loop_us is None:
-        return f"packet {packet.seq}: unknown encoding {packet.encoding!r}"
-    if packet.t_offset_us < 0 or packet.t_offset_us % loop_us:
-        return f"packet {packet.seq}: time offset {packet.t_offset_us} µs is not a whole number of {packet.encoding} loops"
-    return None
 
 
 @dataclass(frozen=True)
@@ -110,9 +100,10 @@ class Recording:
     bytes: int = 0
     packets: int = 0
     events: int = 0
-    next_seq: int | None = None
+    sequence: PacketSequence = field(default_factory=PacketSequence)
     gaps: list[list[int]] = field(default_factory=list)
     malformed: int = 0
+    late: int = 0  # duplicates and late packets of the stream, dropped
     dropped: int = 0
     started_wall: float = field(default_factory=time.time)
     first_t_us: int | None = None
@@ -148,8 +139,9 @@ class Recording:
             return None
         if self.ended:
             return f"packet {packet.seq} after the end of stream"
-        if self.next_seq is not None and packet.seq < self.next_seq:
-            return f"seq went back from {self.next_seq - 1} to {packet.seq} (camera restarted)"
+        if self.sequence.classify(packet.seq, packet.stream_id)[0] is Arrival.NEW_STREAM:
+            return f"packet {packet.seq} of another stream after packet {(self.sequence.next_seq or 0) - 1} " \
+                   "(camera restarted)"
         if (packet.encoding, packet.width, packet.height) != self._stream_key:
             return f"packet {packet.seq} is {packet.encoding} {packet.width}x{packet.height}, the file " \
                    f"{self._stream_key[0]} {self._stream_key[1]}x{self._stream_key[2]}"
@@ -172,9 +164,10 @@ class Recording:
             self._stream_key = (packet.encoding, packet.width, packet.height)
             self.raw.write(start)
             self.write_sidecar()
-        if self.next_seq is not None and packet.seq > self.next_seq:
-            self.gaps.append([self.next_seq, packet.seq])
-        self.next_seq = packet.seq + 1
+        expected = self.sequence.next_seq
+        arrival, _ = self.sequence.arrive(packet.seq, packet.stream_id)
+        if arrival is Arrival.GAP:
+            self.gaps.append([expected, packet.seq])
         self.raw.write(packet.data)
         self.bytes += len(packet.data)
         self.packets += 1
@@ -228,7 +221,8 @@ class Recording:
             "flagtrack_version": __version__, **self.geometry, "packets": self.packets, "events": self.events,
             "bytes": self.bytes, "t_first_us": self.first_t_us, "t_last_us": self.last_t_us,
             "sequence_gaps": self.gaps, "missing_packets": sum(b - a for a, b in self.gaps),
-            "malformed_packets": self.malformed, "dropped_packets": self.dropped, "part": self.part,
+            "malformed_packets": self.malformed, "late_packets": self.late, "dropped_packets": self.dropped,
+            "part": self.part,
             "continues": self.continues, "continued_in": self.continued_in, "config": self.config,
             "centrelines_file": self.centrelines_path.name if self.centrelines is not None else None,
         }
@@ -278,6 +272,7 @@ class RecorderService:
         self.finished: list[Path] = []
         self.lost_packets = 0
         self.malformed_packets = 0  # whole run, recording or not
+        self.late_packets = 0  # duplicates and late packets, dropped
         self.restarts = 0  # new camera streams while recording (each started a new file)
         self.problems = ProblemLog(log, "recorder")
         self._draining: Recording | None = None  # the previous stream's part, still taking its centrelines
@@ -288,7 +283,7 @@ class RecorderService:
         keys = bus.keys
         self._packets = bus.subscribe(keys.camera_events(cfg.camera_id), EventPacket, capacity=cfg.max_queue_packets,
                                       max_bytes=cfg.max_queue_bytes, ring=True)
-        self._lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000)
+        self._lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000, max_bytes=256 << 20)
         self._commands = bus.subscribe(keys.recorder_command(), RecorderCommand, capacity=1000)
 
     def run(self, stop: threading.Event) -> None:
@@ -400,6 +395,11 @@ class RecorderService:
             reason = self.current.new_stream(packet)
             if reason is not None:
                 self._next_part(reason, packet)
+            elif self.current.sequence.classify(packet.seq, packet.stream_id)[0] is Arrival.LATE:
+                self.late_packets += 1  # a duplicate, or a packet already passed: the file has it, or its gap
+                self.current.late += 1
+                self.problems.add("late or duplicate packets", f"packet {packet.seq}: dropped", 1)
+                return
             try:
                 self.current.write_packet(packet)
             except FormatError as exc:  # the first packet cannot start the file: nothing was written

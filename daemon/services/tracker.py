@@ -8,15 +8,17 @@ Completed updates are published in batches (``batch_updates``, or sooner after
 status (about once a second): events/s, updates/s, lag behind the newest event; repeated problems
 are logged as rate-limited summaries, never one line per packet.
 
-A new camera stream starts a fresh core tracker: after the end of stream, or when the sequence
-number goes back (a camera restarted while the tracker ran; its packets number from 0 again), which
-is logged and counted in the status (``restarts``). No packet stops the service: one whose bytes do
+A new camera stream starts a fresh core tracker: after the end of stream, or when packets of another
+stream come (a camera restarted while the tracker ran: another ``stream_id``, see
+:mod:`.sequence`), which is logged and counted in the status (``restarts``); a duplicate or late
+packet of the stream is dropped and counted (``late_packets``). No packet stops the service: one whose bytes do
 not decode is counted as malformed, and one the core cannot track (an exception) is counted too and
 a fresh core tracker takes over.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -29,6 +31,7 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.events import empty_events
 from flagtrack.daemon.errors import FormatError
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, ProblemLog, TrackerStatus
+from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.camera.packets import decode_packet
 
@@ -117,7 +120,8 @@ class TrackerService:
         self.stream = 0  # number of the stream being tracked (CentrelineMessage.stream)
         self.problems = ProblemLog(log, "tracker")
         self._drops_logged = 0
-        self._next_seq: int | None = None
+        self._sequence = PacketSequence()
+        self.late_packets = 0  # duplicates and late packets of the stream, dropped
         self._pending: list[CentrelineBatch] = []
         self._pending_ns: list[np.ndarray] = []
         self._pending_since = 0.0
@@ -176,16 +180,29 @@ class TrackerService:
         """
         run: list[EventPacket] = []
         for packet in packets:
-            if self._next_seq is not None and packet.seq != self._next_seq:
+            previous = self._sequence.next_seq
+            arrival, missing = self._sequence.arrive(packet.seq, packet.stream_id)
+            if arrival is Arrival.LATE:  # a duplicate, or a packet of this stream already passed
+                self.late_packets += 1
+                self.problems.add("late or duplicate packets", f"packet {packet.seq} came after {previous - 1}: "
+                                  "dropped", 1)
+                continue
+            problem = packet_problem(packet)
+            if arrival is not Arrival.NEXT or problem is not None:
                 self._track_run(run)  # a gap breaks the stream: what came before is decoded apart
                 run = []
-                if packet.seq < self._next_seq:
-                    self._new_stream(packet)
-                else:
-                    gap = packet.seq - self._next_seq
-                    self.missing_packets += gap
-                    self.problems.add("packets missing", f"{gap} packet(s) missing before seq {packet.seq}", gap)
-            self._next_seq = packet.seq + 1
+                if arrival is Arrival.NEW_STREAM:
+                    self._new_stream(packet, previous)
+                elif arrival is Arrival.GAP:
+                    self.missing_packets += missing
+                    self.problems.add("packets missing", f"{missing} packet(s) missing before seq {packet.seq}",
+                                      missing)
+            if problem is not None:  # its times cannot be placed: it would throw the chain hours off
+                self.undecodable_packets += 1
+                self.problems.add("packets whose times cannot be placed", problem)
+                if not packet.end_of_stream:
+                    continue
+                packet = dataclasses.replace(packet, data=b"", n_events=0)  # its end of stream still counts
             self.packets += 1
             if run and packet.encoding != run[0].encoding:
                 self._track_run(run)
@@ -197,14 +214,15 @@ class TrackerService:
         self._track_run(run)
         return max(0.0, time.time_ns() - packets[-1].sent_ns) * 1e-9
 
-    def _new_stream(self, packet: EventPacket) -> None:
-        """The sequence number went back: the camera restarted. The updates of the old stream are
+    def _new_stream(self, packet: EventPacket, previous_next_seq: int | None) -> None:
+        """Another stream began (the camera restarted). The updates of the old stream are
         published, and a fresh core tracker takes the new one (the old one's unfinished windows,
         cut short by the restart, are dropped)."""
         self._publish_if_due(force=True)
         self.restarts += 1
-        self.problems.add("camera restarts", f"seq went back from {self._next_seq - 1} to {packet.seq}: a new "
-                          f"stream of camera {packet.camera_id}, tracked afresh", 1)
+        self.problems.add("camera restarts", f"packet {packet.seq} of stream {packet.stream_id} after packet "
+                          f"{(previous_next_seq or 0) - 1}: a new stream of camera {packet.camera_id}, "
+                          "tracked afresh", 1)
         self.tracker = self.tracker_factory()
         self.stream += 1
 
@@ -260,7 +278,7 @@ class TrackerService:
         if end_of_stream:
             self.streams_ended += 1
             self.tracker = self.tracker_factory()
-            self._next_seq = None
+            self._sequence.restart()
         if batch is not None:
             self._add(batch, source_ns)
         if end_of_stream:
@@ -341,5 +359,5 @@ class TrackerService:
             source=self.name, state=state, events_per_s=(self.events - window["events"]) / elapsed,
             updates_per_s=(self.updates - window["updates"]) / elapsed, lag_s=lag_s, packets=self.packets,
             missing_packets=self.missing_packets, malformed_packets=self.malformed_packets,
-            dropped_packets=self.dropped_packets, restarts=self.restarts,
+            dropped_packets=self.dropped_packets, restarts=self.restarts, late_packets=self.late_packets,
         )

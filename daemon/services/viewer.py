@@ -215,8 +215,11 @@ class ViewerService:
         self.problems = ProblemLog(log, "viewer")
         keys = bus.keys
         self.subs: dict[str, Any] = {
-            "centrelines": bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000),
-            "events": bus.subscribe(keys.camera_events(cfg.camera_id), EventPacket, capacity=100_000),
+            # a live view: when it falls behind, the oldest go (and at most this much memory waits)
+            "centrelines": bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000, ring=True,
+                                         max_bytes=256 << 20),
+            "events": bus.subscribe(keys.camera_events(cfg.camera_id), EventPacket, capacity=100_000, ring=True,
+                                    max_bytes=64 << 20),
             "rate": bus.subscribe(keys.event_rate(cfg.camera_id), EventRate, capacity=1000, ring=True),
             "tunnel": bus.subscribe(keys.tunnel_state(), TunnelState, capacity=1000, ring=True),
         }

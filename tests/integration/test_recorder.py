@@ -377,3 +377,36 @@ def test_the_recorder_queue_is_bounded_by_bytes(tmp_path: Path) -> None:
 
     want = np.concatenate([decode_packet("evt3", p.data, p.t_offset_us)[0] for p in packets[-kept:]])
     np.testing.assert_array_equal(read_events(tmp_path / "b.raw", strict=True).events, want)
+
+
+def test_a_duplicated_packet_is_dropped_and_the_file_stays_one_stream(tmp_path: Path) -> None:
+    """Packet 30 comes twice (after 31): the recorder keeps one file, exactly the events sent once,
+    and counts the duplicate as late; a packet of another stream id then starts the next part."""
+    events = np.concatenate(list(line_events(WavyFlag(), 0, 60_000, 640, 480)))
+    packets = packets_of(events, 60_000)[:50]
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with Bus(BusConfig(namespace="flagtrack/rdup", listen=(endpoint,))) as bus:
+        recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, path="d"))
+        stop = threading.Event()
+        thread = threading.Thread(target=recorder.run, args=(stop,))
+        thread.start()
+        try:
+            time.sleep(0.3)
+            pub = bus.publisher(bus.keys.camera_events("cam0"))
+            for seq in [*range(32), 30, *range(32, 50)]:
+                p = packets[seq]
+                pub.put(EventPacket("cam0", seq, p.t_first_us, p.t_last_us, p.n_events, 640, 480, "evt3",
+                                    time.time_ns(), p.t_offset_us, stream_id=42, data=p.data))
+            assert wait_for(lambda: recorder.late_packets == 1 and recorder.current.packets == 50)
+            p = packets[0]
+            pub.put(EventPacket("cam0", 3, p.t_first_us, p.t_last_us, p.n_events, 640, 480, "evt3",
+                                time.time_ns(), p.t_offset_us, stream_id=43, data=p.data))
+            assert wait_for(lambda: recorder.current.part == 2)
+        finally:
+            stop.set()
+            thread.join(10)
+    sidecar = json.loads((tmp_path / "d.json").read_text())
+    assert sidecar["packets"] == 50 and sidecar["late_packets"] == 1 and sidecar["sequence_gaps"] == []
+    assert sidecar["continued_in"]
+    sent = events[events["t"] <= packets[49].t_last_us]
+    np.testing.assert_array_equal(read_events(tmp_path / "d.raw", strict=True).events, sent)

@@ -48,7 +48,7 @@ class BusMonitor:
                  sensor_id: str | None = None) -> None:
         keys = bus.keys
         self.rates = bus.subscribe(keys.event_rate(camera_id), EventRate, capacity=100_000)
-        self.lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=1_000_000)
+        self.lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=1_000_000, max_bytes=256 << 20)
         self.recorder = bus.subscribe(keys.recorder_status(), RecorderStatus, capacity=1000)
         self.sensor = None if sensor_id is None else bus.subscribe(keys.sensor_samples(sensor_id), SensorSamples,
                                                                    capacity=100_000)

@@ -1,0 +1,54 @@
+"""Schema versions: version 1 messages (older peers) still decode, fields of a later version are ignored."""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import pytest
+
+from flagtrack.daemon import schema
+from flagtrack.daemon.errors import SchemaError
+from flagtrack.daemon.schema import EventPacket, TrackerStatus, decode, encode
+
+_HEADER = struct.Struct("<2sBBI")
+
+
+def _rewrite(data: bytes, version: int | None = None, edit=None) -> bytes:  # noqa: ANN001
+    """The message with another version byte and/or an edited meta."""
+    magic, old_version, type_id, meta_len = _HEADER.unpack_from(data)
+    meta = json.loads(data[_HEADER.size:_HEADER.size + meta_len])
+    if edit is not None:
+        edit(meta)
+    body = json.dumps(meta).encode()
+    return _HEADER.pack(magic, old_version if version is None else version, type_id, len(body)) + body + \
+        data[_HEADER.size + meta_len:]
+
+
+def test_this_build_writes_version_2_and_reads_1_and_2() -> None:
+    packet = EventPacket("cam0", 3, 10, 999, 5, 640, 480, "evt3", 123, stream_id=77, data=b"\x00\x80" * 4)
+    data = encode(packet)
+    assert data[2] == schema.VERSION == 2
+    assert decode(data, EventPacket) == packet
+    assert decode(_rewrite(data, version=1), EventPacket) == packet
+    with pytest.raises(SchemaError, match="unsupported schema version 3"):
+        decode(_rewrite(data, version=3), EventPacket)
+
+
+def test_a_version_1_packet_without_stream_id_decodes_with_its_default() -> None:
+    packet = EventPacket("cam0", 3, 10, 999, 5, 640, 480, "evt3", 123, data=b"")
+    old = _rewrite(encode(packet), version=1, edit=lambda meta: meta.pop("stream_id"))
+    assert decode(old, EventPacket).stream_id == 0
+
+
+def test_scalar_fields_of_a_later_version_are_ignored() -> None:
+    status = TrackerStatus("tracker", "tracking", 1e6, 4000.0, 0.001, 10, 0, 0, late_packets=2)
+    newer = _rewrite(encode(status), edit=lambda meta: meta.update(frames_per_fortnight=7))
+    assert decode(newer, TrackerStatus) == status
+
+
+def test_a_missing_required_field_is_still_an_error() -> None:
+    status = TrackerStatus("tracker", "tracking", 1e6, 4000.0, 0.001, 10, 0, 0)
+    broken = _rewrite(encode(status), edit=lambda meta: meta.pop("packets"))
+    with pytest.raises(SchemaError, match="packets"):
+        decode(broken, TrackerStatus)
