@@ -17,7 +17,8 @@ from dataclasses import dataclass
 from flagtrack.daemon.schema import EventPacket
 from flagtrack.drivers.formats.codec import LOOP_US
 
-_SLACK_US = 10_000  # a packet's first event may precede its earliest by a sensor's step back
+_SLACK_US = 10_000  # a packet's first event may follow its earliest by a sensor's step back
+
 
 def packet_problem(packet: EventPacket) -> str | None:
     """Why a packet's events cannot be placed in time (its encoding or time offset), or None. O(1).
