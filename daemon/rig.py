@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,10 +25,10 @@ from flagtrack.daemon.config import (
     from_mapping, load_yaml, require_file, require_folder, require_output_file, to_mapping,
 )
 from flagtrack.daemon.errors import ConfigError
-from flagtrack.daemon.services.recorder import RecorderConfig
+from flagtrack.daemon.services.recorder import RecorderConfig, recording_base
 from flagtrack.daemon.services.supervisor.config import SupervisorConfig
 from flagtrack.daemon.services.tracker import TrackerServiceConfig
-from flagtrack.daemon.services.viewer import ViewerConfig
+from flagtrack.daemon.services.viewer import ViewerConfig, effective_sink
 from flagtrack.daemon.tracking_config import TrackingConfig
 from flagtrack.daemon.transport import BusConfig
 from flagtrack.drivers.camera.replay import ReplayConfig
@@ -159,9 +158,8 @@ def check_rig(rig: RigConfig, services: Sequence[str]) -> None:
     if "recorder" in services:
         require_folder(rig.recorder.directory, key="recorder.directory", path=where)
         if rig.recorder.path:
-            base = Path(rig.recorder.path).expanduser()
-            base = base if base.is_absolute() else Path(rig.recorder.directory).expanduser() / base
-            require_folder(base.parent, key="recorder.path", path=where)
+            require_folder(recording_base(rig.recorder.directory, rig.recorder.path).parent, key="recorder.path",
+                           path=where)
     if "viewer" in services and viewer_writes_file(rig.viewer):
         require_output_file(rig.viewer.rrd_path, key="viewer.rrd_path", path=where)
     if "supervisor" in services:
@@ -170,5 +168,4 @@ def check_rig(rig: RigConfig, services: Sequence[str]) -> None:
 
 def viewer_writes_file(cfg: ViewerConfig) -> bool:
     """Whether the viewer writes ``rrd_path``: sink ``rrd``, or ``auto`` with no display to show a window on."""
-    has_display = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-    return cfg.sink == "rrd" or (cfg.sink == "auto" and not has_display)
+    return effective_sink(cfg) == "rrd"

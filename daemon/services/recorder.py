@@ -54,6 +54,12 @@ from flagtrack.drivers.formats.centreline import CentrelineWriter
 log = logging.getLogger(__name__)
 
 
+def recording_base(directory: str | Path, path: str) -> Path:
+    """The base path (no extension) of a recording named ``path``: as given if absolute, else in ``directory``."""
+    base = Path(path).expanduser()
+    return base if base.is_absolute() else Path(directory).expanduser() / base
+
+
 @dataclass(frozen=True)
 class RecorderConfig:
     """Recorder settings.
@@ -133,13 +139,14 @@ class Recording:
     def centrelines_path(self) -> Path:
         return self.base.with_name(self.base.name + "_centrelines.h5")
 
-    def new_stream(self, packet: EventPacket) -> str | None:
-        """Why ``packet`` begins a new camera stream (it cannot go in this file), or None. O(1)."""
+    def new_stream(self, packet: EventPacket, arrival: Arrival) -> str | None:
+        """Why ``packet`` (``arrival`` in this file's sequence) begins a new camera stream (it cannot go
+        in this file), or None. O(1)."""
         if self._stream_key is None:
             return None
         if self.ended:
             return f"packet {packet.seq} after the end of stream"
-        if self.sequence.classify(packet.seq, packet.stream_id)[0] is Arrival.NEW_STREAM:
+        if arrival is Arrival.NEW_STREAM:
             return f"packet {packet.seq} of another stream after packet {(self.sequence.next_seq or 0) - 1} " \
                    "(camera restarted)"
         if (packet.encoding, packet.width, packet.height) != self._stream_key:
@@ -346,10 +353,7 @@ class RecorderService:
 
     def start(self, path: str, centrelines: bool, request_id: str = "") -> None:
         """Begin a recording at ``path`` (no extension; relative to the configured directory)."""
-        base = Path(path).expanduser()
-        if not base.is_absolute():
-            base = Path(self.cfg.directory).expanduser() / base
-        self._begin(Recording(base=base, config=self.config_snapshot,
+        self._begin(Recording(base=recording_base(self.cfg.directory, path), config=self.config_snapshot,
                               want_centrelines=centrelines or self.cfg.centrelines), request_id)
 
     def _begin(self, recording: Recording, request_id: str = "", message: str = "") -> None:
@@ -392,10 +396,11 @@ class RecorderService:
             self._malformed(SchemaError(problem, key=key))
             return
         if self.current is not None:
-            reason = self.current.new_stream(packet)
+            arrival, _ = self.current.sequence.classify(packet.seq, packet.stream_id)
+            reason = self.current.new_stream(packet, arrival)
             if reason is not None:
                 self._next_part(reason, packet)
-            elif self.current.sequence.classify(packet.seq, packet.stream_id)[0] is Arrival.LATE:
+            elif arrival is Arrival.LATE:
                 self.late_packets += 1  # a duplicate, or a packet already passed: the file has it, or its gap
                 self.current.late += 1
                 self.problems.add("late or duplicate packets", f"packet {packet.seq}: dropped", 1)
@@ -439,7 +444,7 @@ class RecorderService:
         """Route the centreline messages that came: to the previous part while they are of its stream,
         else to the current recording (read and dropped undecoded when nothing records them)."""
         lines = self._lines
-        if self._draining is None and (self.current is None or not self.current.want_centrelines):
+        if not self._recording_lines:
             lines.channel.drain()  # not recording them: no need to decode
             return
         while (msg := lines.recv(timeout_s=0)) is not None:
@@ -459,6 +464,11 @@ class RecorderService:
             if msg.final and target is draining is not None:
                 self._close_draining()
 
+    @property
+    def _recording_lines(self) -> bool:
+        """Whether a part (the current one, or the previous one still draining) records centrelines."""
+        return self._draining is not None or (self.current is not None and self.current.want_centrelines)
+
     def _of_previous_stream(self, msg: CentrelineMessage) -> bool:
         """Whether ``msg`` (while a previous part drains) comes from packets older than the current
         part's first (an empty one, such as a final message, goes with the previous part). O(1)."""
@@ -467,7 +477,7 @@ class RecorderService:
 
     def _lines_done(self, now: float) -> bool:
         """At the end of a stream: whether the tracker's last centrelines are in (or will not come)."""
-        if self._draining is None and (self.current is None or not self.current.want_centrelines):
+        if not self._recording_lines:
             return True
         if self._final_seen:
             return True

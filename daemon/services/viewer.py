@@ -60,12 +60,17 @@ class ViewerConfig:
     geometry_rate_hz: float = 30.0
 
 
+def effective_sink(cfg: ViewerConfig) -> str:
+    """The sink the viewer uses: ``auto`` is a window where a display exists, else the .rrd file."""
+    if cfg.sink != "auto":
+        return cfg.sink
+    return "spawn" if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") else "rrd"
+
+
 def open_recording(cfg: ViewerConfig) -> tuple[rr.RecordingStream, str]:
     """Create the Rerun recording stream and connect its sink; return it and a description."""
     rec = rr.RecordingStream("flagtrack")
-    sink = cfg.sink
-    if sink == "auto":
-        sink = "spawn" if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") else "rrd"
+    sink = effective_sink(cfg)
     if sink == "spawn":
         rec.spawn()
         return rec, "Rerun viewer window"
