@@ -18,7 +18,7 @@ from typing import Any, Literal
 import zenoh
 
 from flagtrack.daemon.errors import ConfigError, SchemaError
-from flagtrack.daemon.schema import Keys, decode, encode
+from flagtrack.daemon.schema import Keys, ProblemLog, decode, encode
 
 log = logging.getLogger(__name__)
 
@@ -133,7 +133,7 @@ class Subscription:
         self.channel = channel
         self._expected = expected
         self.malformed = 0
-        self._last_error_log = 0.0
+        self._problems = ProblemLog(log, "bus")
 
     def recv(self, timeout_s: float | None = None) -> Any | None:
         """The next well-formed message (or None on timeout); malformed ones are counted and skipped."""
@@ -148,10 +148,7 @@ class Subscription:
                 return decode(payload, self._expected, key=key)
             except SchemaError as exc:
                 self.malformed += 1
-                now = time.monotonic()
-                if now - self._last_error_log > 5.0:  # count repeated problems, log them rarely
-                    log.warning("%s (%d malformed so far)", exc, self.malformed)
-                    self._last_error_log = now
+                self._problems.add("malformed messages", exc)  # counted, logged rarely
 
     def recv_raw(self, timeout_s: float | None = None) -> tuple[str, bytes] | None:
         """The next ``(key, payload)`` undecoded (for recorders that store bytes as they came)."""
