@@ -32,7 +32,8 @@ def run_one_service(name: str, args: argparse.Namespace) -> int:
     from flagtrack.daemon.commands.up import run_rig
     from flagtrack.daemon.rig import load_rig
 
-    return run_rig(load_rig(args.config, services=[name]), [name], shutdown_timeout_s=args.shutdown_timeout).code
+    # run_rig checks the files and folders of this service, before anything opens
+    return run_rig(load_rig(args.config, services=()), [name], shutdown_timeout_s=args.shutdown_timeout).code
 
 
 def _command(name: str, help_text: str) -> Command:
