@@ -22,7 +22,7 @@ from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.camera.replay import ReplayCamera, ReplayConfig
 from flagtrack.drivers.formats import open_events, write_events
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
-from tests.integration.test_transport import free_port, wait_for
+from tests.integration.test_transport import free_port, received, wait_for
 
 FLAG = WavyFlag(length=200.0, root=(100.0, 240.0), frequency_hz=20.0)
 CONFIG = TrackingConfig(root=FLAG.root, length=FLAG.length, tau_s=2.5e-4)
@@ -67,13 +67,9 @@ def live(path: Path, config: TrackingConfig, speed: float = 0.0) -> tuple[Centre
         time.sleep(0.4)
         CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(ReplayConfig(path, speed=speed))).run(threading.Event())
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
-        messages = []
-        while (msg := lines.recv(timeout_s=1.0)) is not None:
-            messages.append(msg)
+        messages = received(lines)
         stop_service()
-        statuses = []
-        while (s := status.recv(timeout_s=0.5)) is not None:
-            statuses.append(s)
+        statuses = received(status, timeout_s=0.5)
     assert [m.seq for m in messages] == list(range(len(messages)))
     # stamped at publication, after the packets they used reached the camera adapter (same host clock)
     assert all(m.published_ns >= m.source_ns.max() for m in messages if len(m.source_ns))
@@ -200,13 +196,9 @@ def test_a_restarted_camera_is_tracked_afresh(tmp_path: Path) -> None:
         assert wait_for(lambda: service.packets == 25, timeout_s=20)
         publish(pub, packets_of(second, 60_000), end=True)
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
-        messages = []
-        while (msg := lines.recv(timeout_s=1.0)) is not None:
-            messages.append(msg)
+        messages = received(lines)
         stop_service()
-        statuses = []
-        while (s := status.recv(timeout_s=0.5)) is not None:
-            statuses.append(s)
+        statuses = received(status, timeout_s=0.5)
     assert service.restarts == 1 and service.missing_packets == 0
     assert statuses[-1].restarts == 1 and statuses[-1].missing_packets == 0
     old = [m for m in messages if m.stream == 0 and len(m.t_s)]
@@ -322,9 +314,7 @@ def test_a_duplicated_or_late_packet_is_dropped_not_taken_for_a_restart(tmp_path
         time.sleep(0.4)
         publish(pub, [packets[k] for k in order], seqs=order, end=True, stream_id=stream_id)
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
-        messages = []
-        while (msg := lines.recv(timeout_s=1.0)) is not None:
-            messages.append(msg)
+        messages = received(lines)
         stop_service()
     assert service.restarts == 0 and service.late_packets == 2 and service.missing_packets == 1
     got = CentrelineBatch.concatenate([m.batch() for m in messages])
@@ -369,9 +359,7 @@ def test_a_packet_whose_time_offset_is_loops_off_is_dropped_not_tracked(tmp_path
         time.sleep(0.4)
         publish(pub, [*packets[:30], bad, *packets[31:]], end=True)
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
-        messages = []
-        while (msg := lines.recv(timeout_s=1.0)) is not None:
-            messages.append(msg)
+        messages = received(lines)
         stop_service()
     assert service.malformed_packets == 1 and service.restarts == 0
     got = CentrelineBatch.concatenate([m.batch() for m in messages])

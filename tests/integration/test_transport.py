@@ -27,6 +27,14 @@ def two_buses() -> Iterator[tuple[Bus, Bus]]:
         yield a, b
 
 
+def received(sub, timeout_s: float = 1.0) -> list:  # noqa: ANN001
+    """Every message ``sub`` gets until none comes for ``timeout_s``."""
+    messages = []
+    while (msg := sub.recv(timeout_s=timeout_s)) is not None:
+        messages.append(msg)
+    return messages
+
+
 def wait_for(predicate, timeout_s: float = 5.0) -> bool:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
