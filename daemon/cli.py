@@ -9,63 +9,18 @@ heavy imports happen inside ``run``.
 from __future__ import annotations
 
 import argparse
-import importlib
 import logging
-import pkgutil
 import sys
 import warnings
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from types import ModuleType
+from collections.abc import Sequence
 from typing import Any
 
 from flagtrack.daemon import commands
+from flagtrack.daemon.commands._registry import add_subcommands, discover
 from flagtrack.daemon.errors import FlagtrackError
+from flagtrack.daemon.process import tune_process
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class Command:
-    """One subcommand, for modules that define several (``COMMANDS = [Command(...), ...]``)."""
-
-    COMMAND: str
-    HELP: str
-    add_arguments: Callable[[argparse.ArgumentParser], None]
-    run: Callable[[argparse.Namespace], int]
-    DESCRIPTION: str = ""
-
-
-def discover(package: ModuleType) -> list[Any]:
-    """The commands of ``package``'s modules (a module with ``COMMAND``, or its ``COMMANDS``), by name."""
-    found: list[Any] = []
-    for info in pkgutil.iter_modules(package.__path__):
-        if info.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"{package.__name__}.{info.name}")
-        if hasattr(module, "COMMAND"):
-            found.append(module)
-        found.extend(getattr(module, "COMMANDS", ()))
-    return sorted(found, key=lambda m: m.COMMAND)
-
-
-def add_subcommands(parser: argparse.ArgumentParser, package: ModuleType, dest: str,
-                    only: str | None = None) -> None:
-    """Add one subparser per command module of ``package`` (or only the one named ``only``); each sets
-    ``args.run``."""
-    subparsers = parser.add_subparsers(dest=dest, metavar="COMMAND", required=True)
-    for module in discover(package):
-        if only is not None and module.COMMAND != only:
-            continue
-        sub = subparsers.add_parser(
-            module.COMMAND,
-            help=module.HELP,
-            description=getattr(module, "DESCRIPTION", "") or module.HELP,
-            formatter_class=argparse.RawDescriptionHelpFormatter,
-        )
-        module.add_arguments(sub)
-        if not sub.get_default("run"):
-            sub.set_defaults(run=module.run)
 
 
 class _VersionAction(argparse.Action):
@@ -117,6 +72,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser(_named_command(argv)).parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    tune_process()
     previous = warnings.showwarning
     _print_warnings_as_lines(args.command)
     try:

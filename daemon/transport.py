@@ -18,7 +18,8 @@ from typing import Any, Literal
 import zenoh
 
 from flagtrack.daemon.errors import ConfigError, SchemaError
-from flagtrack.daemon.schema import Keys, ProblemLog, decode, encode
+from flagtrack.daemon.problems import ProblemLog
+from flagtrack.daemon.schema import Keys, decode, encode
 
 log = logging.getLogger(__name__)
 

@@ -49,11 +49,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def settings_from_args(args: argparse.Namespace) -> object:
-    """The :class:`~flagtrack.daemon.benchmark.runner.RunSettings` of the command line."""
+    """The :class:`~flagtrack.daemon.bench.accuracy_suite.runner.RunSettings` of the command line."""
     from dataclasses import replace
 
-    from flagtrack.daemon.benchmark.plan import PRESETS
-    from flagtrack.daemon.benchmark.runner import RunSettings
+    from flagtrack.daemon.bench.accuracy_suite.plan import PRESETS
+    from flagtrack.daemon.bench.accuracy_suite.runner import RunSettings
     from flagtrack.daemon.errors import ConfigError
 
     preset = PRESETS["quick" if args.quick else "full"]
@@ -86,8 +86,8 @@ def settings_from_args(args: argparse.Namespace) -> object:
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark and write the results folder."""
-    from flagtrack.daemon.benchmark.report import write_results
-    from flagtrack.daemon.benchmark.runner import run as run_benchmark
+    from flagtrack.daemon.bench.accuracy_suite.report import write_results
+    from flagtrack.daemon.bench.accuracy_suite.runner import run as run_benchmark
 
     settings = settings_from_args(args)
     if args.report_only:
@@ -115,8 +115,8 @@ def _report_only(out: Path, settings: object) -> int:
     """Rewrite the report of an earlier run (same command line recorded)."""
     from dataclasses import replace
 
-    from flagtrack.daemon.benchmark.report import rows_from_folder, write_results
-    from flagtrack.daemon.benchmark.tables import method_rank
+    from flagtrack.daemon.bench.accuracy_suite.report import rows_from_folder, write_results
+    from flagtrack.daemon.bench.accuracy_suite.tables import method_rank
     from flagtrack.daemon.errors import ConfigError
 
     if not (out / "run.json").is_file():

@@ -90,7 +90,7 @@ def _map_rates(n: int, chunk: int, repeat: int) -> list[dict[str, float]]:
 
 def _tracker_rates(seconds: float, degree: int) -> dict[str, float]:
     from flagtrack.daemon.core.tracker import Tracker
-    from flagtrack.daemon.tracking_config import TrackingConfig
+    from flagtrack.daemon.tracking.section import TrackingConfig
     from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
 
     chunks = list(line_events(WavyFlag(length=LENGTH, root=ROOT), 0, int(seconds * 1e6), 640, 480,

@@ -23,7 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _measure(n: int, duration_s: float, jobs: int, out_dir: str, seed0: int) -> dict[str, float]:
     import time
 
-    from flagtrack.drivers.sim.recording import RecordingSpec, simulate_many
+    from flagtrack.drivers.sim.simulate import RecordingSpec, simulate_many
 
     specs = [RecordingSpec(seed=seed0 + i, duration_s=duration_s) for i in range(n)]
     start = time.perf_counter()
@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     """Warm up (numba compile), then measure one core and all cores."""
     import tempfile
 
-    from flagtrack.drivers.sim.recording import RecordingSpec, simulate_recording
+    from flagtrack.drivers.sim.simulate import RecordingSpec, simulate_recording
 
     jobs = args.jobs if args.jobs > 0 else os.cpu_count() or 1
     with tempfile.TemporaryDirectory() as tmp:

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from flagtrack.daemon.tracking_config import TrackingConfig
+    from flagtrack.daemon.tracking.section import TrackingConfig
 
 log = logging.getLogger(__name__)
 
@@ -32,7 +32,7 @@ def add_tracking_arguments(parser: argparse.ArgumentParser) -> None:
 
 def apply_tracking_arguments(config: TrackingConfig, args: argparse.Namespace) -> TrackingConfig:
     """``config`` with the flags given on the command line applied."""
-    from flagtrack.daemon.tracking_config import Method
+    from flagtrack.daemon.tracking.section import Method
 
     config = config.with_overrides(
         root=tuple(args.root) if args.root else None, length=args.length, direction_deg=args.direction,
@@ -43,18 +43,4 @@ def apply_tracking_arguments(config: TrackingConfig, args: argparse.Namespace) -
     if (args.tau is not None or args.dt is not None) and config.schedule:
         log.warning("--tau/--dt given: the config's schedule is ignored")
         config = config.with_overrides(schedule=())
-    return config
-
-
-def load_tracking_config_file(path: Path) -> TrackingConfig:
-    """The ``tracker:`` section of ``path``; a relative calibration file is taken from the config's folder."""
-    from flagtrack.daemon.tracking_config import load_tracking_config
-
-    return resolve_calibration(load_tracking_config(path), Path(path).parent)
-
-
-def resolve_calibration(config: TrackingConfig, base: Path) -> TrackingConfig:
-    """``config`` with a relative ``calibration`` path made relative to ``base`` (the config's folder)."""
-    if config.calibration is not None and not Path(config.calibration).is_absolute():
-        return config.with_overrides(calibration=Path(base) / config.calibration)
     return config

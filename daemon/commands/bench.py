@@ -11,7 +11,7 @@ HELP = "run a benchmark (decode, reconstruct, accuracy, live, ...) and print its
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add one sub-subcommand per benchmark module."""
     from flagtrack.daemon import bench
-    from flagtrack.daemon.cli import add_subcommands
+    from flagtrack.daemon.commands._registry import add_subcommands
 
     add_subcommands(parser, bench, "bench")
 

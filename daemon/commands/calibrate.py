@@ -107,12 +107,12 @@ def _calibrate(args: argparse.Namespace) -> int:
     from flagtrack.calibration.errors import CalibrationError
     from flagtrack.calibration.fit import Calibration, calibrate_corners
     from flagtrack.calibration.pseudo_image import detect_blink, pseudo_image
-    from flagtrack.calibration.recording import read_board_recording
+    from flagtrack.drivers.formats.excerpt import read_excerpt
     from flagtrack.calibration.report import report_lines, save_figure, save_image
 
     board, frame, search, degree = _parse_setup(args)
     path = Path(args.inputs[0])
-    events, size = read_board_recording(path, args.max_seconds, tuple(args.size) if args.size else None)
+    events, size = read_excerpt(path, args.max_seconds, tuple(args.size) if args.size else None)
     figure = None if args.no_figure else (args.figure or args.output.with_suffix(".png"))
     try:
         timing = detect_blink(events["t"], events["p"], search)

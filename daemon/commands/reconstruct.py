@@ -7,17 +7,8 @@ import logging
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
 
-from flagtrack.daemon.commands._tracking_args import (
-    add_tracking_arguments,
-    apply_tracking_arguments,
-    load_tracking_config_file,
-)
-
-if TYPE_CHECKING:
-    from flagtrack.daemon.core.mapping import PointMapping
-    from flagtrack.daemon.tracking_config import TrackingConfig
+from flagtrack.daemon.commands._tracking_args import add_tracking_arguments, apply_tracking_arguments
 
 COMMAND = "reconstruct"
 HELP = "reconstruct the centreline of the flag from an event file (HDF5 out)"
@@ -35,8 +26,6 @@ example:
 
 log = logging.getLogger(__name__)
 
-_WRITE_EVERY = 8192  # updates buffered before an HDF5 append
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``flagtrack reconstruct``."""
@@ -49,83 +38,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Reconstruct ``args.file`` into ``args.output``."""
-    from flagtrack.daemon.tracking_config import TrackingConfig
+    from flagtrack.daemon.tracking.offline import reconstruct_file
+    from flagtrack.daemon.tracking.section import TrackingConfig
+    from flagtrack.daemon.tracking.setup import load_tracking_config_file, tracking_setup
 
     config = load_tracking_config_file(args.config) if args.config else TrackingConfig()
-    config = apply_tracking_arguments(config, args)
+    setup = tracking_setup(apply_tracking_arguments(config, args), path=str(args.config) if args.config else None)
     started = time.perf_counter()
-    summary = reconstruct_file(args.file, args.output, config, config_path=str(args.config) if args.config else None,
-                               progress=not args.no_progress and sys.stderr.isatty())
+    with _progress_bar(args.file, not args.no_progress and sys.stderr.isatty()) as bar:
+        summary = reconstruct_file(args.file, args.output, setup, progress=bar)
     elapsed = time.perf_counter() - started
-    rate = summary["events_in"] / elapsed / 1e6 if elapsed > 0 else 0.0
-    print(f"{summary['updates']} updates from {summary['events_in']} events "
-          f"({summary['events_kept']} after denoising) in {elapsed:.2f} s ({rate:.1f} Mev/s) -> {args.output}",
+    rate = summary.events_in / elapsed / 1e6 if elapsed > 0 else 0.0
+    print(f"{summary.updates} updates from {summary.events_in} events "
+          f"({summary.events_kept} after denoising) in {elapsed:.2f} s ({rate:.1f} Mev/s) -> {args.output}",
           file=sys.stderr)
     return 0
-
-
-def reconstruct_file(path: Path, output: Path, config: TrackingConfig, *, config_path: str | None = None,
-                     progress: bool = False) -> dict[str, Any]:
-    """Stream ``path`` through a :class:`~flagtrack.daemon.core.tracker.Tracker` into ``output``.
-
-    Memory is bounded by the reader's chunk and the tracker's pending windows, not by the recording.
-
-    Returns:
-        A summary: updates, events_in, events_kept, first/last event times.
-    """
-    from flagtrack.daemon.core.centreline import CentrelineBatch
-    from flagtrack.daemon.core.tracker import Tracker
-    from flagtrack.drivers.formats import open_events
-    from flagtrack.drivers.formats.centreline import CentrelineWriter
-
-    params = config.tracker_params(path=config_path)
-    mapping = _load_mapping(config, config_path)
-    units = "px" if mapping is None else getattr(mapping, "units", "m")
-    with open_events(path) as reader:
-        info = reader.info
-        size = (info.width or 0, info.height or 0)
-        tracker = Tracker(params, mapping=mapping, sensor_size=size)
-        attrs = {**config.attrs(), "units": units, "input_file": str(path.resolve()), "input_format": info.format}
-        if config.calibration is not None:
-            from flagtrack.calibration import calibration_attrs
-
-            attrs.update(calibration_attrs(config.calibration))
-        with CentrelineWriter(output, tracker.s, params.chain.n_joints, attrs) as writer, \
-                _progress_bar(path, progress) as bar:
-            pending: list[CentrelineBatch] = []
-            n_pending = 0
-            for chunk in reader:
-                batch = tracker.feed(chunk.events)
-                if len(batch):
-                    pending.append(batch)
-                    n_pending += len(batch)
-                if n_pending >= _WRITE_EVERY:
-                    writer.append(CentrelineBatch.concatenate(pending))
-                    pending, n_pending = [], 0
-                bar(chunk.byte_offset)
-            bar(path.stat().st_size)
-            pending.append(tracker.finish())
-            writer.append(CentrelineBatch.concatenate(pending))
-            stats = tracker.stats
-            writer.set_attrs({"events_in": stats.events_in, "events_kept": stats.events_kept})
-    if stats.events_out_of_order:
-        log.warning("%d events were out of time order", stats.events_out_of_order)
-    return {"updates": stats.updates, "events_in": stats.events_in, "events_kept": stats.events_kept,
-            "first_t_us": stats.first_t_us, "last_t_us": stats.last_t_us}
-
-
-def _load_mapping(config: TrackingConfig, config_path: str | None) -> PointMapping | None:
-    """The calibration mapping named by the config, or None for pixels."""
-    if config.calibration is None:
-        return None
-    from flagtrack.daemon.errors import ConfigError
-
-    try:
-        from flagtrack.calibration import load_mapping  # type: ignore[attr-defined]
-    except ImportError:
-        raise ConfigError("calibration files need flagtrack.calibration.load_mapping, not available in this "
-                          "version", key="tracker.calibration", path=config_path) from None
-    return load_mapping(config.calibration)
 
 
 class _progress_bar:

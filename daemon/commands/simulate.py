@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     """Simulate and print one JSON line per recording."""
     from flagtrack.daemon.errors import ConfigError
     from flagtrack.drivers.sim.dvs import DvsParams
-    from flagtrack.drivers.sim.recording import RecordingSpec, simulate_checkerboard, simulate_many
+    from flagtrack.drivers.sim.simulate import RecordingSpec, simulate_checkerboard, simulate_many
 
     if args.n < 1 or args.width < 16 or args.height < 16:
         raise ConfigError("need --n >= 1 and a sensor of at least 16 x 16 px")

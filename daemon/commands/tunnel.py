@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
 def _config(args: argparse.Namespace) -> Any:
     import dataclasses
 
-    from flagtrack.drivers.tunnel.config import TunnelConfig, load_tunnel_config
+    from flagtrack.drivers.tunnel.setup import TunnelConfig, load_tunnel_config
 
     cfg = load_tunnel_config(args.config) if args.config else TunnelConfig()
     if getattr(args, "port", None):
@@ -104,7 +104,7 @@ def _sim(args: argparse.Namespace) -> int:
 
 
 def _get(args: argparse.Namespace) -> int:
-    from flagtrack.drivers.tunnel.config import open_tunnel
+    from flagtrack.drivers.tunnel.setup import open_tunnel
 
     tunnel = open_tunnel(_config(args))
     try:
@@ -116,7 +116,7 @@ def _get(args: argparse.Namespace) -> int:
 
 
 def _set(args: argparse.Namespace) -> int:
-    from flagtrack.drivers.tunnel.config import open_tunnel
+    from flagtrack.drivers.tunnel.setup import open_tunnel
 
     tunnel = open_tunnel(_config(args))
     try:
@@ -150,7 +150,7 @@ def _set(args: argparse.Namespace) -> int:
 
 
 def _stop(args: argparse.Namespace) -> int:
-    from flagtrack.drivers.tunnel.config import open_tunnel
+    from flagtrack.drivers.tunnel.setup import open_tunnel
 
     tunnel = open_tunnel(_config(args))
     try:

@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
                                                 if v is not None})
     beam = sensor.beam if args.x_over_l is None else dataclasses.replace(sensor.beam, x_over_l=args.x_over_l)
     sensor = dataclasses.replace(sensor, sync=sync, beam=beam)
-    tracking = _tracking_config(args, record) if args.reconstruct else None
+    tracking = _tracking_setup(args, record) if args.reconstruct else None
     result = validate_run(args.run_dir, out_dir=args.out, centrelines_dir=args.centrelines, sensor=sensor,
                           reconstruct=tracking, window_s=args.window)
     rows = [_row(p) for p in result.points if p.sensor_status is not None]
@@ -74,17 +74,20 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _tracking_config(args: argparse.Namespace, record) -> object:  # noqa: ANN001
-    from flagtrack.daemon.commands._tracking_args import apply_tracking_arguments, load_tracking_config_file
-    from flagtrack.daemon.config import from_mapping
-    from flagtrack.daemon.tracking_config import TrackingConfig
+def _tracking_setup(args: argparse.Namespace, record) -> object:  # noqa: ANN001
+    """The tracking set-up of ``--reconstruct``: the ``-c`` file's or the run's own, with the flags applied."""
+    from flagtrack.daemon.commands._tracking_args import apply_tracking_arguments
+    from flagtrack.daemon.typed_yaml import from_mapping
+    from flagtrack.daemon.tracking.section import TrackingConfig
+    from flagtrack.daemon.tracking.setup import load_tracking_config_file, tracking_setup
 
     if args.config is not None:
-        config = load_tracking_config_file(args.config)
+        config, where = load_tracking_config_file(args.config), str(args.config)
     else:
+        where = str(args.run_dir / "run.jsonl")
         stored = record.start.get("config", {}).get("tracker") or {}
-        config = from_mapping(TrackingConfig, stored, path=str(args.run_dir / "run.jsonl"), key="config.tracker")
-    return apply_tracking_arguments(config, args)
+        config = from_mapping(TrackingConfig, stored, path=where, key="config.tracker")
+    return tracking_setup(apply_tracking_arguments(config, args), path=where)
 
 
 _COLUMNS = ("point_id", "speed_mps", "state", "sensor_status", "sensor_sync", "sensor_offset_us",

@@ -17,7 +17,7 @@ from flagtrack.daemon.core.events import make_events
 from flagtrack.daemon.schema import CameraStatus, EventPacket, EventRate
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.camera.base import Camera, CameraInfo, EndOfStream
-from flagtrack.drivers.camera.packets import Packet, PacketParams, Packetizer
+from flagtrack.drivers.formats.packets import Packet, PacketParams, Packetizer
 
 log = logging.getLogger(__name__)
 

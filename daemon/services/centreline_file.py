@@ -9,7 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
-from flagtrack.daemon.schema import CentrelineMessage, ProblemLog
+from flagtrack.daemon.problems import ProblemLog
+from flagtrack.daemon.schema import CentrelineMessage
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.formats.centreline import CentrelineWriter
 

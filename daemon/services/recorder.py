@@ -42,12 +42,11 @@ from typing import Any, BinaryIO
 from flagtrack.daemon import __version__
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import FormatError, SchemaError
-from flagtrack.daemon.schema import (
-    CentrelineMessage, EventPacket, ProblemLog, RecorderCommand, RecorderStatus, decode,
-)
+from flagtrack.daemon.problems import ProblemLog
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, RecorderCommand, RecorderStatus, decode
 from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
 from flagtrack.daemon.transport import Bus
-from flagtrack.drivers.camera.packets import stream_preamble
+from flagtrack.drivers.formats.packets import stream_preamble
 from flagtrack.drivers.formats import raw_header
 from flagtrack.drivers.formats.centreline import CentrelineWriter
 

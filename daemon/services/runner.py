@@ -8,42 +8,18 @@ at most ``shutdown_timeout_s`` and says which services it abandoned.
 
 from __future__ import annotations
 
-import ctypes
+import contextlib
 import logging
 import os
 import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
 log = logging.getLogger(__name__)
-
-_SWITCH_INTERVAL_S = 0.0005
-# glibc mallopt parameters: M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD (the largest it takes, 32 MB)
-_MALLOC_SETTINGS = ((-1, 256 << 20), (-2, 16 << 20), (-3, 32 << 20))
-
-
-def keep_freed_memory() -> bool:
-    """Ask glibc's allocator to keep freed memory for reuse rather than hand it back to the OS at once.
-
-    Live services allocate and free the same few arrays for every packet. By default glibc returns
-    memory once 128 KB lie free at the top of its heap, and maps arrays of growing sizes afresh, so
-    the next packet's arrays page-fault again (3-4 faults per 1 ms packet in the replay camera, about
-    3.7 µs each on the development VM). With these settings the heap keeps up to 256 MB free for
-    reuse. Returns whether they took (False without glibc, or when the user set glibc's allocator
-    through ``MALLOC_*`` or ``GLIBC_TUNABLES``: nothing changes).
-    """
-    if any(name.startswith("MALLOC_") for name in os.environ) or "glibc.malloc" in os.environ.get("GLIBC_TUNABLES", ""):
-        return False
-    try:
-        mallopt = ctypes.CDLL("libc.so.6").mallopt
-    except (OSError, AttributeError):
-        return False
-    return all(mallopt(param, value) == 1 for param, value in _MALLOC_SETTINGS)
-
 
 class Service(Protocol):
     """A long-running part of the daemon."""
@@ -159,8 +135,10 @@ class ServiceGroup:
         return self.report
 
 
-def install_signal_handlers(group: ServiceGroup, on_force: Callable[[], None] | None = None) -> None:
-    """First SIGINT/SIGTERM stops the group gracefully; the second forces the process out (exit 130)."""
+@contextlib.contextmanager
+def capture_signals(group: ServiceGroup, on_force: Callable[[], None] | None = None) -> Iterator[None]:
+    """While inside: the first SIGINT/SIGTERM stops the group gracefully, the second forces the process
+    out (exit 130). The previous handlers are restored on the way out (uvicorn's ``capture_signals``)."""
 
     def handler(signum: int, _frame: object) -> None:
         group.report.signal_count += 1
@@ -174,8 +152,12 @@ def install_signal_handlers(group: ServiceGroup, on_force: Callable[[], None] | 
             on_force()
         os._exit(130)
 
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
+    previous = {signum: signal.signal(signum, handler) for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for signum, old in previous.items():
+            signal.signal(signum, old)
 
 
 def run_services(
@@ -191,16 +173,12 @@ def run_services(
 
     ``on_service_end``: see :class:`ServiceGroup` (``up`` passes the bus's ``undeclare_alive``).
     """
-    # Zenoh delivers on its own threads, which need the GIL to queue a message; with Python's default
-    # 5 ms switch interval a busy service thread would hold messages back for up to 5 ms.
-    sys.setswitchinterval(min(sys.getswitchinterval(), _SWITCH_INTERVAL_S))
-    keep_freed_memory()
     group = ServiceGroup(services, stop_when_any_finishes, on_service_end)
-    if handle_signals and threading.current_thread() is threading.main_thread():
-        install_signal_handlers(group, on_force)
-    group.start()
-    try:
-        group.wait()
-    finally:
-        report = group.shutdown(shutdown_timeout_s)
+    signals = handle_signals and threading.current_thread() is threading.main_thread()
+    with capture_signals(group, on_force) if signals else contextlib.nullcontext():
+        group.start()
+        try:
+            group.wait()
+        finally:
+            report = group.shutdown(shutdown_timeout_s)
     return report

@@ -19,7 +19,7 @@ import numpy as np
 from flagtrack.daemon.schema import SensorSamples
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.sensor.base import PointSensor, SensorReading
-from flagtrack.drivers.sensor.config import SensorConfig
+from flagtrack.drivers.sensor.setup import SensorConfig
 
 log = logging.getLogger(__name__)
 

@@ -30,10 +30,11 @@ import numpy as np
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.events import empty_events
 from flagtrack.daemon.errors import FormatError
-from flagtrack.daemon.schema import CentrelineMessage, EventPacket, ProblemLog, TrackerStatus
+from flagtrack.daemon.problems import ProblemLog
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, TrackerStatus
 from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
 from flagtrack.daemon.transport import Bus
-from flagtrack.drivers.camera.packets import decode_packet
+from flagtrack.drivers.formats.packets import decode_packet
 
 log = logging.getLogger(__name__)
 _NO_NS = np.zeros(0, dtype=np.int64)
@@ -74,7 +75,7 @@ def warm_up_kernels(tracker_factory: Any) -> None:
     loading the compiled kernels (about a second; on a first run, compiling them: tens of seconds)
     happens before the first packet, not while packets queue up."""
     from flagtrack.daemon.core.events import make_events
-    from flagtrack.drivers.camera.packets import Packetizer
+    from flagtrack.drivers.formats.packets import Packetizer
 
     n = 400
     t = np.arange(n, dtype=np.int64) * 10

@@ -26,9 +26,10 @@ import numpy as np
 import rerun as rr
 
 from flagtrack.daemon.errors import ConfigError, FormatError
-from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, ProblemLog, TunnelState
+from flagtrack.daemon.problems import ProblemLog
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, TunnelState
 from flagtrack.daemon.transport import Bus
-from flagtrack.drivers.camera.packets import decode_packet
+from flagtrack.drivers.formats.packets import decode_packet
 
 log = logging.getLogger(__name__)
 TIMELINE = "camera"

@@ -28,7 +28,7 @@ from types import TracebackType
 from typing import Any, Literal
 
 from flagtrack.daemon import __version__
-from flagtrack.daemon.config import from_mapping, to_mapping
+from flagtrack.daemon.typed_yaml import from_mapping, to_mapping
 from flagtrack.daemon.errors import ConfigError, FormatError
 from flagtrack.daemon.sweep.plan import Point, SweepConfig, plan_points
 

@@ -6,7 +6,6 @@ Headless (Agg canvas, no pyplot state).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -86,39 +85,3 @@ def _pct(value: Any) -> str:
     return "n/a" if value is None or not math.isfinite(float(value)) else f"{100 * float(value):.2f} %"
 
 
-def plot_sweep(points: Sequence[Any], path: str | Path, title: str = "") -> Path:
-    """Save the sweep figure (paper 5g): time mean ± std of |e|/L and Delta_RMS/L against the speed.
-
-    Args:
-        points: :class:`~flagtrack.daemon.sweep.runlog.PointResult` s (or objects with the same fields).
-    """
-    fig = _figure((6.0, 4.0))
-    ax = fig.subplots()
-    styles = {"up": ("^", "full"), "down": ("v", "none")}
-    all_speeds = [p.speed_mps for p in points] or [0.0]
-    dx = 0.01 * max(max(all_speeds) - min(all_speeds), 1.0)  # |e| and Delta_RMS side by side
-    for branch, (marker, fill) in styles.items():
-        mine = [p for p in points if p.branch == branch and math.isfinite(p.sensor_error_mean_over_l)]
-        if mine:
-            speeds = [p.speed_mps - dx for p in mine]
-            ax.errorbar(speeds, [p.sensor_error_mean_over_l for p in mine],
-                        yerr=[_zero(p.sensor_error_std_over_l) for p in mine], color="C1", marker=marker,
-                        fillstyle=fill, capsize=3, linestyle="none", label=f"|e|/L ({branch})")
-        mine = [p for p in points if p.branch == branch and math.isfinite(p.delta_rms_over_l)]
-        if mine:
-            ax.errorbar([p.speed_mps + dx for p in mine], [p.delta_rms_over_l for p in mine],
-                        yerr=[_zero(p.delta_rms_std_over_l) for p in mine], color="C2", marker=marker,
-                        fillstyle=fill, capsize=3, linestyle="none", label=fr"$\Delta_{{RMS}}/L$ ({branch})")
-    ax.axhline(0.01, color="0.6", linestyle="--", linewidth=0.8)
-    ax.set_xlabel("wind speed U (m/s)")
-    ax.set_ylabel("error / L")
-    ax.set_title(title, fontsize=9)
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(fontsize=8)
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    return path
-
-
-def _zero(value: float) -> float:
-    return 0.0 if not math.isfinite(value) else value

@@ -16,15 +16,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.config import from_mapping
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.core.events import empty_triggers
 from flagtrack.daemon.errors import ConfigError, FormatError
+from flagtrack.daemon.tracking.offline import reconstruct_file
+from flagtrack.daemon.tracking.setup import TrackingSetup
 from flagtrack.daemon.sweep.runlog import RUN_LOG, PointResult, read_run
 from flagtrack.daemon.sweep.summary import write_summary_csv
 from flagtrack.daemon.validation.collect import raw_triggers
-from flagtrack.daemon.validation.figures import plot_point, plot_sweep
+from flagtrack.daemon.sweep.figures import plot_sweep
+from flagtrack.daemon.validation.figures import plot_point
 from flagtrack.daemon.validation.point import FlagFrame, validate_point
-from flagtrack.drivers.sensor.config import SensorConfig
+from flagtrack.drivers.sensor.setup import SensorConfig
 from flagtrack.drivers.sensor.record import read_sensor_record
 
 log = logging.getLogger(__name__)
@@ -66,7 +69,7 @@ def run_frame(record: Any) -> FlagFrame:
 
 
 def validate_run(run_dir: str | Path, *, out_dir: str | Path | None = None, centrelines_dir: str | Path | None = None,
-                 sensor: SensorConfig | None = None, reconstruct: Any = None, window_s: float = 0.3) -> RunValidation:
+                 sensor: SensorConfig | None = None, reconstruct: TrackingSetup | None = None, window_s: float = 0.3) -> RunValidation:
     """Recompute every point's sensor comparison (see the module docstring).
 
     Args:
@@ -75,7 +78,7 @@ def validate_run(run_dir: str | Path, *, out_dir: str | Path | None = None, cent
         centrelines_dir: take each point's centrelines from ``DIR/<point_id>_centrelines.h5`` (or
             ``DIR/<point_id>.h5``) instead of the run's own.
         sensor: the sensor config to use (default: the run's own, e.g. with another ``sync`` or ``beam``).
-        reconstruct: a ``TrackingConfig``: reconstruct each raw file with it first (into ``out_dir/centrelines``).
+        reconstruct: a tracking set-up: reconstruct each raw file with it first (into ``out_dir/centrelines``).
         window_s: time shown in each point's figure.
     """
     run_dir = Path(run_dir)
@@ -100,7 +103,7 @@ def validate_run(run_dir: str | Path, *, out_dir: str | Path | None = None, cent
 
 
 def _validate_one(run_dir: Path, point: PointResult, out: Path, frame: FlagFrame, sensor: SensorConfig,
-                  centrelines_dir: str | Path | None, reconstruct: Any, window_s: float
+                  centrelines_dir: str | Path | None, reconstruct: TrackingSetup | None, window_s: float
                   ) -> tuple[PointResult, Path | None]:
     from flagtrack.drivers.formats.centreline import read_centrelines
 
@@ -124,12 +127,10 @@ def _validate_one(run_dir: Path, point: PointResult, out: Path, frame: FlagFrame
 
 
 def _centrelines_path(run_dir: Path, point: PointResult, out: Path, centrelines_dir: str | Path | None,
-                      reconstruct: Any, raw: Path | None) -> Path | None:
+                      reconstruct: TrackingSetup | None, raw: Path | None) -> Path | None:
     if reconstruct is not None:
         if raw is None or not raw.exists():
             return None
-        from flagtrack.daemon.commands.reconstruct import reconstruct_file
-
         target = out / "centrelines" / f"{point.point_id}_centrelines.h5"
         target.parent.mkdir(parents=True, exist_ok=True)
         reconstruct_file(raw, target, reconstruct)

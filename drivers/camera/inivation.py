@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from flagtrack.daemon.config import from_mapping
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.core.events import EVENT_DTYPE, TRIGGER_DTYPE, empty_events, empty_triggers
 from flagtrack.daemon.errors import ConfigError, DriverError
 from flagtrack.drivers.camera.base import CameraData, CameraInfo

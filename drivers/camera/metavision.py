@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from flagtrack.daemon.config import from_mapping
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.errors import ConfigError, DriverError
 from flagtrack.drivers.camera.base import CameraData, CameraInfo
 from flagtrack.drivers.camera.hardware import (

@@ -13,7 +13,7 @@ import numpy as np
 from flagtrack.daemon.core.events import empty_events, empty_triggers
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.camera.base import CameraData, CameraInfo, EndOfStream
-from flagtrack.drivers.camera.packets import slot_table
+from flagtrack.drivers.formats.packets import slot_table
 from flagtrack.drivers.formats import open_events
 
 log = logging.getLogger(__name__)

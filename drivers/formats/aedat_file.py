@@ -19,7 +19,7 @@ import numpy as np
 
 from flagtrack.daemon.core.events import EVENT_DTYPE, TRIGGER_DTYPE, empty_events, empty_triggers
 from flagtrack.daemon.errors import FormatError
-from flagtrack.drivers.formats.recording import DEFAULT_CHUNK_BYTES, EventChunk, EventReader, RecordingInfo
+from flagtrack.drivers.formats.reader import DEFAULT_CHUNK_BYTES, EventChunk, EventReader, RecordingInfo
 
 MAGIC = b"#!AER-DAT4.0\r\n"
 _TRIGGER_MAP = {1: (0, 1), 2: (0, 0), 3: (0, 1), 4: (1, 1), 5: (1, 0)}

@@ -17,7 +17,7 @@ import numpy as np
 from flagtrack.daemon.core.events import EVENT_DTYPE, TRIGGER_DTYPE, empty_events
 from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.formats._csv_kernels import BAD, FULL, format_rows, parse_rows
-from flagtrack.drivers.formats.recording import DEFAULT_CHUNK_BYTES, EventChunk, EventReader, RecordingInfo
+from flagtrack.drivers.formats.reader import DEFAULT_CHUNK_BYTES, EventChunk, EventReader, RecordingInfo
 
 COLUMNS = ("t", "x", "y", "p")
 _SIZE = re.compile(r"width\s*=\s*(\d+)\D+height\s*=\s*(\d+)")

@@ -18,7 +18,7 @@ import numpy as np
 
 from flagtrack.daemon.core.events import EVENT_DTYPE, TRIGGER_DTYPE, empty_events, empty_triggers
 from flagtrack.daemon.errors import FormatError
-from flagtrack.drivers.formats.recording import DEFAULT_CHUNK_BYTES, EventChunk, EventReader, RecordingInfo
+from flagtrack.drivers.formats.reader import DEFAULT_CHUNK_BYTES, EventChunk, EventReader, RecordingInfo
 
 CD_TYPES = (0, 12)
 TRIGGER_TYPE = 14

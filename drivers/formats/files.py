@@ -15,7 +15,7 @@ from flagtrack.drivers.formats.dat_file import DatReader, DatWriter
 from flagtrack.drivers.formats.npy_file import MAGIC as NPY_MAGIC
 from flagtrack.drivers.formats.npy_file import NpyReader, NpyWriter
 from flagtrack.drivers.formats.raw_file import RawReader, RawWriter
-from flagtrack.drivers.formats.recording import DEFAULT_CHUNK_BYTES, EventReader, Recording
+from flagtrack.drivers.formats.reader import DEFAULT_CHUNK_BYTES, EventReader, Recording
 
 READERS: dict[str, type[EventReader]] = {
     "raw": RawReader,

@@ -18,7 +18,7 @@ import numpy as np
 from flagtrack.daemon.core.events import EVENT_DTYPE, TRIGGER_DTYPE, empty_events
 from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.formats.csv_file import sidecar
-from flagtrack.drivers.formats.recording import DEFAULT_CHUNK_BYTES, EventChunk, EventReader, RecordingInfo
+from flagtrack.drivers.formats.reader import DEFAULT_CHUNK_BYTES, EventChunk, EventReader, RecordingInfo
 
 MAGIC = b"\x93NUMPY"
 _HEADER_BYTES = 128  # room for EVENT_DTYPE and a 20-digit count, a multiple of 64

@@ -11,7 +11,7 @@ import numpy as np
 from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.formats.codec import Decoder, Encoder
 from flagtrack.drivers.formats.raw_header import MAX_HEADER_BYTES, parse_header_lines, raw_header, raw_layout
-from flagtrack.drivers.formats.recording import DEFAULT_CHUNK_BYTES, EventChunk, EventReader, RecordingInfo
+from flagtrack.drivers.formats.reader import DEFAULT_CHUNK_BYTES, EventChunk, EventReader, RecordingInfo
 
 
 def read_header_bytes(path: Path) -> bytes:

@@ -1,7 +1,7 @@
 """A simulated point sensor on a real pseudo-terminal: the ASCII protocol (poll or stream) or a Modbus RTU slave.
 
 Like :class:`~flagtrack.drivers.tunnel.simulated.SimulatedTunnel`, it opens a pty pair
-(:class:`~flagtrack.drivers.pty_link.PtyLink`), gives the client side's path as
+(:class:`~flagtrack.drivers.serial.pty_link.PtyLink`), gives the client side's path as
 :attr:`SimulatedSensorDevice.port` and answers from a thread; lines and Modbus RTU frames are split
 as the simulated tunnel splits them. The reading comes from ``signal(t_us)``
 on the device's own clock (µs since start plus ``clock_offset_us``). Faults for tests:
@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Literal
 
-from flagtrack.drivers.pty_link import PtyLink
+from flagtrack.drivers.serial.pty_link import PtyLink
 from flagtrack.drivers.sensor.modbus import ModbusSensorMap
-from flagtrack.drivers.tunnel import modbus_rtu as rtu
+from flagtrack.drivers.serial import modbus_rtu as rtu
 from flagtrack.drivers.tunnel.sim_responders import split_frames, split_lines
 
 log = logging.getLogger(__name__)

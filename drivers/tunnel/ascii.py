@@ -20,7 +20,7 @@ import re
 from dataclasses import dataclass
 
 from flagtrack.daemon.errors import DriverError
-from flagtrack.drivers.tunnel.serial_adapter import SerialAdapter
+from flagtrack.drivers.serial.adapter import SerialAdapter
 
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 from typing import Protocol
 
-from flagtrack.drivers.tunnel import modbus_rtu as rtu
+from flagtrack.drivers.serial import modbus_rtu as rtu
 from flagtrack.drivers.tunnel.modbus import ModbusMap
 from flagtrack.drivers.tunnel.sim_model import WATCHDOG_FAULT, TunnelModel
 

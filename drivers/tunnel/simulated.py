@@ -18,7 +18,7 @@ import threading
 import time
 from types import TracebackType
 
-from flagtrack.drivers.pty_link import PtyLink
+from flagtrack.drivers.serial.pty_link import PtyLink
 from flagtrack.drivers.tunnel.modbus import ModbusMap
 from flagtrack.drivers.tunnel.sim_model import SimParams, TunnelModel
 from flagtrack.drivers.tunnel.sim_responders import AsciiResponder, ModbusResponder, Responder

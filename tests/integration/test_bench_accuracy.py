@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from flagtrack.daemon.benchmark.tables import COLUMNS, SWEEP_COLUMNS
+from flagtrack.daemon.bench.accuracy_suite.tables import COLUMNS, SWEEP_COLUMNS
 from flagtrack.daemon.cli import main
 
 

@@ -11,7 +11,7 @@ import pytest
 from flagtrack.calibration import load_mapping
 from flagtrack.daemon.cli import main
 from flagtrack.drivers.sim.optics import tilted_pinhole
-from flagtrack.drivers.sim.recording import RecordingSpec, simulate_checkerboard, simulate_recording
+from flagtrack.drivers.sim.simulate import RecordingSpec, simulate_checkerboard, simulate_recording
 from flagtrack.drivers.sim.scenes import BlinkParams, CheckerboardSpec
 
 pytest.importorskip("cv2", reason="corner detection needs opencv-python-headless")

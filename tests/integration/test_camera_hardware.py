@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 from flagtrack.daemon.errors import DriverError
-from flagtrack.daemon.rig import load_rig
+from flagtrack.daemon.rig.config import load_rig
 from flagtrack.daemon.schema import CameraStatus, EventPacket
-from flagtrack.daemon.services.build import open_camera
+from flagtrack.daemon.rig.build import open_camera
 from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
 from flagtrack.daemon.transport import Bus, BusConfig
-from flagtrack.drivers.camera.packets import decode_packet
+from flagtrack.drivers.formats.packets import decode_packet
 from tests.fakes.fixtures import fake_dv, fake_hal, fake_nd  # noqa: F401 - fixtures
 from tests.integration.test_transport import free_port
 

@@ -14,7 +14,7 @@ from flagtrack.daemon.schema import CameraStatus, EventPacket, EventRate
 from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.camera.base import EndOfStream
-from flagtrack.drivers.camera.packets import PacketParams, Packetizer, decode_packet
+from flagtrack.drivers.formats.packets import PacketParams, Packetizer, decode_packet
 from flagtrack.drivers.camera.replay import ReplayCamera, ReplayConfig
 from flagtrack.drivers.formats import make_decoder, read_events, write_events
 from flagtrack.drivers.sim.quickline import WavyFlag, line_events

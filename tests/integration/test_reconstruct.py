@@ -22,7 +22,7 @@ from tqdm import tqdm
 from flagtrack.daemon.cli import main
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.tracker import Tracker
-from flagtrack.daemon.tracking_config import TrackingConfig
+from flagtrack.daemon.tracking.section import TrackingConfig
 from flagtrack.drivers.formats import write_events
 from flagtrack.drivers.formats.centreline import read_centrelines
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events

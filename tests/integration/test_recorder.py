@@ -131,7 +131,7 @@ def test_malformed_packets_are_counted_not_written(tmp_path: Path) -> None:
 
 
 def packets_of(events: np.ndarray, t_until_us: int) -> list:
-    from flagtrack.drivers.camera.packets import PacketParams, Packetizer
+    from flagtrack.drivers.formats.packets import PacketParams, Packetizer
 
     packetizer = Packetizer("evt3", 640, 480, PacketParams(packet_us=1000))
     return packetizer.push(events, None, t_until_us=t_until_us) + packetizer.flush()
@@ -373,7 +373,7 @@ def test_the_recorder_queue_is_bounded_by_bytes(tmp_path: Path) -> None:
             thread.join(10)
     sidecar = json.loads((tmp_path / "b.json").read_text())
     assert sidecar["dropped_packets"] == 60 - kept and sidecar["packets"] == kept
-    from flagtrack.drivers.camera.packets import decode_packet
+    from flagtrack.drivers.formats.packets import decode_packet
 
     want = np.concatenate([decode_packet("evt3", p.data, p.t_offset_us)[0] for p in packets[-kept:]])
     np.testing.assert_array_equal(read_events(tmp_path / "b.raw", strict=True).events, want)

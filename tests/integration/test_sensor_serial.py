@@ -10,14 +10,14 @@ import time
 import numpy as np
 import pytest
 
-from flagtrack.daemon.config import from_mapping
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.errors import ConfigError, DriverError
-from flagtrack.daemon.rig import RigConfig
+from flagtrack.daemon.rig.config import RigConfig
 from flagtrack.daemon.schema import SensorSamples
-from flagtrack.daemon.services.build import build_services
+from flagtrack.daemon.rig.build import build_services
 from flagtrack.daemon.services.runner import ServiceGroup
 from flagtrack.daemon.transport import Bus
-from flagtrack.drivers.sensor.config import SensorConfig, open_sensor
+from flagtrack.drivers.sensor.setup import SensorConfig, open_sensor
 from flagtrack.drivers.sensor.device import DeviceParams, SimulatedSensorDevice
 from flagtrack.drivers.sensor.modbus import ModbusSensorMap
 

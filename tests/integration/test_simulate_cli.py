@@ -13,7 +13,7 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.drivers.formats import read_events
 from flagtrack.drivers.formats.centreline import read_centrelines, write_centrelines
 from flagtrack.drivers.sim.kinematics import FlagKinematics, sample_kinematics
-from flagtrack.drivers.sim.recording import RecordingSpec, optics_and_kinematics
+from flagtrack.drivers.sim.simulate import RecordingSpec, optics_and_kinematics
 from flagtrack.drivers.sim.render import LaserLineScene
 from flagtrack.drivers.sim.scenes import simulate_events
 

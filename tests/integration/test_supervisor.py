@@ -13,12 +13,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from flagtrack.daemon.config import from_mapping
-from flagtrack.daemon.rig import RigConfig
-from flagtrack.daemon.services.build import build_services
+from flagtrack.daemon.typed_yaml import from_mapping
+from flagtrack.daemon.rig.config import RigConfig
+from flagtrack.daemon.rig.build import build_services
 from flagtrack.daemon.services.runner import ServiceGroup
 from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step
-from flagtrack.daemon.services.supervisor.config import FeedbackConfig
+from flagtrack.daemon.services.supervisor.section import FeedbackConfig
 from flagtrack.daemon.services.supervisor.monitor import point_state
 from flagtrack.daemon.sweep.runlog import completed_points, read_run
 from flagtrack.daemon.sweep.summary import SUMMARY_COLUMNS

@@ -17,7 +17,7 @@ from flagtrack.daemon.core.tracker import Tracker
 from flagtrack.daemon.schema import CentrelineMessage, TrackerStatus
 from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
 from flagtrack.daemon.services.tracker import TrackerService, TrackerServiceConfig
-from flagtrack.daemon.tracking_config import TrackingConfig
+from flagtrack.daemon.tracking.section import TrackingConfig
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.camera.replay import ReplayCamera, ReplayConfig
 from flagtrack.drivers.formats import open_events, write_events
@@ -81,7 +81,7 @@ def test_replay_through_the_bus_equals_offline_reconstruct(tmp_path: Path, metho
     events = np.concatenate(list(line_events(FLAG, 0, 150_000, 640, 480, QuickLineParams(noise_rate_hz=2e5))))
     path = tmp_path / "flag.raw"
     write_events(path, events, width=640, height=480, encoding="evt3")
-    config = CONFIG.with_overrides(method=__import__("flagtrack.daemon.tracking_config", fromlist=["Method"]).Method(method))
+    config = CONFIG.with_overrides(method=__import__("flagtrack.daemon.tracking.section", fromlist=["Method"]).Method(method))
     want = offline(path, config)
     got, statuses, service = live(path, config)
     assert len(want) > 500 and len(got) == len(want)
@@ -95,7 +95,7 @@ def test_bad_packets_and_gaps_are_counted_and_tracking_goes_on(tmp_path: Path) -
     """A message that is not a packet, a packet whose EVT bytes are corrupt and a lost packet are
     counted, and the packets around them are still tracked."""
     from flagtrack.daemon.schema import EventPacket
-    from flagtrack.drivers.camera.packets import PacketParams, Packetizer
+    from flagtrack.drivers.formats.packets import PacketParams, Packetizer
 
     events = np.concatenate(list(line_events(FLAG, 0, 40_000, 640, 480)))
     packets = Packetizer("evt3", 640, 480, PacketParams(packet_us=1000)).push(events, None, t_until_us=40_000)
@@ -134,7 +134,7 @@ def test_the_window_ending_with_a_packet_is_published_with_that_packet() -> None
     """The packet's horizon completes the window that ends where the packet ends: its centreline
     does not wait for the next packet (a millisecond later, live)."""
     from flagtrack.daemon.schema import EventPacket
-    from flagtrack.drivers.camera.packets import PacketParams, Packetizer
+    from flagtrack.drivers.formats.packets import PacketParams, Packetizer
 
     events = np.concatenate(list(line_events(FLAG, 0, 6_000, 640, 480)))
     events["t"] -= events["t"][0]  # windows of 250 µs from t = 0: every fourth ends with a 1 ms packet
@@ -172,7 +172,7 @@ def publish(pub, packets: list, seqs: list[int] | None = None, end: bool = False
 
 
 def packets_of(events: np.ndarray, t_until_us: int) -> list:
-    from flagtrack.drivers.camera.packets import PacketParams, Packetizer
+    from flagtrack.drivers.formats.packets import PacketParams, Packetizer
 
     packetizer = Packetizer("evt3", 640, 480, PacketParams(packet_us=1000))
     return packetizer.push(events, None, t_until_us=t_until_us) + packetizer.flush()

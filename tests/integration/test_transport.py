@@ -125,7 +125,7 @@ def test_large_packets_cross_with_and_without_shared_memory(shared_memory: bool)
 
 
 def test_shared_memory_is_off_unless_asked(tmp_path) -> None:
-    from flagtrack.daemon.rig import load_rig
+    from flagtrack.daemon.rig.config import load_rig
 
     assert zenoh_config(BusConfig()).get_json("transport/shared_memory/enabled") == "false"
     rig = tmp_path / "rig.yaml"

@@ -9,10 +9,10 @@ from collections.abc import Iterator
 import pytest
 import serial
 
-from flagtrack.daemon.config import from_mapping
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.errors import ConfigError, DriverError
 from flagtrack.drivers.tunnel.ascii import AsciiProtocol, AsciiTunnel
-from flagtrack.drivers.tunnel.serial_adapter import SerialAdapter
+from flagtrack.drivers.serial.adapter import SerialAdapter
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
 

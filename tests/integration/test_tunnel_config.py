@@ -8,7 +8,7 @@ import pytest
 
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.sweep.plan import Record, load_sweep_config, sweep_plan
-from flagtrack.drivers.tunnel.config import TunnelConfig, load_tunnel_config
+from flagtrack.drivers.tunnel.setup import TunnelConfig, load_tunnel_config
 from tests.conftest import REPO
 
 DEPLOY = REPO / "deploy"

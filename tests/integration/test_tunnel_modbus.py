@@ -8,7 +8,7 @@ from collections.abc import Iterator
 import pytest
 
 from flagtrack.daemon.errors import DriverError
-from flagtrack.drivers.tunnel import modbus_rtu as rtu
+from flagtrack.drivers.serial import modbus_rtu as rtu
 from flagtrack.drivers.tunnel.modbus import ModbusMap, ModbusTunnel
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel

@@ -12,7 +12,7 @@ import pytest
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.tunnel.ascii import AsciiTunnel
 from flagtrack.drivers.tunnel.base import TunnelLink
-from flagtrack.drivers.tunnel.config import TunnelConfig, open_tunnel
+from flagtrack.drivers.tunnel.setup import TunnelConfig, open_tunnel
 from flagtrack.drivers.tunnel.modbus import ModbusTunnel
 from flagtrack.drivers.tunnel.safe import SafeTunnel, SafetyParams, TunnelAborted
 from flagtrack.drivers.tunnel.sim_model import SimParams

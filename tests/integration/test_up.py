@@ -174,9 +174,9 @@ def test_the_rig_does_its_slow_one_off_work_before_its_services_start() -> None:
     matplotlib is imported (else the summary figure stalls the twin camera at the end of a sweep)."""
     code = """
 import sys
-from flagtrack.daemon.commands.up import prepare_services
-from flagtrack.daemon.config import from_mapping
-from flagtrack.daemon.rig import RigConfig
+from flagtrack.daemon.rig.run import prepare_services
+from flagtrack.daemon.typed_yaml import from_mapping
+from flagtrack.daemon.rig.config import RigConfig
 from flagtrack.daemon.core.kernels import run_updates
 from flagtrack.drivers.formats._packet_kernels import encode_packets
 from flagtrack.drivers.sim.quickline import _fill_events
@@ -196,15 +196,15 @@ print(len(run_updates.signatures), len(encode_packets.signatures), len(_fill_eve
 def test_a_failing_preparation_is_one_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
     """A broken install (here: matplotlib cannot be imported) stops the rig before anything opens,
     with one line for the user instead of a traceback."""
-    from flagtrack.daemon.commands.up import prepare_services
     from flagtrack.daemon.errors import FlagtrackError
-    from flagtrack.daemon.rig import RigConfig
-    from flagtrack.daemon.sweep import summary
+    from flagtrack.daemon.rig.config import RigConfig
+    from flagtrack.daemon.rig.run import prepare_services
+    from flagtrack.daemon.sweep import figures
 
     def broken() -> None:
         raise ImportError("No module named 'matplotlib'")
 
-    monkeypatch.setattr(summary, "load_figure_modules", broken)
+    monkeypatch.setattr(figures, "load_figure_modules", broken)
     with pytest.raises(FlagtrackError, match="preparing the services failed .*ImportError.*matplotlib"):
         prepare_services(RigConfig(), ["supervisor"])
 
@@ -255,7 +255,7 @@ def test_bad_paths_and_camera_settings_are_one_line_before_anything_opens(tmp_pa
 def test_files_are_checked_for_the_services_that_run_only(tmp_path: Path) -> None:
     """A tracker host's copy of the rig does not need the camera host's recording."""
     from flagtrack.daemon.errors import ConfigError
-    from flagtrack.daemon.rig import load_rig
+    from flagtrack.daemon.rig.config import load_rig
 
     config = tmp_path / "rig.yaml"
     config.write_text(f"camera: {{adapter: replay, replay: {{path: {tmp_path}/nope.raw}}}}\n{TRACKER}"

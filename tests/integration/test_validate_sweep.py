@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 
 from flagtrack.daemon.cli import main
-from flagtrack.daemon.config import from_mapping
-from flagtrack.daemon.rig import RigConfig
-from flagtrack.daemon.services.build import build_services
+from flagtrack.daemon.typed_yaml import from_mapping
+from flagtrack.daemon.rig.config import RigConfig
+from flagtrack.daemon.rig.build import build_services
 from flagtrack.daemon.services.runner import ServiceGroup
 from flagtrack.daemon.sweep.runlog import read_run
 from flagtrack.daemon.transport import Bus

@@ -12,7 +12,7 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate
 from flagtrack.daemon.services.viewer import RerunLogger, ViewerConfig, ViewerService, age_colours, open_recording
 from flagtrack.daemon.transport import Bus, BusConfig
-from flagtrack.drivers.camera.packets import Packetizer
+from flagtrack.drivers.formats.packets import Packetizer
 from flagtrack.drivers.sim.quickline import WavyFlag, line_events
 from tests.integration.test_transport import free_port, wait_for
 

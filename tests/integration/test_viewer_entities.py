@@ -12,7 +12,7 @@ import pytest
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, TunnelState
 from flagtrack.daemon.services.viewer import RerunLogger, ViewerConfig, open_recording
-from flagtrack.drivers.camera.packets import Packetizer
+from flagtrack.drivers.formats.packets import Packetizer
 from flagtrack.drivers.sim.quickline import WavyFlag, line_events
 
 N_T, N_S, N_J = 6, 9, 10

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flagtrack.daemon.benchmark import plan, tables
-from flagtrack.daemon.benchmark.evaluate import loss_time_cycles
-from flagtrack.daemon.benchmark.report import sweep_section, targets_section
+from flagtrack.daemon.bench.accuracy_suite import plan, tables
+from flagtrack.daemon.bench.accuracy_suite.evaluate import loss_time_cycles
+from flagtrack.daemon.bench.accuracy_suite.report import sweep_section, targets_section
 
 
 def _row(part: str, kinematics: int, level: float, method: str, delta: float, *, joints: int = 10,

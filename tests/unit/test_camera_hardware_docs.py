@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from flagtrack.daemon.rig import load_rig
-from flagtrack.daemon.services.build import open_camera
+from flagtrack.daemon.rig.config import load_rig
+from flagtrack.daemon.rig.build import open_camera
 from tests.fakes.fixtures import fake_dv, fake_hal, fake_nd  # noqa: F401 - fixtures
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "cameras.md"

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from flagtrack.daemon.config import (
+from flagtrack.daemon.typed_yaml import (
     from_mapping, load_yaml, require_file, require_folder, require_output_file, to_mapping,
 )
 from flagtrack.daemon.errors import ConfigError

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from flagtrack.daemon.rig import check_rig, load_rig
+from flagtrack.daemon.rig.config import check_rig, load_rig
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 RIGS = sorted(DEPLOY.glob("rig-*.yaml"))

@@ -10,7 +10,7 @@ import sys
 import numpy as np
 from flagtrack.daemon.core.events import make_events
 from flagtrack.daemon.core.tracker import TrackerParams, track
-from flagtrack.daemon.tracking_config import TrackingConfig
+from flagtrack.daemon.tracking.section import TrackingConfig
 
 t = np.arange(2000, dtype=np.int64) * 5
 events = make_events(t, 100 + (np.arange(2000) % 50), np.full(2000, 240), np.ones(2000))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from flagtrack.daemon.core.onset import FlagState, OnsetDetector, OnsetParams, detect_states, transitions
-from flagtrack.daemon.sweep.onset_eval import RateModel, detection_delays, false_alarms_per_hour, rate_trace
+from flagtrack.daemon.bench.onset_traces import RateModel, detection_delays, false_alarms_per_hour, rate_trace
 
 DT = 0.1
 STILL_HZ = 2e4
@@ -127,7 +127,7 @@ def test_synthetic_traces_are_seeded_and_have_the_modelled_ratio() -> None:
 
 
 def test_defaults_on_the_measurement_traces() -> None:
-    """A short version of `python -m flagtrack.daemon.sweep.onset_eval` (numbers in docs/tunnel.md)."""
+    """A short version of `flagtrack bench onset` (numbers in docs/tunnel.md)."""
     params = OnsetParams()
     assert false_alarms_per_hour(params, RateModel(), hours=1, seed=11) == 0.0
     delays = detection_delays(params, dataclasses.replace(RateModel(), flap_ratio=10.0), trials=5, seed=12)

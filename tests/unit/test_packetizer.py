@@ -7,7 +7,7 @@ import pytest
 
 from flagtrack.daemon.core.events import TRIGGER_DTYPE, make_events
 from flagtrack.daemon.errors import FormatError
-from flagtrack.drivers.camera.packets import PacketParams, Packetizer, decode_packet, slot_table
+from flagtrack.drivers.formats.packets import PacketParams, Packetizer, decode_packet, slot_table
 from flagtrack.drivers.formats.codec import LOOP_US, Encoder
 
 

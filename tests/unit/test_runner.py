@@ -80,7 +80,7 @@ def test_shutdown_names_services_that_do_not_stop() -> None:
 _GROWING_ARRAYS = """
 import resource, sys
 import numpy as np
-from flagtrack.daemon.services.runner import keep_freed_memory
+from flagtrack.daemon.process import keep_freed_memory
 applied = keep_freed_memory() if sys.argv[1] == "keep" else None
 np.ones(1)
 before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
@@ -128,3 +128,29 @@ def test_a_failing_end_hook_does_not_hide_the_services_outcome() -> None:
 
     report = run_services([Finishing("camera"), Failing("recorder")], handle_signals=False, on_service_end=hook)
     assert report.finished == ["camera"] and isinstance(report.errors["recorder"], RuntimeError)
+
+
+def test_signal_handlers_are_restored_after_the_run() -> None:
+    """The runner takes SIGINT/SIGTERM only while its services run (uvicorn's capture_signals)."""
+    import signal
+
+    def mine(signum: int, frame: object) -> None:  # a handler the host program had
+        pass
+
+    before = {s: signal.signal(s, mine) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        seen: dict[int, object] = {}
+
+        @dataclass
+        class Peeking:
+            name: str = "camera"
+
+            def run(self, stop: threading.Event) -> None:
+                seen.update({s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)})
+
+        run_services([Peeking()], stop_when_any_finishes=["camera"], handle_signals=True)
+        assert all(handler is not mine for handler in seen.values())  # the runner's own during the run
+        assert signal.getsignal(signal.SIGINT) is mine and signal.getsignal(signal.SIGTERM) is mine
+    finally:
+        for s, old in before.items():
+            signal.signal(s, old)

@@ -13,6 +13,7 @@ import pytest
 from flagtrack.daemon import schema
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import SchemaError
+from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import (
     CameraStatus, CentrelineMessage, EventPacket, Keys, SensorSamples, TunnelCommand, decode, encode,
 )
@@ -212,11 +213,11 @@ def test_sensor_samples_of_the_first_layout_still_decode() -> None:
 def test_descriptor_checks_cache_no_oversized_shape() -> None:
     """A shape of a million zero dimensions is refused without being kept in the descriptor cache
     (any publisher could otherwise make a service hold megabytes per message)."""
-    before = schema._blob_layout.cache_info().currsize
+    before = schema.codec._blob_layout.cache_info().currsize
     data = with_blobs(centreline_message(), _set(0, 2, [0] * 1_000_000))
     with pytest.raises(SchemaError, match="bad payload descriptor"):
         decode(data)
-    assert schema._blob_layout.cache_info().currsize == before
+    assert schema.codec._blob_layout.cache_info().currsize == before
 
 
 def test_object_arrays_are_not_sent() -> None:
@@ -277,7 +278,7 @@ def test_arrays_that_agree_decode_whatever_their_sizes() -> None:
 
 def test_problem_log_logs_the_first_at_once_then_rate_limited_summaries(caplog: pytest.LogCaptureFixture) -> None:
     logger = logging.getLogger("flagtrack.test.problems")
-    problems = schema.ProblemLog(logger, "svc", interval_s=3600.0)
+    problems = ProblemLog(logger, "svc", interval_s=3600.0)
     with caplog.at_level(logging.WARNING, logger="flagtrack.test.problems"):
         for k in range(1000):
             problems.add("gaps", f"gap {k}", 2)

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 import yaml
 
-from flagtrack.daemon.config import from_mapping
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.errors import ConfigError
-from flagtrack.daemon.rig import RigConfig, load_rig
-from flagtrack.drivers.camera.packets import Packetizer, decode_packet
+from flagtrack.daemon.rig.config import RigConfig, load_rig
+from flagtrack.drivers.formats.packets import Packetizer, decode_packet
 from flagtrack.drivers.camera.simulated import SimulatedCamera, SimulatedCameraConfig, fast_forward, trigger_edges
 from flagtrack.drivers.sensor.ascii import AsciiSensorProtocol, LineParser
-from flagtrack.drivers.sensor.config import SensorConfig
+from flagtrack.drivers.sensor.setup import SensorConfig
 from flagtrack.drivers.sensor.modbus import ModbusSensorMap
 
 REPO = Path(__file__).resolve().parents[2]

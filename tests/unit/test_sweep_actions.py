@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from flagtrack.daemon.config import from_mapping
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.sweep.actions import CommandAction, PauseAction, parse_action, run_command
 from flagtrack.daemon.sweep.plan import Action, SweepConfig, sweep_plan

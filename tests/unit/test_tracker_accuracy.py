@@ -22,7 +22,7 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.chain import ChainState
 from flagtrack.daemon.core.denoise import BackgroundActivityFilter
 from flagtrack.daemon.core.tracker import Tracker, TrackerParams
-from flagtrack.daemon.tracking_config import Method, TrackingConfig
+from flagtrack.daemon.tracking.section import Method, TrackingConfig
 
 DURATION_S = 0.1
 LIMITS = {"clean": (0.005, 0.01), "noisy": (0.0075, 0.0125), "defects": (0.0075, 0.0125),

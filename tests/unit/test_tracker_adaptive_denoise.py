@@ -7,7 +7,7 @@ import pytest
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.tracker import Tracker, track
-from flagtrack.daemon.tracking_config import TrackingConfig
+from flagtrack.daemon.tracking.section import TrackingConfig
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
 
 FLAG = WavyFlag()

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from flagtrack.daemon.errors import ConfigError
-from flagtrack.daemon.tracking_config import Method, TrackingConfig, load_tracking_config
+from flagtrack.daemon.tracking.section import Method, TrackingConfig, load_tracking_config
 
 
 def _write(tmp_path: Path, text: str) -> Path:
@@ -99,3 +99,28 @@ def test_overrides_replace_only_given_values() -> None:
 
 def test_missing_section_gives_defaults(tmp_path: Path) -> None:
     assert load_tracking_config(_write(tmp_path, "camera: {}\n")) == TrackingConfig()
+
+
+def test_the_denoise_section_is_the_core_filter_parameters_with_the_robust_default(tmp_path: Path) -> None:
+    """One definition of each filter parameter: the section is the core's DenoiseParams; keys it does not
+    give keep the robust method's adaptive default (max 3 neighbours), not the classic filter's 1."""
+    from flagtrack.daemon.core.denoise import DenoiseParams
+    from flagtrack.daemon.tracking.section import ROBUST_DENOISE
+
+    config = load_tracking_config(_write(tmp_path, "tracker: {root: [0, 0], length: 100, denoise: {window_us: 800}}"))
+    assert isinstance(config.denoise, DenoiseParams)
+    assert config.denoise.window_us == 800 and config.denoise.max_neighbours == ROBUST_DENOISE.max_neighbours == 3
+    assert DenoiseParams().max_neighbours == 1  # the classic filter stays the core's own default
+    assert TrackingConfig().denoise == ROBUST_DENOISE
+
+
+def test_the_tracker_section_defaults_are_the_chain_defaults() -> None:
+    """The section's chain keys default to ChainParams' own values (no second definition drifting)."""
+    import dataclasses
+
+    from flagtrack.daemon.core.chain import ChainParams
+
+    chain = {f.name: f.default for f in dataclasses.fields(ChainParams)}
+    section = TrackingConfig()
+    assert (section.joints, section.direction_deg, section.alpha, section.angle_limit_deg) == (
+        chain["n_joints"], chain["direction_deg"], chain["alpha"], chain["angle_limit_deg"])

@@ -7,7 +7,7 @@ import numpy as np
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.events import make_events
 from flagtrack.daemon.core.tracker import Tracker
-from flagtrack.daemon.tracking_config import TrackingConfig
+from flagtrack.daemon.tracking.section import TrackingConfig
 
 
 def _assert_at_rest_without_evidence(batch: CentrelineBatch, t_ms: list[float]) -> None:

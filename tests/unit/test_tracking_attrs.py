@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from flagtrack.daemon.errors import ConfigError
-from flagtrack.daemon.tracking_config import Method, SegmentConfig, TrackingConfig, load_tracking_config
+from flagtrack.daemon.core.windows import WindowSegment as SegmentConfig
+from flagtrack.daemon.tracking.section import Method, TrackingConfig, load_tracking_config
 
 
 def test_attrs_hold_effective_values() -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from flagtrack.daemon.services.supervisor.config import FeedbackConfig
+from flagtrack.daemon.services.supervisor.section import FeedbackConfig
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ import numpy as np
 from flagtrack.daemon.errors import DriverError, FlagtrackError
 from flagtrack.daemon.schema import RecorderCommand, SupervisorState, TunnelState
 from flagtrack.daemon.services.supervisor.analysis import point_metrics
-from flagtrack.daemon.services.supervisor.config import SupervisorConfig
+from flagtrack.daemon.services.supervisor.section import SupervisorConfig
 from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor, point_state
 from flagtrack.daemon.sweep.actions import ActionOutcome, PauseAction, parse_action, run_command
@@ -372,7 +372,7 @@ def _last_seconds(batches: list, window_s: float) -> list:
 
 
 def _mapping(obj: Any) -> Any:
-    from flagtrack.daemon.config import to_mapping
+    from flagtrack.daemon.typed_yaml import to_mapping
 
     return to_mapping(obj)
 

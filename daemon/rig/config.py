@@ -21,43 +21,38 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from flagtrack.daemon.config import (
+from flagtrack.daemon.typed_yaml import (
     from_mapping, load_yaml, require_file, require_folder, require_output_file, to_mapping,
 )
 from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.services.camera import CameraStreamConfig
 from flagtrack.daemon.services.recorder import RecorderConfig, recording_base
-from flagtrack.daemon.services.supervisor.config import SupervisorConfig
+from flagtrack.daemon.services.supervisor.section import SupervisorConfig
 from flagtrack.daemon.services.tracker import TrackerServiceConfig
 from flagtrack.daemon.services.viewer import ViewerConfig, effective_sink
-from flagtrack.daemon.tracking_config import TrackingConfig
+from flagtrack.daemon.tracking.section import TrackingConfig
+from flagtrack.daemon.tracking.setup import resolve_calibration
 from flagtrack.daemon.transport import BusConfig
 from flagtrack.drivers.camera.replay import ReplayConfig
 from flagtrack.drivers.camera.simulated import SimulatedCameraConfig
-from flagtrack.drivers.sensor.config import SensorConfig
-from flagtrack.drivers.tunnel.config import TunnelConfig
+from flagtrack.drivers.sensor.setup import SensorConfig
+from flagtrack.drivers.tunnel.setup import TunnelConfig
 
 SERVICE_NAMES = ("camera", "tracker", "recorder", "viewer", "supervisor", "sensor")
 HARDWARE_ADAPTERS = ("prophesee", "metavision", "inivation")
 
 
 @dataclass(frozen=True)
-class CameraConfig:
-    """The camera and how its stream is cut.
+class CameraConfig(CameraStreamConfig):
+    """The ``camera:`` section: the adapter, and how its stream is cut (the camera service's own fields).
 
     Attributes:
-        id: camera name in key expressions.
         adapter: ``replay`` (a file), ``simulated`` (digital twin), ``prophesee``, ``metavision``, ``inivation``.
-        packet_us, max_packet_events: packet size by time and by count.
-        rate_interval_s: camera time per event-rate statistic.
         replay, simulated: settings of those adapters.
         hardware: settings of a hardware adapter (see docs/cameras.md), passed to it as they are.
     """
 
-    id: str = "cam0"
     adapter: Literal["replay", "simulated", "prophesee", "metavision", "inivation"] = "simulated"
-    packet_us: int = 1000
-    max_packet_events: int = 65_536
-    rate_interval_s: float = 0.1
     replay: ReplayConfig | None = None
     simulated: SimulatedCameraConfig = field(default_factory=SimulatedCameraConfig)
     hardware: dict[str, Any] = field(default_factory=dict)
@@ -127,8 +122,6 @@ def load_rig(path: str | Path, services: Sequence[str] | None = None) -> RigConf
         rig_name = data.get("rig", "default")
         data = {**data, "bus": {**bus, "namespace": f"flagtrack/{rig_name}"}}
     rig = from_mapping(RigConfig, {**data, "path": str(path)}, path=str(path))
-    from flagtrack.daemon.commands._tracking_args import resolve_calibration
-
     rig = dataclasses.replace(rig, tracker=resolve_calibration(rig.tracker, Path(path).parent))
     check_rig(rig, rig.services if services is None else services)
     return rig
@@ -141,7 +134,7 @@ def check_rig(rig: RigConfig, services: Sequence[str]) -> None:
     exist or be creatable (``recorder.directory`` and ``path``, the ``.rrd`` file's, ``supervisor.runs_dir``);
     a hardware camera's settings are checked as far as they can be without the device (bias names,
     ROI form); what only the device can tell (an ROI that fits its sensor) is checked when ``up``
-    opens it, before anything else (:func:`flagtrack.daemon.services.build.open_hardware_camera`).
+    opens it, before anything else (:func:`flagtrack.daemon.rig.build.open_hardware_camera`).
 
     Raises:
         ConfigError: naming the key and the rig file.

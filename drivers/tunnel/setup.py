@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from flagtrack.daemon.config import from_mapping, load_yaml
+from flagtrack.daemon.typed_yaml import from_mapping, load_yaml
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.drivers.tunnel.ascii import AsciiProtocol, AsciiTunnel
 from flagtrack.drivers.tunnel.base import TunnelLink

@@ -1,4 +1,4 @@
-"""Reading the recording of a blinking board: the first seconds of an event file, time-sorted."""
+"""The first seconds of an event file, time-sorted, with the sensor size (a calibration board's recording)."""
 
 from __future__ import annotations
 
@@ -7,14 +7,14 @@ from pathlib import Path
 
 import numpy as np
 
-from flagtrack.calibration.errors import CalibrationError
 from flagtrack.daemon.core.events import empty_events
+from flagtrack.daemon.errors import FormatError
 
 log = logging.getLogger(__name__)
 
 
-def read_board_recording(path: str | Path, max_s: float | None = 10.0,
-                         size: tuple[int, int] | None = None) -> tuple[np.ndarray, tuple[int, int]]:
+def read_excerpt(path: str | Path, max_s: float | None = 10.0,
+                 size: tuple[int, int] | None = None) -> tuple[np.ndarray, tuple[int, int]]:
     """Events of the first ``max_s`` seconds of ``path`` (any event file flagtrack reads), and the sensor size.
 
     Args:
@@ -23,8 +23,7 @@ def read_board_recording(path: str | Path, max_s: float | None = 10.0,
         size: (width, height) if the file does not give it (default: the file's, else max x/y + 1).
 
     Raises:
-        CalibrationError: the file holds no events.
-        FormatError: the file cannot be decoded.
+        FormatError: the file cannot be decoded, or holds no events.
     """
     from flagtrack.drivers.formats import open_events
 
@@ -43,7 +42,7 @@ def read_board_recording(path: str | Path, max_s: float | None = 10.0,
             parts.append(events if t_end is None else events[events["t"] <= t_end])
     events = np.concatenate(parts) if parts else empty_events()
     if not len(events):
-        raise CalibrationError("no events in the recording", path=str(path))
+        raise FormatError("no events in the recording", path=str(path))
     if np.any(np.diff(events["t"]) < 0):
         events = events[np.argsort(events["t"], kind="stable")]
     if size is None:

@@ -44,14 +44,19 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     return data
 
 
-def from_mapping(cls: type[T], data: Any, *, path: str | None = None, key: str = "") -> T:
+def from_mapping(cls: type[T], data: Any, *, path: str | None = None, key: str = "", base: T | None = None) -> T:
     """Build dataclass ``cls`` from ``data``, recursively, with checked types.
+
+    A nested section starts from its field's default value: keys it does not give keep that value
+    (so a section can be a core parameter dataclass whose default in this place differs from the
+    class's own defaults, with one definition of each parameter).
 
     Args:
         cls: a dataclass type; fields without defaults are required.
         data: the mapping read from YAML (``None`` means all defaults).
         path: the file the mapping came from, for error messages.
         key: dotted prefix of this section in the file, for error messages.
+        base: an instance whose values stand for the keys ``data`` does not give (instead of ``cls``'s defaults).
 
     Raises:
         ConfigError: unknown key, missing required key, or a value of the wrong type; the message
@@ -70,7 +75,13 @@ def from_mapping(cls: type[T], data: Any, *, path: str | None = None, key: str =
     for name, field in fields.items():
         sub = _join(key, name)
         if name in data:
-            values[name] = _convert(hints[name], data[name], path=path, key=sub)
+            section = _default_section(field) if base is None else getattr(base, name)
+            if section is not None and isinstance(data[name], Mapping):
+                values[name] = from_mapping(type(section), data[name], path=path, key=sub, base=section)
+            else:
+                values[name] = _convert(hints[name], data[name], path=path, key=sub)
+        elif base is not None:
+            values[name] = getattr(base, name)
         elif field.default is dataclasses.MISSING and field.default_factory is dataclasses.MISSING:
             raise ConfigError("required key is missing", key=sub, path=path)
     try:
@@ -91,6 +102,17 @@ def with_path(exc: ConfigError, path: str | None) -> ConfigError:
     prefix = f"key '{exc.key}': " if exc.key else ""
     message = text[len(prefix):] if prefix and text.startswith(prefix) else text
     return ConfigError(message, key=exc.key, path=path)
+
+
+def _default_section(field: dataclasses.Field) -> Any:
+    """The field's default value if it is a config section (a dataclass instance), else None."""
+    if field.default is not dataclasses.MISSING:
+        default = field.default
+    elif field.default_factory is not dataclasses.MISSING:
+        default = field.default_factory()
+    else:
+        return None
+    return default if dataclasses.is_dataclass(default) and not isinstance(default, type) else None
 
 
 @functools.cache

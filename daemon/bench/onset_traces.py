@@ -7,13 +7,11 @@ multiplies it by ``flap_ratio`` (10-100, 5 for a weak near-onset flutter); event
 Poisson noise. Scores: false alarms per hour on still traces, missed detections, and detection
 delays of onset (still -> flapping) and decay (flapping -> still).
 
-Run ``python -m flagtrack.daemon.sweep.onset_eval`` (about a minute) to print the table of
-docs/tunnel.md; pass ``--grid`` to compare parameter sets.
+``flagtrack bench onset`` (about a minute) prints the table of docs/tunnel.md.
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
 from dataclasses import dataclass
@@ -160,22 +158,3 @@ GRID = {
     "on x3 / off x1.5": {"on_ratio": 3.0, "off_ratio": 1.5},
     "on x6 / off x3": {"on_ratio": 6.0, "off_ratio": 3.0},
 }
-
-
-def main() -> None:
-    """Print the measurement table (and the grid with ``--grid``)."""
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--hours", type=float, default=20.0, help="hours of still traces for false alarms")
-    parser.add_argument("--trials", type=int, default=40, help="onset/decay trials per flapping ratio")
-    parser.add_argument("--grid", action="store_true", help="also score the parameter variants of GRID")
-    args = parser.parse_args()
-    variants = GRID if args.grid else {"defaults": {}}
-    for name, changes in variants.items():
-        params = dataclasses.replace(OnsetParams(), **changes)
-        print(f"== {name}: {params}")
-        for row in report(params, args.hours, args.trials):
-            print(row)
-
-
-if __name__ == "__main__":
-    main()

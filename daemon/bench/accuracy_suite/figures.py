@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from flagtrack.daemon.benchmark.plan import LOSS_THRESHOLD
-from flagtrack.daemon.benchmark.tables import PAPER_FAMILY
+from flagtrack.daemon.bench.accuracy_suite.plan import LOSS_THRESHOLD
+from flagtrack.daemon.bench.accuracy_suite.tables import PAPER_FAMILY
 
 STYLE = {"paper": ("tab:red", "s"), "robust-classic": ("tab:blue", "^"), "robust": ("tab:green", "o")}
 

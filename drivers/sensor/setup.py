@@ -109,7 +109,7 @@ def open_sensor(cfg: SensorConfig, camera: Any = None, rig_path: str | None = No
                                       parity=cfg.parity, stopbits=cfg.stopbits, bytesize=cfg.bytesize,
                                       poll=cfg.poll, units=cfg.units)
     from flagtrack.drivers.sensor.ascii import AsciiSensor
-    from flagtrack.drivers.tunnel.serial_adapter import SerialAdapter
+    from flagtrack.drivers.serial.adapter import SerialAdapter
 
     adapter = SerialAdapter(cfg.port, cfg.baudrate, cfg.timeout_s, cfg.ascii.eol.encode("ascii"), parity=cfg.parity,
                             stopbits=cfg.stopbits, bytesize=cfg.bytesize)

@@ -4,57 +4,25 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.config import with_path
+from flagtrack.daemon.typed_yaml import with_path
 from flagtrack.daemon.errors import ConfigError, DriverError, FlagtrackError
-from flagtrack.daemon.rig import HARDWARE_ADAPTERS, CameraConfig, RigConfig
-from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
+from flagtrack.daemon.rig.config import HARDWARE_ADAPTERS, CameraConfig, RigConfig
+from flagtrack.daemon.services.camera import CameraService
 from flagtrack.daemon.services.recorder import RecorderService
 from flagtrack.daemon.services.runner import Service
+from flagtrack.daemon.services.supervisor.service import FlagGeometry, SupervisorService
 from flagtrack.daemon.services.tracker import TrackerService
 from flagtrack.daemon.services.viewer import ViewerService
+from flagtrack.daemon.tracking.setup import TrackingSetup, tracking_setup
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.camera.base import Camera, CameraInfo
+from flagtrack.drivers.tunnel.base import WindTunnel
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class TrackerSetup:
-    """What the tracker service needs, checked up front: a factory of core trackers and the units."""
-
-    factory: Callable[[], Any]
-    units: str
-    attrs: dict[str, Any]
-
-
-def tracker_setup(rig: RigConfig) -> TrackerSetup:
-    """Check the ``tracker:`` section (root, length, ranges, calibration file) and prepare the core.
-
-    Raises:
-        ConfigError: naming the key and the rig file.
-    """
-    from flagtrack.daemon.core.tracker import Tracker
-
-    params = rig.tracker.tracker_params(path=rig.path)
-    mapping = load_calibration(rig.tracker.calibration, rig.path)
-    units = "px" if mapping is None else getattr(mapping, "units", "m")
-    attrs = {**rig.tracker.attrs(), "units": units}
-    return TrackerSetup(lambda: Tracker(params, mapping=mapping), units, attrs)
-
-
-def load_calibration(path: Any, rig_path: str | None) -> Any:
-    """The pixel -> plane mapping of a calibration file, or None."""
-    if path is None:
-        return None
-    try:
-        from flagtrack.calibration import load_mapping  # type: ignore[attr-defined]
-    except ImportError:
-        raise ConfigError("calibration files are not supported by this build", key="tracker.calibration",
-                          path=rig_path) from None
-    return load_mapping(path)
 
 
 def open_camera(cfg: CameraConfig, speed_source: Callable[[], float] | None = None, rig_path: str | None = None) -> Camera:
@@ -154,8 +122,8 @@ def build_services(
     names: Sequence[str],
     *,
     exit_at_end_of_stream: bool = False,
-    resume_dir: Any = None,
-    tracker: TrackerSetup | None = None,
+    resume_dir: Path | None = None,
+    tracker: TrackingSetup | None = None,
     camera: Camera | None = None,
 ) -> list[Service]:
     """Instantiate the named services of ``rig`` on ``bus`` (subscribers before the camera).
@@ -163,15 +131,14 @@ def build_services(
     A simulated camera reads the wind speed from the simulated tunnel when the supervisor runs in
     this process, else from the tunnel state on the bus. A simulated point sensor reads the
     simulated camera's flag, so both must run in this process. ``tracker``: the rig's
-    :func:`tracker_setup`, if the caller already made it; ``camera``: the camera, if the caller opened
+    :func:`~flagtrack.daemon.tracking.setup.tracking_setup`, if the caller already made it; ``camera``: the camera, if the caller opened
     it (:func:`open_hardware_camera`).
     """
-    setup = (tracker or tracker_setup(rig)) if "tracker" in names else None
+    setup = (tracker or tracking_setup(rig.tracker, path=rig.path)) if "tracker" in names else None
     services: list[Service] = []
     speed_source: Callable[[], float] | None = None
     if "supervisor" in names:
-        from flagtrack.daemon.services.supervisor import build_supervisor
-        from flagtrack.drivers.tunnel.config import open_tunnel
+        from flagtrack.drivers.tunnel.setup import open_tunnel
 
         assert rig.tunnel is not None  # checked by RigConfig
         tunnel = open_tunnel(rig.tunnel)
@@ -199,11 +166,15 @@ def build_services(
     if "sensor" in names:
         services.append(sensor_service(rig, bus, camera))
     if camera is not None:
-        stream = CameraStreamConfig(id=rig.camera.id, packet_us=rig.camera.packet_us,
-                                    max_packet_events=rig.camera.max_packet_events,
-                                    rate_interval_s=rig.camera.rate_interval_s)
-        services.append(CameraService(bus, stream, camera))
+        services.append(CameraService(bus, rig.camera, camera))
     return services
+
+
+def build_supervisor(rig: RigConfig, bus: Bus, tunnel: WindTunnel, resume_dir: Path | None = None) -> SupervisorService:
+    """The supervisor of ``rig``, with its opened (not started) tunnel."""
+    tracker = rig.tracker
+    flag = FlagGeometry(float(tracker.length or 1.0), tuple(tracker.root or (0.0, 0.0)), float(tracker.direction_deg))
+    return SupervisorService(bus, rig.supervisor, tunnel, rig.camera.id, flag, rig.snapshot(), resume_dir, rig.sensor)
 
 
 def sensor_service(rig: RigConfig, bus: Bus, camera: Camera | None) -> Service:
@@ -213,7 +184,7 @@ def sensor_service(rig: RigConfig, bus: Bus, camera: Camera | None) -> Service:
         ConfigError: a simulated sensor without the simulated camera in this process.
     """
     from flagtrack.daemon.services.sensor import SensorService
-    from flagtrack.drivers.sensor.config import open_sensor
+    from flagtrack.drivers.sensor.setup import open_sensor
 
     cfg = rig.sensor
     if cfg is None:

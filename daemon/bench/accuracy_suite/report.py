@@ -9,8 +9,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.benchmark import figures, tables
-from flagtrack.daemon.benchmark.runner import RunResult, RunSettings
+from flagtrack.daemon.bench.accuracy_suite import figures, tables
+from flagtrack.daemon.bench.accuracy_suite.runner import RunResult, RunSettings
 
 NOTES = """\
 ## How our set-up differs from the paper's

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from flagtrack.daemon.benchmark.plan import METHODS, PAPER_JOINTS, PAPER_TAU_OVER_T
+from flagtrack.daemon.bench.accuracy_suite.plan import METHODS, PAPER_JOINTS, PAPER_TAU_OVER_T
 
 RECORDING_COLUMNS = ("name", "part", "kinematics", "seed", "level", "frequency_hz", "wavelength_over_l", "w_travel",
                      "peak_to_peak_over_l", "duration_s", "leak_rate_hz", "shot_noise_hz", "n_events")

@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.config import from_mapping, load_yaml, to_mapping
+from flagtrack.daemon.core.denoise_params import DenoiseParams
+from flagtrack.daemon.core.windows import WindowSegment
+from flagtrack.daemon.typed_yaml import from_mapping, load_yaml, to_mapping
 from flagtrack.daemon.errors import ConfigError
 
 SECTION = "tracker"
@@ -28,31 +30,16 @@ class Method(enum.Enum):
 
 
 @dataclass(frozen=True)
-class DenoiseConfig:
-    """Background-activity filter of the robust method (docs/tracking.md, docs/benchmark.md).
-
-    An event passes when ``k`` of its 8 neighbouring pixels fired within ``window_us`` before it;
-    ``k`` adapts between ``min_neighbours`` and ``max_neighbours`` to the measured background noise
-    (``noise_pass``: the largest chance a noise event passes), measured over blocks of
-    ``block_us``. ``max_neighbours: 1`` is the classic filter (the robust method before the
-    accuracy benchmark).
-    """
+class DenoiseSection(DenoiseParams):
+    """The ``denoise:`` section: the core filter's parameters (:class:`DenoiseParams`, defined there
+    once) and whether the robust method filters at all (``enabled``)."""
 
     enabled: bool = True
-    window_us: int = 500
-    min_neighbours: int = 1
-    max_neighbours: int = 3
-    noise_pass: float = 0.03
-    block_us: int = 2_000
 
 
-@dataclass(frozen=True)
-class SegmentConfig:
-    """From ``t_from_s`` on, update every ``dt_s`` with windows of ``tau_s``."""
-
-    t_from_s: float
-    dt_s: float
-    tau_s: float
+ROBUST_DENOISE = DenoiseSection(max_neighbours=3)
+"""The robust method's filter: adaptive, 1 to 3 supporting neighbours (measured in docs/benchmark.md;
+``max_neighbours: 1`` is the classic filter, the core's default)."""
 
 
 @dataclass(frozen=True)
@@ -91,12 +78,12 @@ class TrackingConfig:
     angle_limit_deg: float = 60.0
     tau_s: float = 2.5e-4
     dt_s: float | None = None
-    schedule: tuple[SegmentConfig, ...] = ()
+    schedule: tuple[WindowSegment, ...] = ()
     ds: float | None = None
     method: Method = Method.ROBUST
     min_events: int = 5
     refine_deg: float = 10.0
-    denoise: DenoiseConfig = field(default_factory=DenoiseConfig)
+    denoise: DenoiseSection = ROBUST_DENOISE
     t_start_s: float | None = None
     t_stop_s: float | None = None
     max_gap_s: float | None = 1.0
@@ -113,9 +100,8 @@ class TrackingConfig:
             ConfigError: a required value is missing or a value is out of range (names the key).
         """
         from flagtrack.daemon.core.chain import ChainParams
-        from flagtrack.daemon.core.denoise import DenoiseParams
         from flagtrack.daemon.core.tracker import TrackerParams
-        from flagtrack.daemon.core.windows import WindowSchedule, WindowSegment
+        from flagtrack.daemon.core.windows import WindowSchedule
 
         for name in ("root", "length"):
             if getattr(self, name) is None:
@@ -126,16 +112,11 @@ class TrackingConfig:
                        direction_deg=self.direction_deg, link_lengths=self.link_lengths, alpha=self.alpha,
                        angle_limit_deg=self.angle_limit_deg, min_events=1 if paper else self.min_events,
                        refine_deg=None if paper else self.refine_deg)
-        segments = self.schedule or (SegmentConfig(0.0, self.dt_s or self.tau_s, self.tau_s),)
-        schedule = _build(WindowSchedule, path, "schedule",
-                          segments=tuple(_build(WindowSegment, path, f"schedule[{i}]", **to_mapping(seg))
-                                         for i, seg in enumerate(segments)),
-                          t_start_s=self.t_start_s, t_stop_s=self.t_stop_s)
-        denoise = None
-        if not paper and self.denoise.enabled:
-            d = self.denoise
-            denoise = _build(DenoiseParams, path, "denoise", window_us=d.window_us, min_neighbours=d.min_neighbours,
-                             max_neighbours=d.max_neighbours, noise_pass=d.noise_pass, block_us=d.block_us)
+        segments = self.schedule or (_build(WindowSegment, path, "schedule[0]", t_from_s=0.0,
+                                            dt_s=self.dt_s or self.tau_s, tau_s=self.tau_s),)
+        schedule = _build(WindowSchedule, path, "schedule", segments=tuple(segments), t_start_s=self.t_start_s,
+                          t_stop_s=self.t_stop_s)
+        denoise = self.denoise if not paper and self.denoise.enabled else None
         if self.ds is not None and not self.ds > 0:
             raise ConfigError(f"must be positive, got {self.ds}", key=f"{SECTION}.ds", path=path)
         if self.max_gap_s is not None and not self.max_gap_s > 0:
@@ -159,11 +140,12 @@ class TrackingConfig:
         values["denoise_neighbourhood"] = "3x3 without the event's own pixel"
         if paper:
             values.update(min_events=1, refine_deg=None, denoise_enabled=False)
-        segments = self.schedule or (SegmentConfig(0.0, self.dt_s or self.tau_s, self.tau_s),)
-        values["dt_s"], values["tau_s"] = segments[0].dt_s, segments[0].tau_s
+        segments = [(seg.t_from_s, seg.dt_s, seg.tau_s) for seg in self.schedule]
+        segments = segments or [(0.0, self.dt_s or self.tau_s, self.tau_s)]
+        values["dt_s"], values["tau_s"] = segments[0][1], segments[0][2]
         values["schedule"] = [to_mapping(seg) for seg in self.schedule]
-        for name in ("t_from_s", "dt_s", "tau_s"):
-            values[f"schedule_{name}"] = [float(getattr(seg, name)) for seg in segments]
+        for i, name in enumerate(("t_from_s", "dt_s", "tau_s")):
+            values[f"schedule_{name}"] = [float(seg[i]) for seg in segments]
         length = self.length or 0.0
         values["ds"] = self.ds if self.ds is not None else length / 50
         if length > 0 and values["ds"] > 0:  # the step of /s: L / (ceil(L / ds)), at most ds

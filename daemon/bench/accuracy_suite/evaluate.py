@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from flagtrack.daemon.benchmark.plan import (
+from flagtrack.daemon.bench.accuracy_suite.plan import (
     LOSS_THRESHOLD, METHODS, PAPER_JOINTS, PAPER_TAU_OVER_T, SETTLE_PERIODS, START_ON_TRUTH, Task, Variant,
 )
 from flagtrack.daemon.core.centreline import CentrelineBatch
@@ -40,8 +40,8 @@ def at_paper_params(variant: Variant) -> bool:
 
 def tracking_config(variant: Variant, attrs: dict[str, Any]) -> Any:
     """The :class:`TrackingConfig` of a variant for a recording (truth attributes give root, L, f)."""
-    from flagtrack.daemon.config import from_mapping
-    from flagtrack.daemon.tracking_config import TrackingConfig
+    from flagtrack.daemon.typed_yaml import from_mapping
+    from flagtrack.daemon.tracking.section import TrackingConfig
 
     tau_s = variant.tau_over_t / float(attrs["kin_frequency_hz"])
     values = {**METHODS[variant.method], "root": [float(v) for v in attrs["kin_root"]], "length": float(attrs["length"]),
@@ -115,7 +115,7 @@ def read_recording(events_path: str | Path, truth_path: str | Path) -> tuple[np.
 def recording_spec(task: Task) -> Any:
     """The simulator's :class:`RecordingSpec` of a task (duration from its cycles and frequency)."""
     from flagtrack.drivers.sim.dvs import DvsParams
-    from flagtrack.drivers.sim.recording import RecordingSpec, optics_and_kinematics
+    from flagtrack.drivers.sim.simulate import RecordingSpec, optics_and_kinematics
 
     spec = RecordingSpec(seed=task.seed, width=task.width, height=task.height)
     _, kin = optics_and_kinematics(spec)
@@ -126,7 +126,7 @@ def recording_spec(task: Task) -> Any:
 
 def run_task(task: Task, work_dir: str, keep_files: bool = False) -> Outcome:
     """Simulate ``task``'s recording into ``work_dir``, track every variant, score; delete the files."""
-    from flagtrack.drivers.sim.recording import simulate_recording
+    from flagtrack.drivers.sim.simulate import simulate_recording
 
     result = simulate_recording(recording_spec(task), work_dir, name=task.name)
     events, truth, attrs = read_recording(result.events_path, result.truth_path)

@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.benchmark import plan
-from flagtrack.daemon.benchmark.evaluate import Outcome, run_task
+from flagtrack.daemon.bench.accuracy_suite import plan
+from flagtrack.daemon.bench.accuracy_suite.evaluate import Outcome, run_task
 
 log = logging.getLogger(__name__)
 

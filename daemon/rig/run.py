@@ -1,0 +1,124 @@
+"""Run a rig: open the bus, build the services it asks for, run them until a signal, a failure
+or the end of the work, and report how the run ended."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from flagtrack.daemon.typed_yaml import require_output_file
+from flagtrack.daemon.errors import FlagtrackError
+from flagtrack.daemon.rig.build import build_services, open_camera, open_hardware_camera
+from flagtrack.daemon.rig.config import RigConfig, check_rig
+from flagtrack.daemon.services.centreline_file import CentrelineFileService
+from flagtrack.daemon.services.runner import RunReport, Service, run_services
+from flagtrack.daemon.services.tracker import warm_up_kernels
+from flagtrack.daemon.sweep import figures
+from flagtrack.daemon.tracking.setup import TrackingSetup, tracking_setup
+from flagtrack.daemon.transport import Bus
+from flagtrack.drivers.camera.simulated import fast_forward
+
+
+def run_rig(rig: RigConfig, names: list[str], *, exit_at_end_of_stream: bool = False,
+            centrelines: Path | None = None, shutdown_timeout_s: float = 10.0, resume_dir: Path | None = None,
+            quiet: bool = False, prepared: bool = False) -> RigRun:
+    """Open the bus, build and run the services until a signal, a failure or the end of the work.
+
+    ``prepared``: the caller already ran :func:`prepare_services` (to time the run without it).
+
+    Returns:
+        A :class:`RigRun` (exit code, the services, the runner's report).
+    """
+    def say(text: str) -> None:
+        if not quiet:
+            print(f"flagtrack up: {text}", file=sys.stderr)
+
+    # bad config: one clear line, before anything opens (the tracker setup then serves every step)
+    check_rig(rig, names)
+    if centrelines is not None:
+        require_output_file(centrelines, key="--centrelines", path=None)
+    setup = tracking_setup(rig.tracker, path=rig.path) if "tracker" in names else None
+    if not prepared:
+        prepare_services(rig, names, say, tracker=setup)
+    finishers: list[str] = []
+    if "supervisor" in names and rig.supervisor.mode != "monitor" and rig.supervisor.exit_when_done:
+        finishers.append("supervisor")
+    if "supervisor" in names and rig.tunnel is not None:  # let a stop ramp the tunnel to zero in full
+        safety = rig.tunnel.safety
+        ramp_s = safety.max_speed_mps / safety.max_ramp_mps2 + safety.settle_timeout_s + 5.0
+        if ramp_s > shutdown_timeout_s:
+            say(f"shutdown may take up to {ramp_s:.0f} s (the tunnel ramps down first)")
+            shutdown_timeout_s = ramp_s
+    # a hardware camera opens first: what only the device can refuse stops the rig before anything else opens
+    camera = open_hardware_camera(rig) if "camera" in names else None
+    try:
+        with Bus(rig.bus_config) as bus:
+            services = build_services(rig, bus, names, exit_at_end_of_stream=exit_at_end_of_stream,
+                                      resume_dir=resume_dir, tracker=setup, camera=camera)
+            if centrelines is not None:
+                made_by = setup.attrs if setup is not None else rig.tracker.attrs()
+                attrs = {**made_by, "input_file": str(rig.camera.replay.path) if rig.camera.replay else ""}
+                services.insert(0, CentrelineFileService(bus, centrelines, attrs,
+                                                         exit_after_final=exit_at_end_of_stream))
+            say(f"{', '.join(s.name for s in services)} on {rig.bus_config.namespace}")
+            report = run_services(services, shutdown_timeout_s=shutdown_timeout_s, stop_when_any_finishes=finishers,
+                                  on_service_end=bus.undeclare_alive)
+    finally:
+        if camera is not None and not camera.handed_over:
+            camera.close()  # the rig failed before the camera service took it
+    for name, exc in report.errors.items():
+        print(f"flagtrack up: {name} failed: {exc}", file=sys.stderr)
+    if report.abandoned:
+        print(f"flagtrack up: did not stop in time: {', '.join(report.abandoned)}", file=sys.stderr)
+    if centrelines is not None:
+        say(f"centrelines in {centrelines}")
+    for service in services:
+        if getattr(service, "description", ""):
+            say(f"viewer {service.description}")
+    code = 1 if report.errors else (130 if report.signal_count else 0)
+    return RigRun(code, services, report)
+
+
+def prepare_services(rig: RigConfig, names: list[str], say: Callable[[str], None] = lambda text: None,
+                     *, tracker: TrackingSetup | None = None) -> None:
+    """Do the slow one-off work of the services before they start, while nothing runs in real time
+    (``say`` tells the user when that includes loading or compiling kernels; ``tracker``: the rig's
+    tracker setup, if the caller already made it).
+
+    - Compile (first run after installing: about a minute) or load the compiled kernels of the twin
+      camera, the packets and the tracker: services that share this process would otherwise compile
+      together, and the supervisor would not see the tracker come up within its start-up timeout
+      (hardware cameras are not opened here).
+    - A supervisor imports matplotlib (about a second, holding the GIL): drawing the summary figure
+      at the end of a sweep would otherwise stall the twin camera of the same process.
+    """
+    twin = "camera" in names and rig.camera.adapter == "simulated"
+    if twin or "tracker" in names:
+        say("loading the compiled kernels (the first run after installing compiles them: about a minute)")
+    try:
+        if twin:
+            fast_forward(open_camera(rig.camera), 0.05)
+        if "tracker" in names:
+            warm_up_kernels((tracker or tracking_setup(rig.tracker, path=rig.path)).factory)
+        if "supervisor" in names:
+            figures.load_figure_modules()
+    except FlagtrackError:
+        raise
+    except Exception as exc:  # a failed compile or import: one line, as the services' own failures are
+        raise FlagtrackError(f"preparing the services failed ({type(exc).__name__}: {exc})") from exc
+
+
+@dataclass(frozen=True)
+class RigRun:
+    """How a run of the rig ended: exit code, the services (to read their results), the report."""
+
+    code: int
+    services: list[Service]
+    report: RunReport
+
+    def service(self, name: str) -> Any:
+        """The service called ``name`` (or None)."""
+        return next((s for s in self.services if s.name == name), None)

@@ -1,0 +1,26 @@
+"""The wire schema: every key expression and message type on the bus (:mod:`.messages`), with a
+versioned encoding (:mod:`.codec`). It knows nothing of YAML or of the transport."""
+
+from flagtrack.daemon.schema.codec import MAGIC, READABLE_VERSIONS, VERSION, decode, encode
+from flagtrack.daemon.schema.messages import (
+    MESSAGE_TYPES,
+    CameraStatus,
+    CentrelineMessage,
+    EventPacket,
+    EventRate,
+    Keys,
+    MessageType,
+    RecorderCommand,
+    RecorderStatus,
+    SensorSamples,
+    SupervisorState,
+    TrackerStatus,
+    TunnelCommand,
+    TunnelState,
+)
+
+__all__ = [
+    "MAGIC", "MESSAGE_TYPES", "READABLE_VERSIONS", "VERSION", "CameraStatus", "CentrelineMessage", "EventPacket",
+    "EventRate", "Keys", "MessageType", "RecorderCommand", "RecorderStatus", "SensorSamples", "SupervisorState",
+    "TrackerStatus", "TunnelCommand", "TunnelState", "decode", "encode",
+]

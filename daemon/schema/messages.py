@@ -1,0 +1,330 @@
+"""Every key expression and message type on the bus (the encoding is :mod:`.codec`'s)."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from flagtrack.daemon.core.centreline import CentrelineBatch
+
+
+class MessageType(enum.IntEnum):
+    """Type byte of each message on the wire."""
+
+    EVENT_PACKET = 1
+    CAMERA_STATUS = 2
+    EVENT_RATE = 3
+    CENTRELINES = 4
+    TRACKER_STATUS = 5
+    TUNNEL_STATE = 6
+    TUNNEL_COMMAND = 7
+    SUPERVISOR_STATE = 8
+    RECORDER_COMMAND = 9
+    RECORDER_STATUS = 10
+    SENSOR_SAMPLES = 11
+
+
+@dataclass(frozen=True)
+class Keys:
+    """Key expressions under one namespace (lowercase slash-separated words, default ``flagtrack/<rig>``)."""
+
+    namespace: str = "flagtrack/default"
+
+    def camera_events(self, camera_id: str) -> str:
+        """Native event packets of one camera (:class:`EventPacket`)."""
+        return f"{self.namespace}/camera/{camera_id}/events"
+
+    def camera_status(self, camera_id: str) -> str:
+        """Camera state and settings read back (:class:`CameraStatus`)."""
+        return f"{self.namespace}/camera/{camera_id}/status"
+
+    def event_rate(self, camera_id: str) -> str:
+        """Event-rate statistics of one camera (:class:`EventRate`)."""
+        return f"{self.namespace}/camera/{camera_id}/rate"
+
+    def centrelines(self) -> str:
+        """Batched tracker output (:class:`CentrelineMessage`)."""
+        return f"{self.namespace}/tracker/centreline"
+
+    def tracker_status(self) -> str:
+        """Tracker health (:class:`TrackerStatus`)."""
+        return f"{self.namespace}/tracker/status"
+
+    def tunnel_state(self) -> str:
+        """Wind-tunnel speed and state (:class:`TunnelState`)."""
+        return f"{self.namespace}/tunnel/state"
+
+    def tunnel_command(self) -> str:
+        """Commands to the tunnel owner (:class:`TunnelCommand`)."""
+        return f"{self.namespace}/tunnel/command"
+
+    def supervisor_state(self) -> str:
+        """Flag state, sweep progress (:class:`SupervisorState`)."""
+        return f"{self.namespace}/supervisor/state"
+
+    def recorder_command(self) -> str:
+        """Start/stop/rotate recordings (:class:`RecorderCommand`)."""
+        return f"{self.namespace}/recorder/command"
+
+    def recorder_status(self) -> str:
+        """What the recorder is writing (:class:`RecorderStatus`)."""
+        return f"{self.namespace}/recorder/status"
+
+    def sensor_samples(self, sensor_id: str) -> str:
+        """Point-sensor samples (:class:`SensorSamples`)."""
+        return f"{self.namespace}/sensor/{sensor_id}/samples"
+
+    def alive(self, service: str) -> str:
+        """Liveliness token of one service instance."""
+        return f"{self.namespace}/alive/{service}"
+
+    def alive_all(self) -> str:
+        """Liveliness of every service in the namespace."""
+        return f"{self.namespace}/alive/**"
+
+
+@dataclass(frozen=True)
+class EventPacket:
+    """About 1 ms of one camera's events in its native encoding (EVT 3.0 / 2.0 bytes).
+
+    Every packet decodes alone (it starts with the stream's time base), and the packets of a
+    stream concatenate into one valid stream (what the recorder writes). ``t_offset_us`` is the
+    stream's encoder offset (a whole number of the encoding's time loops) added back on decoding.
+    ``sent_ns`` is the wall-clock time (ns) at which the adapter received the data, for latency.
+    ``t_last_us`` is the completeness horizon: every event with ``t <= t_last_us`` is in this packet
+    or an earlier one (an empty packet carries it forward while the scene is still).
+    ``end_of_stream`` marks the last packet of a stream (end of a replayed file). ``stream_id``
+    names the stream (drawn when the camera service starts; 0 from older peers): packets of
+    another id are a restarted camera, a lower ``seq`` with the same id a duplicate or late packet.
+    """
+
+    TYPE: ClassVar[MessageType] = MessageType.EVENT_PACKET
+    camera_id: str
+    seq: int
+    t_first_us: int
+    t_last_us: int
+    n_events: int
+    width: int
+    height: int
+    encoding: str
+    sent_ns: int
+    t_offset_us: int = 0
+    n_triggers: int = 0
+    end_of_stream: bool = False
+    stream_id: int = 0
+    data: bytes = b""
+
+
+@dataclass(frozen=True)
+class CameraStatus:
+    """State of a camera adapter and its settings as read back from the device."""
+
+    TYPE: ClassVar[MessageType] = MessageType.CAMERA_STATUS
+    camera_id: str
+    state: str  # starting | streaming | stopped | eof | error
+    adapter: str
+    width: int
+    height: int
+    encoding: str
+    settings: dict[str, Any] = field(default_factory=dict)
+    message: str = ""
+    packets: int = 0
+    events: int = 0
+
+
+@dataclass(frozen=True)
+class EventRate:
+    """Event-rate statistics over one interval of camera time."""
+
+    TYPE: ClassVar[MessageType] = MessageType.EVENT_RATE
+    camera_id: str
+    t_us: int
+    interval_s: float
+    events: int
+    rate_hz: float
+    on_fraction: float
+    bytes: int = 0
+
+
+@dataclass(frozen=True)
+class CentrelineMessage:
+    """A batch of tracker updates: t, joints, smoothed centreline, tip, Δ_RMS, events used.
+
+    Shapes (checked by :func:`decode`): ``t_s``, ``tip_x``, ``tip_y``, ``delta_rms``, ``n_events``,
+    ``source_ns`` (n_t,); ``s`` (n_s,), n_s >= 1; ``x``, ``y`` (n_t, n_s); ``joints_x``, ``joints_y``
+    (n_t, N_j+1), N_j >= 1. ``n_events`` and ``source_ns`` are integers, the rest real numbers.
+    ``source_ns`` (n_t,) is the ``sent_ns`` of the newest packet each update used (for latency).
+    ``final`` marks the last message of a stream (after the camera's end of stream).
+    ``published_ns`` is the wall-clock time (ns) the tracker published the message (0: not said).
+    ``stream`` numbers the camera streams the tracker has tracked (0 for the first; one more after
+    each end of stream or camera restart), so a recorder knows which stream's file the updates go to.
+    """
+
+    TYPE: ClassVar[MessageType] = MessageType.CENTRELINES
+    source: str
+    seq: int
+    units: str
+    t_s: np.ndarray
+    s: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    joints_x: np.ndarray
+    joints_y: np.ndarray
+    tip_x: np.ndarray
+    tip_y: np.ndarray
+    delta_rms: np.ndarray
+    n_events: np.ndarray
+    source_ns: np.ndarray
+    final: bool = False
+    published_ns: int = 0
+    stream: int = 0
+
+    @classmethod
+    def from_batch(
+        cls, batch: CentrelineBatch, *, source: str, seq: int, units: str, source_ns: np.ndarray, final: bool = False,
+        published_ns: int = 0, stream: int = 0,
+    ) -> CentrelineMessage:
+        """Wrap a tracker batch for the wire."""
+        return cls(
+            final=final, published_ns=published_ns, stream=stream, source=source, seq=seq, units=units, t_s=batch.t_s,
+            s=batch.s,
+            x=batch.x, y=batch.y, joints_x=batch.joints_x, joints_y=batch.joints_y, tip_x=batch.tip_x,
+            tip_y=batch.tip_y,
+            delta_rms=batch.delta_rms, n_events=batch.n_events, source_ns=np.asarray(source_ns, np.int64),
+        )
+
+    def batch(self) -> CentrelineBatch:
+        """The updates as a :class:`CentrelineBatch`."""
+        return CentrelineBatch(
+            t_s=self.t_s, s=self.s, x=self.x, y=self.y, joints_x=self.joints_x, joints_y=self.joints_y,
+            delta_rms=self.delta_rms, n_events=self.n_events,
+        )
+
+
+@dataclass(frozen=True)
+class TrackerStatus:
+    """Tracker health, published about once a second.
+
+    ``missing_packets``: sequence gaps; ``malformed_packets``: messages or EVT bytes that could not be
+    used; ``dropped_packets``: packets its full queue turned away (they also show as gaps);
+    ``restarts``: new camera streams that began without the end of the last one (a restarted camera);
+    ``late_packets``: duplicates and late packets of the stream, dropped.
+    """
+
+    TYPE: ClassVar[MessageType] = MessageType.TRACKER_STATUS
+    source: str
+    state: str  # waiting | tracking | stopped
+    events_per_s: float
+    updates_per_s: float
+    lag_s: float
+    packets: int
+    missing_packets: int
+    malformed_packets: int
+    t_s: float = 0.0
+    dropped_packets: int = 0
+    restarts: int = 0
+    late_packets: int = 0
+
+
+@dataclass(frozen=True)
+class TunnelState:
+    """Wind-tunnel speed as read back, its set-point and state."""
+
+    TYPE: ClassVar[MessageType] = MessageType.TUNNEL_STATE
+    speed_mps: float
+    setpoint_mps: float
+    state: str  # idle | ramping | steady | stopping | fault
+    fault: str = ""
+    t_wall_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class TunnelCommand:
+    """A request to the tunnel owner: ``set`` a speed or ``stop`` (ramp to zero)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.TUNNEL_COMMAND
+    action: str
+    speed_mps: float = 0.0
+
+
+@dataclass(frozen=True)
+class SupervisorState:
+    """Flag state from event rates, and sweep progress."""
+
+    TYPE: ClassVar[MessageType] = MessageType.SUPERVISOR_STATE
+    flag_state: str  # still | flapping | unknown
+    rate_hz: float
+    mode: str = "idle"  # idle | sweep | feedback | safe
+    point: str = ""
+    branch: str = ""
+    speed_mps: float = 0.0
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class RecorderCommand:
+    """Start, stop or rotate a recording of one camera (``path`` without extension)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.RECORDER_COMMAND
+    action: str  # start | stop | rotate
+    path: str = ""
+    camera_id: str = ""
+    centrelines: bool = False
+    request_id: str = ""
+
+
+@dataclass(frozen=True)
+class RecorderStatus:
+    """What the recorder is writing (counts of the recording ``path``; ``dropped_packets``: turned
+    away by the recorder's full queue since it started, whatever file was open)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.RECORDER_STATUS
+    state: str  # idle | recording | error
+    path: str = ""
+    bytes: int = 0
+    packets: int = 0
+    missing_packets: int = 0
+    request_id: str = ""
+    message: str = ""
+    malformed_packets: int = 0
+    dropped_packets: int = 0
+
+
+def _no_pulses() -> np.ndarray:
+    return np.zeros(0, dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class SensorSamples:
+    """Point-sensor samples: times on the sensor clock (µs), values (sensor units), NaN = missing.
+
+    ``t_us`` (n,) int64 and ``value`` (n,) float64. Fields after ``value`` were added later with
+    defaults, so messages without them still decode: ``trigger_t_us`` (m,) int64 the trigger pulses
+    the sensor drove or recorded, on its clock; ``missing`` samples lost in this message's span (its
+    NaN values included); ``clock`` ``sensor`` (the device's own clock) or ``host`` (stamped by the
+    host on arrival, wall-clock µs); ``wall_ns`` the wall time the newest sample arrived (with
+    ``t_us[-1]``, a rough link to the camera clock).
+    """
+
+    TYPE: ClassVar[MessageType] = MessageType.SENSOR_SAMPLES
+    sensor_id: str
+    seq: int
+    units: str
+    t_us: np.ndarray
+    value: np.ndarray
+    trigger_t_us: np.ndarray = field(default_factory=_no_pulses)
+    missing: int = 0
+    clock: str = "sensor"
+    wall_ns: int = 0
+
+
+MESSAGE_TYPES: dict[MessageType, type] = {
+    cls.TYPE: cls
+    for cls in (
+        EventPacket, CameraStatus, EventRate, CentrelineMessage, TrackerStatus, TunnelState,
+        TunnelCommand, SupervisorState, RecorderCommand, RecorderStatus, SensorSamples,
+    )
+}

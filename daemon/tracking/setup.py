@@ -1,0 +1,80 @@
+"""The ``tracker:`` section and its calibration, turned once into what trackers and files need."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from flagtrack.daemon.tracking.section import TrackingConfig, load_tracking_config
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.core.mapping import PointMapping
+    from flagtrack.daemon.core.tracker import Tracker, TrackerParams
+
+
+@dataclass(frozen=True)
+class TrackingSetup:
+    """A checked tracking set-up.
+
+    Attributes:
+        config: the ``tracker:`` section it was made from.
+        params: the core tracker's parameters.
+        mapping: the pixel -> plane mapping of the calibration, or None (pixels).
+        units: ``px``, or the mapping's units (``m``).
+        attrs: what every centreline file made with it carries: every processing parameter, the
+            calibration's attributes when there is one, and ``units``.
+    """
+
+    config: TrackingConfig
+    params: TrackerParams
+    mapping: PointMapping | None
+    units: str
+    attrs: dict[str, Any]
+
+    def new_tracker(self, sensor_size: tuple[int, int] = (0, 0)) -> Tracker:
+        """A fresh core tracker (``sensor_size``: width, height in pixels, 0 if unknown)."""
+        from flagtrack.daemon.core.tracker import Tracker
+
+        return Tracker(self.params, mapping=self.mapping, sensor_size=sensor_size)
+
+    @property
+    def factory(self) -> Callable[[], Tracker]:
+        """Fresh core trackers, for a live service (one per camera stream)."""
+        return self.new_tracker
+
+
+def tracking_setup(config: TrackingConfig, *, path: str | None = None) -> TrackingSetup:
+    """Check ``config`` (root, length, ranges, the calibration file) and prepare the core.
+
+    Args:
+        config: the ``tracker:`` section (a relative calibration path already resolved).
+        path: the config file, named in errors.
+
+    Raises:
+        ConfigError: a missing or out-of-range value, naming the key and the file.
+        FormatError: the calibration file is not one.
+    """
+    params = config.tracker_params(path=path)
+    mapping: PointMapping | None = None
+    attrs = config.attrs()
+    if config.calibration is not None:
+        from flagtrack.calibration.calfile import calibration_attrs, load_mapping
+
+        mapping = load_mapping(config.calibration)
+        attrs.update(calibration_attrs(config.calibration))
+    units = "px" if mapping is None else getattr(mapping, "units", "m")
+    return TrackingSetup(config, params, mapping, units, {**attrs, "units": units})
+
+
+def load_tracking_config_file(path: str | Path) -> TrackingConfig:
+    """The ``tracker:`` section of ``path``; a relative calibration file is taken from the file's folder."""
+    return resolve_calibration(load_tracking_config(path), Path(path).parent)
+
+
+def resolve_calibration(config: TrackingConfig, base: Path) -> TrackingConfig:
+    """``config`` with a relative ``calibration`` path made relative to ``base`` (the config's folder)."""
+    if config.calibration is not None and not Path(config.calibration).is_absolute():
+        return config.with_overrides(calibration=Path(base) / config.calibration)
+    return config
