@@ -4,15 +4,13 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage
 from flagtrack.daemon.transport import Bus
-from flagtrack.drivers.formats.centreline import CentrelineWriter
+from flagtrack.drivers.formats.centreline import CentrelineShapeError, CentrelineSink
 
 log = logging.getLogger(__name__)
 
@@ -27,7 +25,8 @@ class CentrelineFileService:
     Args:
         bus: the bus.
         path: output HDF5 file.
-        attrs: root attributes (processing parameters, input file); ``units`` comes from the messages.
+        attrs: root attributes (processing parameters, calibration, input file); ``units`` and
+            ``source`` come from the messages.
         exit_after_final: return after the message that ends the stream.
     """
 
@@ -46,35 +45,26 @@ class CentrelineFileService:
                                           max_bytes=512 << 20)  # a few minutes of kHz updates behind the disk
 
     def run(self, stop: threading.Event) -> None:
-        writer: CentrelineWriter | None = None
-        shape: tuple[int, int] | None = None  # (n_s, N_j + 1) of the file
-        pending: list = []
-        last_write = time.monotonic()
+        sink = CentrelineSink(self.path, self.attrs, flush_interval_s=self.write_interval_s)
         try:
             while not stop.is_set():
                 msg = self.subscription.recv(timeout_s=0.05)
                 if msg is not None:
-                    if writer is None:
-                        self.path.parent.mkdir(parents=True, exist_ok=True)
-                        shape = (len(msg.s), msg.joints_x.shape[1])
-                        writer = CentrelineWriter(self.path, msg.s, shape[1] - 1, {**self.attrs, "units": msg.units})
-                    if (len(msg.s), msg.joints_x.shape[1]) == shape:
-                        pending.append(msg.batch())
+                    try:
+                        sink.add(msg.batch(), units=msg.units, source=msg.source)
                         self.updates += len(msg.t_s)
-                    else:
+                    except CentrelineShapeError as exc:
                         self.rejected += 1
-                        self.problems.add("messages not written", f"message {msg.seq} has {len(msg.s)} samples and "
-                                          f"{msg.joints_x.shape[1]} joints, the file {shape[0]} and {shape[1]}")
-                if pending and (time.monotonic() - last_write > self.write_interval_s or (msg is not None and msg.final)):
-                    writer.append(CentrelineBatch.concatenate(pending))  # type: ignore[union-attr]
-                    pending, last_write = [], time.monotonic()
-                if msg is not None and msg.final and self.exit_after_final:
-                    break
+                        self.problems.add("messages not written", f"message {msg.seq} has {exc.got[0]} samples and "
+                                          f"{exc.got[1]} joints, the file {exc.want[0]} and {exc.want[1]}")
+                    if msg.final:
+                        sink.flush()
+                        if self.exit_after_final:
+                            break
+                sink.flush_if_due()
                 self.problems.flush()
         finally:
-            if writer is not None:
-                if pending:
-                    writer.append(CentrelineBatch.concatenate(pending))
-                writer.close()
+            sink.close()
+            if sink.opened:
                 log.info("centrelines: %d updates written to %s", self.updates, self.path)
             self.problems.flush(force=True)

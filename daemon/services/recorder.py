@@ -40,7 +40,6 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 from flagtrack.daemon import __version__
-from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import FormatError, SchemaError
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, RecorderCommand, RecorderStatus, decode
@@ -48,7 +47,7 @@ from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_p
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.formats.packets import stream_preamble
 from flagtrack.drivers.formats import raw_header
-from flagtrack.drivers.formats.centreline import CentrelineWriter
+from flagtrack.drivers.formats.centreline import CentrelineShapeError, CentrelineSink
 
 log = logging.getLogger(__name__)
 
@@ -94,14 +93,16 @@ class Recording:
     """One open recording: the .raw file, its sidecar and, optionally, the centreline file.
 
     ``part`` numbers the files of one recording (one per camera stream, see the module docstring);
-    ``first_base`` is the base path of part 1.
+    ``first_base`` is the base path of part 1. ``centreline_attrs`` (processing parameters and
+    calibration) go in the centreline file's attributes with the units, the source and the .raw file.
     """
 
     base: Path
     config: dict[str, Any]
     raw: BinaryIO | None = None
-    centrelines: CentrelineWriter | None = None
+    centrelines: CentrelineSink | None = None
     want_centrelines: bool = False
+    centreline_attrs: dict[str, Any] = field(default_factory=dict)
     bytes: int = 0
     packets: int = 0
     events: int = 0
@@ -121,10 +122,13 @@ class Recording:
     continues: str | None = None
     continued_in: str | None = None
     _stream_key: tuple[str, int, int] | None = None
-    _line_shape: tuple[int, int] | None = None
     _last_flush: float = field(default_factory=time.monotonic)
     _last_fsync: float = field(default_factory=time.monotonic)
-    _pending_lines: list[CentrelineBatch] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if self.want_centrelines:  # the file is created at the first update
+            self.centrelines = CentrelineSink(self.centrelines_path,
+                                              {**self.centreline_attrs, "input_file": str(self.raw_path)})
 
     @property
     def raw_path(self) -> Path:
@@ -189,29 +193,19 @@ class Recording:
         Raises:
             SchemaError: the message's samples or joints differ from the file's (another tracker setup).
         """
-        if not self.want_centrelines or len(msg.t_s) == 0:
+        if self.centrelines is None or len(msg.t_s) == 0:
             return
-        shape = (len(msg.s), msg.joints_x.shape[1])
-        if self._line_shape is None:
-            self.centrelines = CentrelineWriter(self.centrelines_path, msg.s, shape[1] - 1,
-                                                {"units": msg.units, "input_file": str(self.raw_path),
-                                                 "source": msg.source})
-            self._line_shape = shape
-        elif shape != self._line_shape:
-            raise SchemaError(f"centreline message {msg.seq} has {shape[0]} samples and {shape[1]} joints, the file "
-                              f"{self._line_shape[0]} and {self._line_shape[1]}: not recorded")
-        self._pending_lines.append(msg.batch())
-
-    def _flush_centrelines(self) -> None:
-        if self._pending_lines and self.centrelines is not None:
-            self.centrelines.append(CentrelineBatch.concatenate(self._pending_lines))
-        self._pending_lines = []
+        try:
+            self.centrelines.add(msg.batch(), units=msg.units, source=msg.source)
+        except CentrelineShapeError as exc:
+            raise SchemaError(f"centreline message {msg.seq} has {exc.got[0]} samples and {exc.got[1]} joints, the "
+                              f"file {exc.want[0]} and {exc.want[1]}: not recorded") from exc
 
     def sync(self, cfg: RecorderConfig, force: bool = False) -> None:
         """Flush (and fsync) when due."""
         now = time.monotonic()
-        if force or now - self._last_flush >= cfg.flush_interval_s:
-            self._flush_centrelines()
+        if self.centrelines is not None and (force or now - self._last_flush >= cfg.flush_interval_s):
+            self.centrelines.flush()
         if self.raw is not None and (force or now - self._last_flush >= cfg.flush_interval_s):
             self.raw.flush()
             self._last_flush = now
@@ -230,7 +224,7 @@ class Recording:
             "malformed_packets": self.malformed, "late_packets": self.late, "dropped_packets": self.dropped,
             "part": self.part,
             "continues": self.continues, "continued_in": self.continued_in, "config": self.config,
-            "centrelines_file": self.centrelines_path.name if self.centrelines is not None else None,
+            "centrelines_file": self.centrelines_path.name if self.centrelines and self.centrelines.opened else None,
         }
         self.sidecar_path.parent.mkdir(parents=True, exist_ok=True)
         tmp = self.sidecar_path.with_name(self.sidecar_path.name + ".tmp")
@@ -248,7 +242,6 @@ class Recording:
         """Flush, fsync and close everything; final sidecar."""
         self.close_raw()
         if self.centrelines is not None:
-            self._flush_centrelines()
             self.centrelines.close()
         self.write_sidecar(stopped=True)
 
@@ -256,8 +249,8 @@ class Recording:
         """The recording of the next camera stream: ``<first base>_stream<part + 1>``, linked to this one."""
         first = self.first_base or self.base
         part = Recording(base=first.with_name(f"{first.name}_stream{self.part + 1}"), config=self.config,
-                         want_centrelines=self.want_centrelines, part=self.part + 1, first_base=first,
-                         continues=self.raw_path.name)
+                         want_centrelines=self.want_centrelines, centreline_attrs=self.centreline_attrs,
+                         part=self.part + 1, first_base=first, continues=self.raw_path.name)
         self.continued_in = part.raw_path.name
         return part
 
@@ -268,12 +261,13 @@ class RecorderService:
     name = "recorder"
 
     def __init__(self, bus: Bus, cfg: RecorderConfig, config_snapshot: dict[str, Any] | None = None,
-                 exit_at_end_of_stream: bool = False) -> None:
+                 exit_at_end_of_stream: bool = False, centreline_attrs: dict[str, Any] | None = None) -> None:
         self.bus = bus
         self.exit_at_end_of_stream = exit_at_end_of_stream
         self._stream_ended = False
         self.cfg = cfg
         self.config_snapshot = config_snapshot or {}
+        self.centreline_attrs = centreline_attrs or {}  # processing parameters and calibration, for every file
         self.current: Recording | None = None
         self.finished: list[Path] = []
         self.lost_packets = 0
@@ -353,7 +347,8 @@ class RecorderService:
     def start(self, path: str, centrelines: bool, request_id: str = "") -> None:
         """Begin a recording at ``path`` (no extension; relative to the configured directory)."""
         self._begin(Recording(base=recording_base(self.cfg.directory, path), config=self.config_snapshot,
-                              want_centrelines=centrelines or self.cfg.centrelines), request_id)
+                              want_centrelines=centrelines or self.cfg.centrelines,
+                              centreline_attrs=self.centreline_attrs), request_id)
 
     def _begin(self, recording: Recording, request_id: str = "", message: str = "") -> None:
         recording.write_sidecar()

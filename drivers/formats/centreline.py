@@ -4,11 +4,18 @@
 ``/delta_rms`` (n_t,), ``/n_events`` (n_t,) int64; root attributes hold every processing
 parameter, ``units``, ``input_file`` and ``flagtrack_version``. Files are written incrementally
 (resizable datasets, flushed per append) so memory is bounded and a crash keeps what was flushed.
+
+Every centreline file flagtrack writes (``reconstruct``, ``up --centrelines``, the recorder's files)
+goes through one :class:`CentrelineSink`: one shape check, one batching rule and one attribute rule
+(:func:`centreline_attrs`), so each file says how it was made.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import time
+import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -95,6 +102,229 @@ def _is_numeric_sequence(value: Any) -> bool:
     return isinstance(value, list | tuple) and len(value) > 0 and all(
         isinstance(v, int | float) and not isinstance(v, bool) for v in value
     )
+
+
+def centreline_attrs(processing: Mapping[str, Any], *, units: str, input_file: str | None = None,
+                     calibration: Mapping[str, Any] | None = None, **extra: Any) -> dict[str, Any]:
+    """The root attributes every centreline file carries (``flagtrack_version`` is added by the writer).
+
+    Args:
+        processing: every processing parameter (``TrackingConfig.attrs()``), and the calibration's
+            attributes if the composition root put them there.
+        units: the length unit of ``/s``, ``/x`` ... (``px``, or ``m`` with a calibration).
+        input_file: what the centrelines were tracked from (an event file, the recorder's ``.raw``);
+            None keeps ``processing``'s ``input_file``, and a file without one says ``null``.
+        calibration: the calibration's attributes (``flagtrack.calibration.calibration_attrs``), if any.
+        extra: anything else (``input_format``, ``source``, ``events_in`` ...).
+    """
+    attrs = {**processing, **(calibration or {}), **extra, "units": units}
+    attrs["input_file"] = input_file if input_file is not None else processing.get("input_file")
+    return attrs
+
+
+class CentrelineShapeError(FormatError):
+    """A batch whose samples or joints differ from the file's (another tracker setup): not written.
+
+    Attributes:
+        got: (n_s, N_j + 1) of the batch.
+        want: (n_s, N_j + 1) of the file.
+    """
+
+    def __init__(self, got: tuple[int, int], want: tuple[int, int], *, path: str | None = None) -> None:
+        self.got = got
+        self.want = want
+        super().__init__(f"a batch of {got[0]} samples and {got[1]} joints does not fit the file's {want[0]} "
+                         f"samples and {want[1]} joints: not written", path=path)
+
+
+class CentrelineSink:
+    """Where a stream of centreline batches goes: one file, checked, batched, with its provenance.
+
+    The file's samples ``s`` and joints (N_j + 1) are those of the first batch (or ``s`` and
+    ``n_joints`` given here); a batch of another shape is refused with
+    :class:`CentrelineShapeError` and nothing of it is written. The file is created at the first
+    non-empty batch (its parent folder too), or at :meth:`close` when the shape is known but no
+    update came (an empty series); a sink that never saw a batch and was given no shape leaves no file.
+
+    Batches are held in memory and written in one HDF5 append (flushed to the OS) by :meth:`flush`,
+    or by :meth:`add` when ``max_pending`` updates wait or ``flush_interval_s`` has passed since the
+    last append; a caller whose loop also wakes without batches calls :meth:`flush_if_due`. A crash
+    keeps what was appended.
+
+    Use as a context manager (or call :meth:`close`). With ``atomic``, the file is written under a
+    temporary name in the same folder and renamed onto ``path`` at a successful close; an exception
+    leaving the ``with`` block (or :meth:`abort`) removes it, so ``path`` only ever holds a whole file.
+
+    Args:
+        path: the output file (overwritten).
+        attrs: the provenance attributes (processing parameters, calibration, ``input_file`` ...);
+            the file's root attributes are :func:`centreline_attrs` of them with the units.
+        s: (n_s,) arc length of the samples, if known before the first batch.
+        n_joints: number of chain links N_j, with ``s``.
+        max_pending: updates held before an append.
+        flush_interval_s: append at least this often (on :meth:`add` and :meth:`flush_if_due`), or only
+            by ``max_pending`` and :meth:`flush`.
+        atomic: write to a temporary file, renamed onto ``path`` at a successful close.
+    """
+
+    def __init__(self, path: str | Path, attrs: Mapping[str, Any], *, s: np.ndarray | None = None,
+                 n_joints: int | None = None, max_pending: int = 8192, flush_interval_s: float | None = None,
+                 atomic: bool = False) -> None:
+        if (s is None) != (n_joints is None):
+            raise ValueError("give both s and n_joints, or neither")
+        self.path = Path(path)
+        self.max_pending = max_pending
+        self.flush_interval_s = flush_interval_s
+        self.atomic = atomic
+        self._attrs = dict(attrs)
+        self._units: str | None = None
+        self._source: str | None = None
+        self._s: np.ndarray | None = None
+        self._shape: tuple[int, int] | None = None  # (n_s, N_j + 1) of the file
+        if s is not None and n_joints is not None:
+            self._s = np.asarray(s, dtype=np.float64)
+            self._shape = (len(self._s), n_joints + 1)
+        self._writer: CentrelineWriter | None = None
+        self._tmp: Path | None = None
+        self._pending: list[CentrelineBatch] = []
+        self.n_pending = 0
+        self._last_flush = time.monotonic()
+        self._closed = False
+
+    @property
+    def opened(self) -> bool:
+        """Whether the file has been created (at ``path``, or at its temporary name when atomic)."""
+        return self._writer is not None
+
+    @property
+    def n_updates(self) -> int:
+        """Updates appended to the file so far (not counting those pending)."""
+        return self._writer.n_updates if self._writer is not None else 0
+
+    def add(self, batch: CentrelineBatch, *, units: str | None = None, source: str | None = None) -> None:
+        """Queue ``batch``; append the pending batches if ``max_pending`` or ``flush_interval_s`` is reached.
+
+        Args:
+            batch: the updates.
+            units: their length unit (e.g. the bus message's); the file's ``units`` attribute if this
+                batch is the first to give one (over the ``units`` of ``attrs``).
+            source: who produced them (the bus message's ``source``); the file's ``source`` likewise.
+
+        Raises:
+            CentrelineShapeError: the batch's samples or joints differ from the file's; nothing of it
+                is queued.
+        """
+        if self._closed:
+            raise ValueError(f"{self.path}: centreline sink is closed")
+        shape = (len(batch.s), batch.joints_x.shape[1])
+        if self._shape is None:
+            self._shape, self._s = shape, np.asarray(batch.s, dtype=np.float64)
+        elif shape != self._shape:
+            raise CentrelineShapeError(shape, self._shape, path=str(self.path))
+        if self._units is None:
+            self._units = units
+        if self._source is None:
+            self._source = source
+        if len(batch) == 0:
+            return
+        if self._writer is None:
+            self._open()
+        self._pending.append(batch)
+        self.n_pending += len(batch)
+        if self.n_pending >= self.max_pending:
+            self.flush()
+        else:
+            self.flush_if_due()
+
+    def flush_if_due(self) -> None:
+        """Append the pending batches if ``flush_interval_s`` has passed since the last append."""
+        if self.flush_interval_s is not None and time.monotonic() - self._last_flush >= self.flush_interval_s:
+            self.flush()
+
+    def flush(self) -> None:
+        """Append the pending batches to the file in one append, flushed to the OS."""
+        self._last_flush = time.monotonic()
+        if not self._pending:
+            return
+        assert self._writer is not None  # opened by the first non-empty batch
+        batch = self._pending[0] if len(self._pending) == 1 else CentrelineBatch.concatenate(self._pending)
+        self._pending, self.n_pending = [], 0
+        self._writer.append(batch)
+
+    def set_attrs(self, attrs: Mapping[str, Any]) -> None:
+        """Add or replace root attributes (for values known only at the end: ``events_in`` ...)."""
+        if self._closed:
+            raise ValueError(f"{self.path}: centreline sink is closed")
+        self._attrs.update(attrs)
+        if self._writer is not None:
+            self._writer.set_attrs(attrs)
+
+    def close(self) -> None:
+        """Append what is pending and close the file (renamed onto ``path`` when atomic). Idempotent.
+
+        When atomic and this fails, the temporary file is removed and ``path`` is left as it was.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            try:
+                if self._writer is None and self._shape is not None:
+                    self._open()  # the shape is known but no update came: an empty series
+                self.flush()
+            finally:
+                if self._writer is not None:
+                    self._writer.close()
+            if self._tmp is not None:
+                with open(self._tmp, "rb") as f:
+                    os.fsync(f.fileno())
+                os.replace(self._tmp, self.path)
+                self._tmp = None
+        except BaseException:
+            self._discard_tmp()
+            raise
+
+    def abort(self) -> None:
+        """Close without appending what is pending; when atomic, remove the temporary file (nothing at ``path``)."""
+        self._closed = True
+        self._pending, self.n_pending = [], 0
+        try:
+            if self._writer is not None:
+                self._writer.close()
+        finally:
+            self._discard_tmp()
+
+    def __enter__(self) -> CentrelineSink:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, *exc: object) -> None:
+        if exc_type is not None and self.atomic:
+            self.abort()
+        else:
+            self.close()
+
+    def _open(self) -> None:
+        assert self._s is not None and self._shape is not None
+        units = self._units if self._units is not None else self._attrs.get("units")
+        if units is None:
+            raise ValueError(f"{self.path}: the centrelines' units are not known (give them in attrs or to add)")
+        extra = {"source": self._source} if self._source is not None else {}
+        attrs = centreline_attrs(self._attrs, units=units, **extra)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        target = self.path
+        if self.atomic:  # a name of its own in the same folder (a rename within one file system)
+            target = self._tmp = self.path.with_name(f".{self.path.name}.{uuid.uuid4().hex[:12]}.tmp")
+        try:
+            self._writer = CentrelineWriter(target, self._s, self._shape[1] - 1, attrs)
+        except BaseException:
+            self._discard_tmp()
+            raise
+        self._last_flush = time.monotonic()
+
+    def _discard_tmp(self) -> None:
+        if self._tmp is not None:
+            self._tmp.unlink(missing_ok=True)
+            self._tmp = None
 
 
 def write_centrelines(path: str | Path, batch: CentrelineBatch, attrs: Mapping[str, Any]) -> None:
