@@ -17,7 +17,7 @@ from flagtrack.daemon.services.runner import Service
 from flagtrack.daemon.services.supervisor.service import FlagGeometry, SupervisorService
 from flagtrack.daemon.services.tracker import TrackerService
 from flagtrack.daemon.services.viewer import ViewerService
-from flagtrack.daemon.tracking.setup import TrackingSetup, tracking_setup
+from flagtrack.daemon.tracking.setup import TrackingSetup, processing_attrs, tracking_setup
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.camera.base import Camera, CameraInfo
 from flagtrack.drivers.tunnel.base import WindTunnel
@@ -150,6 +150,7 @@ def build_services(
         speed_source = BusSpeedSource(bus)
     if "recorder" in names:
         services.append(RecorderService(bus, replace(rig.recorder, camera_id=rig.camera.id), rig.snapshot(),
+                                        centreline_attrs=setup.attrs if setup else processing_attrs(rig.tracker),
                                         exit_at_end_of_stream=exit_at_end_of_stream))
     if "tracker" in names:
         assert setup is not None

@@ -146,7 +146,7 @@ def check_rig(rig: RigConfig, services: Sequence[str]) -> None:
         if rig.camera.adapter in HARDWARE_ADAPTERS:
             module = importlib.import_module(f"flagtrack.drivers.camera.{rig.camera.adapter}")
             module.check_config(rig.camera.hardware, path=where)
-    if "tracker" in services and rig.tracker.calibration is not None:
+    if {"tracker", "recorder"} & set(services) and rig.tracker.calibration is not None:  # the recorder's files name it
         require_file(rig.tracker.calibration, key="tracker.calibration", path=where)
     if "recorder" in services:
         require_folder(rig.recorder.directory, key="recorder.directory", path=where)

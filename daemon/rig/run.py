@@ -17,7 +17,7 @@ from flagtrack.daemon.services.centreline_file import CentrelineFileService
 from flagtrack.daemon.services.runner import RunReport, Service, run_services
 from flagtrack.daemon.services.tracker import warm_up_kernels
 from flagtrack.daemon.sweep import figures
-from flagtrack.daemon.tracking.setup import TrackingSetup, tracking_setup
+from flagtrack.daemon.tracking.setup import TrackingSetup, processing_attrs, tracking_setup
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.camera.simulated import fast_forward
 
@@ -59,7 +59,7 @@ def run_rig(rig: RigConfig, names: list[str], *, exit_at_end_of_stream: bool = F
             services = build_services(rig, bus, names, exit_at_end_of_stream=exit_at_end_of_stream,
                                       resume_dir=resume_dir, tracker=setup, camera=camera)
             if centrelines is not None:
-                made_by = setup.attrs if setup is not None else rig.tracker.attrs()
+                made_by = setup.attrs if setup is not None else processing_attrs(rig.tracker)
                 attrs = {**made_by, "input_file": str(rig.camera.replay.path) if rig.camera.replay else ""}
                 services.insert(0, CentrelineFileService(bus, centrelines, attrs,
                                                          exit_after_final=exit_at_end_of_stream))

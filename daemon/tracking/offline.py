@@ -7,15 +7,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.tracking.setup import TrackingSetup
 from flagtrack.drivers.formats import open_events
-from flagtrack.drivers.formats.centreline import CentrelineWriter
+from flagtrack.drivers.formats.centreline import CentrelineSink
 
 log = logging.getLogger(__name__)
-
-_WRITE_EVERY = 8192  # updates buffered before an HDF5 append
-
 
 @dataclass(frozen=True)
 class ReconstructSummary:
@@ -52,25 +48,16 @@ def reconstruct_file(path: Path, output: Path, setup: TrackingSetup, *,
         info = reader.info
         tracker = setup.new_tracker((info.width or 0, info.height or 0))
         attrs = {**setup.attrs, "input_file": str(Path(path).resolve()), "input_format": info.format}
-        with CentrelineWriter(output, tracker.s, setup.params.chain.n_joints, attrs) as writer:
-            pending: list[CentrelineBatch] = []
-            n_pending = 0
+        with CentrelineSink(output, attrs, s=tracker.s, n_joints=setup.params.chain.n_joints) as sink:
             for chunk in reader:
-                batch = tracker.feed(chunk.events)
-                if len(batch):
-                    pending.append(batch)
-                    n_pending += len(batch)
-                if n_pending >= _WRITE_EVERY:
-                    writer.append(CentrelineBatch.concatenate(pending))
-                    pending, n_pending = [], 0
+                sink.add(tracker.feed(chunk.events))
                 if progress is not None:
                     progress(chunk.byte_offset)
             if progress is not None:
                 progress(Path(path).stat().st_size)
-            pending.append(tracker.finish())
-            writer.append(CentrelineBatch.concatenate(pending))
+            sink.add(tracker.finish())
             stats = tracker.stats
-            writer.set_attrs({"events_in": stats.events_in, "events_kept": stats.events_kept})
+            sink.set_attrs({"events_in": stats.events_in, "events_kept": stats.events_kept})
     if stats.events_out_of_order:
         log.warning("%d events were out of time order", stats.events_out_of_order)
     return ReconstructSummary(stats.updates, stats.events_in, stats.events_kept, stats.first_t_us, stats.last_t_us)

@@ -58,14 +58,29 @@ def tracking_setup(config: TrackingConfig, *, path: str | None = None) -> Tracki
     """
     params = config.tracker_params(path=path)
     mapping: PointMapping | None = None
-    attrs = config.attrs()
     if config.calibration is not None:
-        from flagtrack.calibration.calfile import calibration_attrs, load_mapping
+        from flagtrack.calibration.calfile import load_mapping
 
         mapping = load_mapping(config.calibration)
-        attrs.update(calibration_attrs(config.calibration))
     units = "px" if mapping is None else getattr(mapping, "units", "m")
-    return TrackingSetup(config, params, mapping, units, {**attrs, "units": units})
+    return TrackingSetup(config, params, mapping, units, {**processing_attrs(config), "units": units})
+
+
+def processing_attrs(config: TrackingConfig) -> dict[str, Any]:
+    """How a centreline file was made: every parameter of ``config`` and its calibration's attributes.
+
+    Unlike :func:`tracking_setup`, the section is not checked (a recorder keeps the attributes of
+    the tracker that sends it centrelines, whose section may leave the root to another host).
+
+    Raises:
+        ConfigError, FormatError: the calibration file cannot be read.
+    """
+    attrs = config.attrs()
+    if config.calibration is not None:
+        from flagtrack.calibration.calfile import calibration_attrs
+
+        attrs.update(calibration_attrs(config.calibration))
+    return attrs
 
 
 def load_tracking_config_file(path: str | Path) -> TrackingConfig:

@@ -68,3 +68,33 @@ def test_a_broken_calibration_file_is_one_clear_line(recording: Path, tmp_path: 
                        "--root", "0", "0", "--length", "0.1")
     assert result.returncode == 2 and str(bad) in result.stderr and "not a calibration file" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_every_centreline_file_says_how_it_was_made(recording: Path, tmp_path: Path) -> None:
+    """The recorder's centreline file (one per sweep point), `up --centrelines` and `reconstruct` carry
+    the same processing attributes, calibration included, and the same centrelines."""
+    rig = tmp_path / "rig.yaml"
+    rig.write_text(yaml.safe_dump({
+        "camera": {"adapter": "replay", "replay": {"path": str(recording), "speed": 0.0}},
+        "tracker": {"calibration": str(recording.parent / "cal.yaml"), "root": [0.05, 0.12], "length": 0.1,
+                    "tau_s": 0.0003},
+        "recorder": {"directory": str(tmp_path / "rec"), "path": "point1", "centrelines": True},
+        "services": ["camera", "tracker", "recorder"],
+    }))
+    up = flagtrack("up", "-c", str(rig), "--exit-at-eof", "--centrelines", str(tmp_path / "up.h5"))
+    assert up.returncode == 0, up.stderr
+    rec = flagtrack("reconstruct", str(recording), "-c", str(rig), "-o", str(tmp_path / "offline.h5"))
+    assert rec.returncode == 0, rec.stderr
+    provenance = {"input_file", "input_format", "events_in", "events_kept", "source"}  # what differs by path
+    files = [tmp_path / "offline.h5", tmp_path / "rec" / "point1_centrelines.h5", tmp_path / "up.h5"]
+    with h5py.File(files[0]) as offline:
+        expected = {k: v for k, v in offline.attrs.items() if k not in provenance}
+        t_offline = offline["t"][()]
+    assert expected["units"] == "m" and "calibration_yaml" in expected and "denoise_max_neighbours" in expected
+    for path in files[1:]:
+        with h5py.File(path) as f:
+            got = {k: v for k, v in f.attrs.items() if k not in provenance}
+            assert sorted(got) == sorted(expected), path
+            for name, value in expected.items():
+                assert np.array_equal(np.asarray(got[name]), np.asarray(value)), (path, name)
+            np.testing.assert_allclose(f["t"][()], t_offline, rtol=0, atol=1e-9)
