@@ -298,10 +298,6 @@ class BackgroundActivityFilter:
         self._prepare(events, -(1 << 62))
         return self._mask(events)
 
-    def apply(self, events: np.ndarray) -> np.ndarray:
-        """Return the kept events (a new array; the filter state advances)."""
-        return events[self.keep_mask(events)]
-
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _copy_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, out_t: np.ndarray, out_x: np.ndarray,

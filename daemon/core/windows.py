@@ -67,11 +67,6 @@ class WindowSchedule:
         """One segment: windows of ``tau_s`` every ``dt_s`` (default ``tau_s``)."""
         return WindowSchedule((WindowSegment(0.0, dt_s or tau_s, tau_s),), t_start_s, t_stop_s)
 
-    @property
-    def max_tau_s(self) -> float:
-        """Longest window of the schedule, seconds."""
-        return max(seg.tau_s for seg in self.segments)
-
     def window_ends_us(self, t_s: np.ndarray) -> np.ndarray:
         """(n,) int64: the end ``ceil(t + tau/2)`` (exclusive, µs) of the windows centred at ``t_s``
         (update times as a batch gives them, in seconds: the 1e-6 µs taken off undoes their rounding

@@ -89,7 +89,7 @@ class RecorderConfig:
 
 
 @dataclass
-class Recording:
+class RecordingPart:
     """One open recording: the .raw file, its sidecar and, optionally, the centreline file.
 
     ``part`` numbers the files of one recording (one per camera stream, see the module docstring);
@@ -245,10 +245,10 @@ class Recording:
             self.centrelines.close()
         self.write_sidecar(stopped=True)
 
-    def next_part(self) -> Recording:
+    def next_part(self) -> RecordingPart:
         """The recording of the next camera stream: ``<first base>_stream<part + 1>``, linked to this one."""
         first = self.first_base or self.base
-        part = Recording(base=first.with_name(f"{first.name}_stream{self.part + 1}"), config=self.config,
+        part = RecordingPart(base=first.with_name(f"{first.name}_stream{self.part + 1}"), config=self.config,
                          want_centrelines=self.want_centrelines, centreline_attrs=self.centreline_attrs,
                          part=self.part + 1, first_base=first, continues=self.raw_path.name)
         self.continued_in = part.raw_path.name
@@ -268,14 +268,14 @@ class RecorderService:
         self.cfg = cfg
         self.config_snapshot = config_snapshot or {}
         self.centreline_attrs = centreline_attrs or {}  # processing parameters and calibration, for every file
-        self.current: Recording | None = None
+        self.current: RecordingPart | None = None
         self.finished: list[Path] = []
         self.lost_packets = 0
         self.malformed_packets = 0  # whole run, recording or not
         self.late_packets = 0  # duplicates and late packets, dropped
         self.restarts = 0  # new camera streams while recording (each started a new file)
         self.problems = ProblemLog(log, "recorder")
-        self._draining: Recording | None = None  # the previous stream's part, still taking its centrelines
+        self._draining: RecordingPart | None = None  # the previous stream's part, still taking its centrelines
         self._last_line_s = 0.0  # monotonic time of the last centreline message (or of the end of stream)
         self._final_seen = False
         self._dropped_before = 0  # the queue's drop count when the current part began
@@ -346,11 +346,11 @@ class RecorderService:
 
     def start(self, path: str, centrelines: bool, request_id: str = "") -> None:
         """Begin a recording at ``path`` (no extension; relative to the configured directory)."""
-        self._begin(Recording(base=recording_base(self.cfg.directory, path), config=self.config_snapshot,
+        self._begin(RecordingPart(base=recording_base(self.cfg.directory, path), config=self.config_snapshot,
                               want_centrelines=centrelines or self.cfg.centrelines,
                               centreline_attrs=self.centreline_attrs), request_id)
 
-    def _begin(self, recording: Recording, request_id: str = "", message: str = "") -> None:
+    def _begin(self, recording: RecordingPart, request_id: str = "", message: str = "") -> None:
         recording.write_sidecar()
         self.current = recording
         self._dropped_before = self._packets.channel.dropped
@@ -368,7 +368,7 @@ class RecorderService:
         self._close(recording)
         self._status("idle", recording=recording, request_id=request_id)
 
-    def _close(self, recording: Recording) -> None:
+    def _close(self, recording: RecordingPart) -> None:
         recording.close()
         self.finished.append(recording.raw_path)
         log.info("recorder: closed %s (%d packets, %d bytes, %d gaps)", recording.raw_path, recording.packets,
@@ -481,7 +481,7 @@ class RecorderService:
             return True
         return False
 
-    def _status(self, state: str, *, recording: Recording | None = None, message: str = "", request_id: str = "") -> None:
+    def _status(self, state: str, *, recording: RecordingPart | None = None, message: str = "", request_id: str = "") -> None:
         rec = recording or self.current
         if not hasattr(self, "status_pub"):
             return

@@ -185,15 +185,9 @@ class EventCamera:
     def advance(self, idx: np.ndarray, new_levels: np.ndarray, t_us: float) -> None:
         """Move pixels ``idx`` (int64) linearly from their last level to ``new_levels`` at ``t_us``.
 
-        The ramp starts at each pixel's last update: call :meth:`catch_up` first for pixels that
-        stayed constant since an earlier step.
+        The ramp starts at each pixel's last update.
         """
         self._run(np.asarray(idx, dtype=np.int64), np.asarray(new_levels, dtype=np.float64), t_us)
-
-    def catch_up(self, idx: np.ndarray, t_us: float) -> None:
-        """Bring pixels ``idx`` to ``t_us`` at constant level (leak and pending refractory events only)."""
-        idx = np.asarray(idx, dtype=np.int64)
-        self._run(idx, self.level[idx], t_us)
 
     def flush(self, t_us: float) -> None:
         """Bring every pixel that may still fire to ``t_us`` at constant level.

@@ -12,7 +12,7 @@ import math
 import time
 from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -130,12 +130,6 @@ def write_events_file(path: Path, chunks: Iterable[np.ndarray], width: int, heig
     return path, len(events)
 
 
-def _counted(chunks: Iterator[np.ndarray], counter: list[int]) -> Iterator[np.ndarray]:
-    for chunk in chunks:
-        counter[0] += len(chunk)
-        yield chunk
-
-
 def simulate_recording(spec: RecordingSpec, out_dir: str | Path, name: str | None = None) -> RecordingResult:
     """Simulate one recording into ``out_dir``: ``NAME.raw``, ``NAME_truth.h5``, ``NAME.json``."""
     out = Path(out_dir)
@@ -232,12 +226,3 @@ def simulate_checkerboard(
     params_path.write_text(json.dumps(params, indent=2) + "\n")
     return RecordingResult(str(events_path), "", str(params_path), n_events, t_stop * 1e-6, wall_s)
 
-
-def spec_with(spec: RecordingSpec, **changes: Any) -> RecordingSpec:
-    """``dataclasses.replace`` re-exported for callers building many specs."""
-    return replace(spec, **changes)
-
-
-def spec_to_mapping(spec: RecordingSpec) -> dict[str, Any]:
-    """``spec`` as plain JSON-able data."""
-    return asdict(spec)

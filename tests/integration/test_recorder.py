@@ -297,7 +297,7 @@ def test_centrelines_of_another_tracker_setup_are_refused_not_mixed_in(tmp_path:
     """The centreline file takes the samples and joints of its first message; a message with
     others raises a SchemaError (counted by the service) and the file keeps the rest."""
     from flagtrack.daemon.errors import SchemaError
-    from flagtrack.daemon.services.recorder import Recording
+    from flagtrack.daemon.services.recorder import RecordingPart as Recording
     from tests.integration.test_centreline_file_service import message
 
     recording = Recording(base=tmp_path / "r", config={}, want_centrelines=True)
