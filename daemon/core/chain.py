@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from flagtrack.daemon.core.kernels import LANES, bucket_sort, update_sorted
 
 

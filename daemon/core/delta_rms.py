@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from flagtrack.daemon.core.jit import njit
 
 _F = np.float32

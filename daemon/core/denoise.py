@@ -21,11 +21,11 @@ block statistics) advances event by event, so the result does not depend on how 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
-import math
-
 import numpy as np
+
 from flagtrack.daemon.core.jit import njit
 
 _NEVER = np.int32(-(1 << 31) + 1)  # "never fired", in the int32 map of times relative to a base

@@ -18,9 +18,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from flagtrack.daemon.core.jit import njit
 
 from flagtrack.daemon.core.delta_rms import LANES, lanes_end, window_delta
+from flagtrack.daemon.core.jit import njit
 from flagtrack.daemon.core.smoothing import smooth_one
 
 _F = np.float32

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from flagtrack.daemon.core.jit import njit
 
 REL_TOL = 1e-9

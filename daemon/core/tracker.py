@@ -19,9 +19,9 @@ import numpy as np
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.chain import AreaGeometry, ChainParams, ChainState
 from flagtrack.daemon.core.denoise import BackgroundActivityFilter, DenoiseParams
+from flagtrack.daemon.core.kernels import run_updates
 from flagtrack.daemon.core.mapping import PointMapping
 from flagtrack.daemon.core.smoothing import REL_TOL, n_samples
-from flagtrack.daemon.core.kernels import run_updates
 from flagtrack.daemon.core.windows import UpdateClock, WindowSchedule
 
 log = logging.getLogger(__name__)
