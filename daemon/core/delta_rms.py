@@ -93,7 +93,7 @@ def _segments(sx: np.ndarray, sy: np.ndarray, root_x: float, root_y: float, seg:
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def window_delta(xs: np.ndarray, ys: np.ndarray, offsets: np.ndarray, width: float, group: int, root_x: float,
-                 root_y: float, area: np.ndarray, reach: np.ndarray, r2_min: np.ndarray, r2_max: np.ndarray,
+                 root_y: float, area: np.ndarray, r2_min: np.ndarray, r2_max: np.ndarray,
                  cl2: float, sx: np.ndarray, sy: np.ndarray, seg: np.ndarray, inside: np.ndarray,
                  best: np.ndarray) -> tuple[float, int]:
     """Sum of squared distances to the centreline (sx, sy) of the window's events in a search area.

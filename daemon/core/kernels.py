@@ -232,7 +232,7 @@ def run_updates(x: np.ndarray, y: np.ndarray, lo_idx: np.ndarray, hi_idx: np.nda
         update_sorted(xs, ys, offsets, inv_width, root_x, root_y, angles, lengths, reach, r2_min, r2_max,
                       cl2, cr2, half_angle, min_events, area, jx, jy, counts)
         smooth_one(jx, jy, lengths, length, rel_tol, work, out_sx[w], out_sy[w])
-        total, used = window_delta(xs, ys, offsets, bucket_width, group, root_x, root_y, area, reach, r2_min,
+        total, used = window_delta(xs, ys, offsets, bucket_width, group, root_x, root_y, area, r2_min,
                                    r2_max, cl2, out_sx[w], out_sy[w], seg, inside, best)
         out_n[w] = used
         out_delta[w] = math.sqrt(total / used) if used > 0 else math.nan

@@ -151,20 +151,20 @@ def smooth_one(jx: np.ndarray, jy: np.ndarray, lengths: np.ndarray, length: floa
     r0, f0 = r_full, excess(r_full)
     if abs(f0) <= tol:
         return r0
-    lo, f_lo, hi, f_hi = 1e-6 * r_full, -math.inf, 4.0 * r_full, math.inf
+    lo, hi = 1e-6 * r_full, 4.0 * r_full
     if f0 > 0:
-        hi, f_hi = r0, f0
+        hi = r0
     else:
-        lo, f_lo = r0, f0
+        lo = r0
     r1 = min(max(r0 - f0, lo), hi)
     for _ in range(60):
         f1 = excess(r1)
         if abs(f1) <= tol:
             return r1
         if f1 > 0:
-            hi, f_hi = r1, f1
+            hi = r1
         else:
-            lo, f_lo = r1, f1
+            lo = r1
         denom = f1 - f0
         r2 = r1 - f1 * (r1 - r0) / denom if denom != 0.0 else 0.5 * (lo + hi)
         if not (lo < r2 < hi):
