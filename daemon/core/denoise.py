@@ -57,8 +57,9 @@ class DenoiseParams:
         if self.window_us <= 0:
             raise ValueError(f"window_us must be positive, got {self.window_us}")
         if not 1 <= self.min_neighbours <= self.max_neighbours <= 8:
-            raise ValueError(f"need 1 <= min_neighbours <= max_neighbours <= 8, got "
-                             f"{self.min_neighbours}, {self.max_neighbours}")
+            raise ValueError(
+                f"need 1 <= min_neighbours <= max_neighbours <= 8, got {self.min_neighbours}, {self.max_neighbours}"
+            )
         if not 0 < self.noise_pass < 1:
             raise ValueError(f"noise_pass must be in (0, 1), got {self.noise_pass}")
         if self.block_us <= 0:
@@ -89,28 +90,53 @@ def _support(last: np.ndarray, stride: int, x: int, y: int, t_rel: np.int32, win
     up = c - row
     dn = c + row
     since = t_rel - window_us
-    count = ((last[up - one] >= since) + (last[up] >= since) + (last[up + one] >= since)
-             + (last[c - one] >= since) + (last[c + one] >= since) + (last[dn - one] >= since)
-             + (last[dn] >= since) + (last[dn + one] >= since))
+    count = (
+        (last[up - one] >= since)
+        + (last[up] >= since)
+        + (last[up + one] >= since)
+        + (last[c - one] >= since)
+        + (last[c + one] >= since)
+        + (last[dn - one] >= since)
+        + (last[dn] >= since)
+        + (last[dn + one] >= since)
+    )
     last[c] = t_rel
     return count
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _next_k(isolated: int, area_px: float, block_us: int, window_us: int, k_min: int, k_max: int,
-            noise_pass: float, comb: np.ndarray) -> int:
+def _next_k(
+    isolated: int,
+    area_px: float,
+    block_us: int,
+    window_us: int,
+    k_min: int,
+    k_max: int,
+    noise_pass: float,
+    comb: np.ndarray,
+) -> int:
     """Fewest neighbours for the next block, from the isolated events of the last one."""
     p = isolated / (area_px * block_us) * window_us  # chance a given neighbour fired in the window
     p = min(p * math.exp(min(8.0 * p, 8.0)), 1.0)  # isolated events are the noise with no neighbour
     k = k_min
-    while k < k_max and comb[k] * p ** k > noise_pass:
+    while k < k_max and comb[k] * p**k > noise_pass:
         k += 1
     return k
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _required(state: np.ndarray, t: np.int64, x: int, y: int, block_us: int, window_us: int, k_min: int,
-              k_max: int, noise_pass: float, comb: np.ndarray) -> int:
+def _required(
+    state: np.ndarray,
+    t: np.int64,
+    x: int,
+    y: int,
+    block_us: int,
+    window_us: int,
+    k_min: int,
+    k_max: int,
+    noise_pass: float,
+    comb: np.ndarray,
+) -> int:
     """Neighbours an event at (t, x, y) needs; advances the block statistics to its block."""
     if k_max <= k_min:
         return k_min
@@ -129,25 +155,55 @@ def _required(state: np.ndarray, t: np.int64, x: int, y: int, block_us: int, win
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _filter_mask(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, stride: int, base_us: int,
-                 window_us: int, state: np.ndarray, block_us: int, k_min: int, k_max: int, noise_pass: float,
-                 comb: np.ndarray, keep: np.ndarray) -> None:
+def _filter_mask(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    last: np.ndarray,
+    stride: int,
+    base_us: int,
+    window_us: int,
+    state: np.ndarray,
+    block_us: int,
+    k_min: int,
+    k_max: int,
+    noise_pass: float,
+    comb: np.ndarray,
+    keep: np.ndarray,
+) -> None:
     """Write in ``keep`` (n,) whether each event passes; the map and state advance."""
     window = np.int32(window_us)
     for i in range(len(t)):
         ti = np.int64(t[i])
-        need = _required(state, ti, np.int64(x[i]), np.int64(y[i]), block_us, window_us, k_min, k_max,
-                         noise_pass, comb)
+        need = _required(state, ti, np.int64(x[i]), np.int64(y[i]), block_us, window_us, k_min, k_max, noise_pass, comb)
         n = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
         state[_ISOLATED] += 1 if n == 0 else 0
         keep[i] = n >= need
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _filter_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, i: int, last: np.ndarray, width: int, height: int,
-                 base_us: int, window_us: int, state: np.ndarray, block_us: int, k_min: int, k_max: int,
-                 noise_pass: float, comb: np.ndarray, out_t: np.ndarray, out_x: np.ndarray, out_y: np.ndarray,
-                 j: int, latest: int) -> tuple[int, int, int, bool]:
+def _filter_into(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    i: int,
+    last: np.ndarray,
+    width: int,
+    height: int,
+    base_us: int,
+    window_us: int,
+    state: np.ndarray,
+    block_us: int,
+    k_min: int,
+    k_max: int,
+    noise_pass: float,
+    comb: np.ndarray,
+    out_t: np.ndarray,
+    out_x: np.ndarray,
+    out_y: np.ndarray,
+    j: int,
+    latest: int,
+) -> tuple[int, int, int, bool]:
     """:func:`_filter_mask` and the copy of the kept events in one pass (the hot path), from event ``i``:
     append the kept ones from ``j``, and follow the time order from ``latest`` (the latest time before).
 
@@ -194,8 +250,9 @@ def _filter_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, i: int, last: np.n
             block = block_now
         if block != block_now:
             if block == block_now + 1:
-                k = _next_k(isolated, float((max_x + 1) * (max_y + 1)), block_us, window_us, k_min, k_max,
-                            noise_pass, comb)
+                k = _next_k(
+                    isolated, float((max_x + 1) * (max_y + 1)), block_us, window_us, k_min, k_max, noise_pass, comb
+                )
             else:  # first block, or blocks without events: no evidence of noise
                 k = k_min
             block_now, isolated = block, 0
@@ -251,8 +308,22 @@ class BackgroundActivityFilter:
         if p is None or base_us is None:
             raise RuntimeError("_mask() before _prepare()")
         keep = np.empty(len(events), dtype=np.bool_)
-        _filter_mask(events["t"], events["x"], events["y"], self._last, self._width + 2, base_us, p.window_us,
-                     self._state, p.block_us, p.min_neighbours, p.max_neighbours, p.noise_pass, self._comb, keep)
+        _filter_mask(
+            events["t"],
+            events["x"],
+            events["y"],
+            self._last,
+            self._width + 2,
+            base_us,
+            p.window_us,
+            self._state,
+            p.block_us,
+            p.min_neighbours,
+            p.max_neighbours,
+            p.noise_pass,
+            self._comb,
+            keep,
+        )
         return keep
 
     def _fit(self, max_x: int, max_y: int) -> None:
@@ -260,7 +331,7 @@ class BackgroundActivityFilter:
         width, height = max(self._width, max_x + 1), max(self._height, max_y + 1)
         if (width, height) != (self._width, self._height):
             grown = np.full((height + 2, width + 2), _NEVER, dtype=np.int32)
-            grown[:self._height + 2, :self._width + 2] = self._last.reshape(self._height + 2, self._width + 2)
+            grown[: self._height + 2, : self._width + 2] = self._last.reshape(self._height + 2, self._width + 2)
             self._last = grown.ravel()
             self._width, self._height = width, height
 
@@ -283,8 +354,15 @@ class BackgroundActivityFilter:
         self._last = np.maximum(self._last.astype(np.int64) - shift, _NEVER).astype(np.int32)
         self._base_us = base_us
 
-    def filter_into(self, events: np.ndarray, out_t: np.ndarray, out_x: np.ndarray, out_y: np.ndarray,
-                    start: int, latest_us: int = -(1 << 62)) -> tuple[int, bool, int]:
+    def filter_into(
+        self,
+        events: np.ndarray,
+        out_t: np.ndarray,
+        out_x: np.ndarray,
+        out_y: np.ndarray,
+        start: int,
+        latest_us: int = -(1 << 62),
+    ) -> tuple[int, bool, int]:
         """Append t, x, y of the kept events of ``events`` (EVENT_DTYPE) to the buffers from ``start``.
 
         Args:
@@ -312,8 +390,27 @@ class BackgroundActivityFilter:
         i, end, latest, ordered = 0, start, latest_us, True
         while True:  # the kernel stops where the map needs to grow or its time base to move
             i, end, latest, ordered_part = _filter_into(
-                t, x, y, i, self._last, self._width, self._height, self._base_us, p.window_us, self._state, p.block_us,
-                p.min_neighbours, p.max_neighbours, p.noise_pass, self._comb, out_t, out_x, out_y, end, latest)
+                t,
+                x,
+                y,
+                i,
+                self._last,
+                self._width,
+                self._height,
+                self._base_us,
+                p.window_us,
+                self._state,
+                p.block_us,
+                p.min_neighbours,
+                p.max_neighbours,
+                p.noise_pass,
+                self._comb,
+                out_t,
+                out_x,
+                out_y,
+                end,
+                latest,
+            )
             ordered &= ordered_part
             if i == len(t):
                 return end, ordered, latest
@@ -339,8 +436,16 @@ class BackgroundActivityFilter:
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _copy_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, out_t: np.ndarray, out_x: np.ndarray,
-               out_y: np.ndarray, start: int, latest: int) -> tuple[int, int, bool]:
+def _copy_into(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    out_t: np.ndarray,
+    out_x: np.ndarray,
+    out_y: np.ndarray,
+    start: int,
+    latest: int,
+) -> tuple[int, int, bool]:
     """Append every event (no filtering); return (index after the last, latest time, whether the
     times never decreased from ``latest`` on)."""
     ordered = True

@@ -205,7 +205,9 @@ class OnsetDetector:
         return p.on_ratio * self._baseline_hz, p.off_ratio * self._baseline_hz
 
 
-def detect_states(t_s: Iterable[float], rate_hz: Iterable[float], params: OnsetParams = OnsetParams()) -> list[OnsetReading]:
+def detect_states(
+    t_s: Iterable[float], rate_hz: Iterable[float], params: OnsetParams = OnsetParams()
+) -> list[OnsetReading]:
     """Run a fresh detector over a whole trace; one reading per sample."""
     detector = OnsetDetector(params)
     return [detector.update(float(t), float(r)) for t, r in zip(t_s, rate_hz, strict=True)]

@@ -69,21 +69,26 @@ def hermite_eval(u: np.ndarray, v: np.ndarray, slopes: np.ndarray, uq: np.ndarra
         t = (uq[q] - u[j]) / h
         t2 = t * t
         t3 = t2 * t
-        out[q] = ((2 * t3 - 3 * t2 + 1) * v[j] + (t3 - 2 * t2 + t) * h * slopes[j]
-                  + (-2 * t3 + 3 * t2) * v[j + 1] + (t3 - t2) * h * slopes[j + 1])
+        out[q] = (
+            (2 * t3 - 3 * t2 + 1) * v[j]
+            + (t3 - 2 * t2 + t) * h * slopes[j]
+            + (-2 * t3 + 3 * t2) * v[j + 1]
+            + (t3 - t2) * h * slopes[j + 1]
+        )
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
-def _sampled_length(u: np.ndarray, jx: np.ndarray, jy: np.ndarray, work: np.ndarray,
-                    sx: np.ndarray, sy: np.ndarray) -> float:
+def _sampled_length(
+    u: np.ndarray, jx: np.ndarray, jy: np.ndarray, work: np.ndarray, sx: np.ndarray, sy: np.ndarray
+) -> float:
     """Sample the makima curve through (jx, jy) at n_s even u into sx, sy; return the polyline length.
 
     ``work`` is scratch of at least 3 len(u) + 3 values.
     """
     n = len(u)
     tx = work[:n]
-    ty = work[n:2 * n]
-    m = work[2 * n:3 * n + 3]
+    ty = work[n : 2 * n]
+    m = work[2 * n : 3 * n + 3]
     makima_slopes(u, jx, tx, m)
     makima_slopes(u, jy, ty, m)
     n_s = len(sx)
@@ -117,8 +122,16 @@ def _sampled_length(u: np.ndarray, jx: np.ndarray, jy: np.ndarray, work: np.ndar
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def smooth_one(jx: np.ndarray, jy: np.ndarray, lengths: np.ndarray, length: float, rel_tol: float,
-               work: np.ndarray, sx: np.ndarray, sy: np.ndarray) -> float:
+def smooth_one(
+    jx: np.ndarray,
+    jy: np.ndarray,
+    lengths: np.ndarray,
+    length: float,
+    rel_tol: float,
+    work: np.ndarray,
+    sx: np.ndarray,
+    sy: np.ndarray,
+) -> float:
     """Smooth one chain in place; return the tip link length that gives the exact smoothed length.
 
     Args:
@@ -132,7 +145,7 @@ def smooth_one(jx: np.ndarray, jy: np.ndarray, lengths: np.ndarray, length: floa
     """
     n = len(lengths)
     u = work[: n + 1]
-    scratch = work[n + 1:]
+    scratch = work[n + 1 :]
     u[0] = 0.0
     for k in range(n):
         u[k + 1] = u[k] + lengths[k]
@@ -175,16 +188,25 @@ def smooth_one(jx: np.ndarray, jy: np.ndarray, lengths: np.ndarray, length: floa
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def smooth_batch(jx: np.ndarray, jy: np.ndarray, lengths: np.ndarray, length: float, rel_tol: float,
-                 sx: np.ndarray, sy: np.ndarray, r_tip: np.ndarray) -> None:
+def smooth_batch(
+    jx: np.ndarray,
+    jy: np.ndarray,
+    lengths: np.ndarray,
+    length: float,
+    rel_tol: float,
+    sx: np.ndarray,
+    sy: np.ndarray,
+    r_tip: np.ndarray,
+) -> None:
     """Smooth K chains: jx, jy (K, N_j + 1) (tip moved in place), sx, sy (K, n_s), r_tip (K,)."""
     work = np.empty(4 * (len(lengths) + 1) + 3)
     for k in range(jx.shape[0]):
         r_tip[k] = smooth_one(jx[k], jy[k], lengths, length, rel_tol, work, sx[k], sy[k])
 
 
-def smooth_chains(joints_x: np.ndarray, joints_y: np.ndarray, lengths: np.ndarray, length: float, n_s: int,
-                  rel_tol: float = REL_TOL) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def smooth_chains(
+    joints_x: np.ndarray, joints_y: np.ndarray, lengths: np.ndarray, length: float, n_s: int, rel_tol: float = REL_TOL
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Smoothed centrelines of K chains (pure; inputs untouched).
 
     Args:
