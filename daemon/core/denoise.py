@@ -128,8 +128,8 @@ def _next_k(
 def _required(
     state: np.ndarray,
     t: np.int64,
-    x: int,
-    y: int,
+    x: np.int64,
+    y: np.int64,
     block_us: int,
     window_us: int,
     k_min: int,
@@ -181,6 +181,9 @@ def _filter_mask(
         keep[i] = n >= need
 
 
+# The kernels below compare and take max() of np.int64 and int (``latest = max(latest, ti)``). numba
+# compiles both as int64 and returns int and bool to Python, as their signatures say; to mypy, with
+# numpy's stubs, np.int64 and np.bool are not int and bool: hence ``type: ignore[assignment]`` there.
 @njit(cache=True, nogil=True, error_model="numpy")
 def _filter_into(
     t: np.ndarray,
@@ -223,8 +226,8 @@ def _filter_into(
             ti, xi, yi = np.int64(t[i]), np.int64(x[i]), np.int64(y[i])
             if xi >= width or yi >= height or abs(ti - base_us) >= _REBASE_US:
                 break
-            ordered &= ti >= latest
-            latest = max(latest, ti)
+            ordered &= ti >= latest  # type: ignore[assignment]
+            latest = max(latest, ti)  # type: ignore[assignment]
             count = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
             out_t[j] = ti  # written always, kept by advancing j: no branch
             out_x[j] = x[i]
@@ -239,8 +242,8 @@ def _filter_into(
         ti, xi, yi = np.int64(t[i]), np.int64(x[i]), np.int64(y[i])
         if xi >= width or yi >= height or abs(ti - base_us) >= _REBASE_US:
             break
-        ordered &= ti >= latest
-        latest = max(latest, ti)
+        ordered &= ti >= latest  # type: ignore[assignment]
+        latest = max(latest, ti)  # type: ignore[assignment]
         max_x, max_y = max(max_x, xi), max(max_y, yi)
         if ti < block_lo or ti >= block_hi:  # ti // block_us != block_now, without a division per event
             block = ti // block_us
@@ -274,10 +277,10 @@ def scan_chunk(t: np.ndarray, x: np.ndarray, y: np.ndarray, latest: int) -> tupl
     top, max_x, max_y = latest, 0, 0
     for i in range(len(t)):
         ti = np.int64(t[i])
-        ordered &= ti >= top
-        top = max(top, ti)
-        max_x = max(max_x, np.int64(x[i]))
-        max_y = max(max_y, np.int64(y[i]))
+        ordered &= ti >= top  # type: ignore[assignment]
+        top = max(top, ti)  # type: ignore[assignment]
+        max_x = max(max_x, np.int64(x[i]))  # type: ignore[assignment]
+        max_y = max(max_y, np.int64(y[i]))  # type: ignore[assignment]
     return ordered, top, max_x, max_y
 
 
@@ -350,6 +353,7 @@ class BackgroundActivityFilter:
     def _rebase(self, base_us: int) -> None:
         """Move the time base of the int32 map to ``base_us`` (times older than the map can hold
         become "never"; they are far older than any window)."""
+        assert self._base_us is not None, "_rebase() before the first time base"
         shift = base_us - self._base_us
         self._last = np.maximum(self._last.astype(np.int64) - shift, _NEVER).astype(np.int32)
         self._base_us = base_us
@@ -451,8 +455,8 @@ def _copy_into(
     ordered = True
     for i in range(len(t)):
         ti = np.int64(t[i])
-        ordered &= ti >= latest
-        latest = max(latest, ti)
+        ordered &= ti >= latest  # type: ignore[assignment]
+        latest = max(latest, ti)  # type: ignore[assignment]
         out_t[start + i] = ti
         out_x[start + i] = x[i]
         out_y[start + i] = y[i]

@@ -78,7 +78,7 @@ class OnsetParams:
             raise ValueError("need 1 < off_ratio < on_ratio")
         if (self.on_rate_hz is None) != (self.off_rate_hz is None):
             raise ValueError("give both on_rate_hz and off_rate_hz, or neither")
-        if self.on_rate_hz is not None and not 0 < self.off_rate_hz < self.on_rate_hz:  # type: ignore[operator]
+        if self.on_rate_hz is not None and self.off_rate_hz is not None and not 0 < self.off_rate_hz < self.on_rate_hz:
             raise ValueError("need 0 < off_rate_hz < on_rate_hz")
 
 

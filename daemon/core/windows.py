@@ -181,7 +181,8 @@ class UpdateClock:
             return _NONE
         if len(parts) == 1:
             return parts[0]
-        return tuple(np.concatenate(cols) for cols in zip(*parts))  # type: ignore[return-value]
+        t_cols, lo_cols, hi_cols = zip(*parts)
+        return np.concatenate(t_cols), np.concatenate(lo_cols), np.concatenate(hi_cols)
 
     def _ready_few(
         self,
