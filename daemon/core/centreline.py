@@ -56,9 +56,14 @@ class CentrelineBatch:
     def select(self, index: slice | np.ndarray) -> CentrelineBatch:
         """Return the updates picked by ``index`` (a slice or boolean/integer array)."""
         return CentrelineBatch(
-            t_s=self.t_s[index], s=self.s, x=self.x[index], y=self.y[index],
-            joints_x=self.joints_x[index], joints_y=self.joints_y[index],
-            delta_rms=self.delta_rms[index], n_events=self.n_events[index],
+            t_s=self.t_s[index],
+            s=self.s,
+            x=self.x[index],
+            y=self.y[index],
+            joints_x=self.joints_x[index],
+            joints_y=self.joints_y[index],
+            delta_rms=self.delta_rms[index],
+            n_events=self.n_events[index],
         )
 
     @staticmethod
@@ -68,8 +73,10 @@ class CentrelineBatch:
             raise ValueError("no batches to concatenate")
         first = batches[0]
         return CentrelineBatch(
-            t_s=np.concatenate([b.t_s for b in batches]), s=first.s,
-            x=np.concatenate([b.x for b in batches]), y=np.concatenate([b.y for b in batches]),
+            t_s=np.concatenate([b.t_s for b in batches]),
+            s=first.s,
+            x=np.concatenate([b.x for b in batches]),
+            y=np.concatenate([b.y for b in batches]),
             joints_x=np.concatenate([b.joints_x for b in batches]),
             joints_y=np.concatenate([b.joints_y for b in batches]),
             delta_rms=np.concatenate([b.delta_rms for b in batches]),

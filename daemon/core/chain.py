@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from flagtrack.daemon.core.kernels import LANES, bucket_sort, update_sorted
 
 
@@ -94,8 +95,9 @@ class ChainState:
         return joint_positions(params.root[0], params.root[1], self.angles_rad, params.lengths())
 
 
-def joint_positions(root_x: float, root_y: float, angles: np.ndarray, lengths: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def joint_positions(
+    root_x: float, root_y: float, angles: np.ndarray, lengths: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(N_j + 1,) joint x, y of a chain from its root, link directions and lengths."""
     x = np.concatenate([[root_x], root_x + np.cumsum(lengths * np.cos(angles))])
     y = np.concatenate([[root_y], root_y + np.cumsum(lengths * np.sin(angles))])
@@ -128,12 +130,12 @@ class AreaGeometry:
             cos_refine_signed_sq=cos_refine * abs(cos_refine),
             half_angle_rad=math.radians(params.angle_limit_deg),
             bucket_width=float(lengths.min()) / 4,
-            n_buckets=int(math.ceil((params.length + 2 * (1 + params.alpha) * lengths.max()) / (lengths.min() / 4))) + 1,
+            n_buckets=int(math.ceil((params.length + 2 * (1 + params.alpha) * lengths.max()) / (lengths.min() / 4)))
+            + 1,
         )
 
 
-def update_chain(state: ChainState, x: np.ndarray, y: np.ndarray, params: ChainParams
-                 ) -> tuple[ChainState, np.ndarray]:
+def update_chain(state: ChainState, x: np.ndarray, y: np.ndarray, params: ChainParams) -> tuple[ChainState, np.ndarray]:
     """Return the chain after one update from the events (x, y) of one window; inputs untouched.
 
     Coordinates are taken in single precision, as the tracker does.
@@ -149,11 +151,30 @@ def update_chain(state: ChainState, x: np.ndarray, y: np.ndarray, params: ChainP
     sorted_x, sorted_y = np.empty(n + LANES, dtype=np.float32), np.empty(n + LANES, dtype=np.float32)
     offsets = np.empty(geo.n_buckets + 1, dtype=np.int64)
     root_x, root_y = float(params.root[0]), float(params.root[1])
-    bucket_sort(xs, ys, 0, n, root_x, root_y, 1.0 / geo.bucket_width, sorted_x, sorted_y,
-                np.empty(n, dtype=np.int32), offsets)
+    bucket_sort(
+        xs, ys, 0, n, root_x, root_y, 1.0 / geo.bucket_width, sorted_x, sorted_y, np.empty(n, dtype=np.int32), offsets
+    )
     jx, jy = np.empty(params.n_joints + 1), np.empty(params.n_joints + 1)
     counts = np.zeros(params.n_joints, dtype=np.int64)
-    update_sorted(sorted_x, sorted_y, offsets, 1.0 / geo.bucket_width, root_x, root_y, angles, geo.lengths,
-                  np.sqrt(geo.r2_max), geo.r2_min, geo.r2_max, geo.cos_limit_signed_sq, geo.cos_refine_signed_sq,
-                  geo.half_angle_rad, params.min_events, np.empty((params.n_joints, 6)), jx, jy, counts)
+    update_sorted(
+        sorted_x,
+        sorted_y,
+        offsets,
+        1.0 / geo.bucket_width,
+        root_x,
+        root_y,
+        angles,
+        geo.lengths,
+        np.sqrt(geo.r2_max),
+        geo.r2_min,
+        geo.r2_max,
+        geo.cos_limit_signed_sq,
+        geo.cos_refine_signed_sq,
+        geo.half_angle_rad,
+        params.min_events,
+        np.empty((params.n_joints, 6)),
+        jx,
+        jy,
+        counts,
+    )
     return ChainState(angles), counts

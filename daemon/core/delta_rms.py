@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from flagtrack.daemon.core.jit import njit
 
 _F = np.float32
@@ -27,8 +28,20 @@ def lanes_end(i0: int, i1: int) -> int:
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
-def _mark_inside(xs: np.ndarray, ys: np.ndarray, i0: int, i1: int, px: float, py: float, c: float, s: float,
-                 r2_min: float, r2_max: float, cl2: float, inside: np.ndarray) -> None:
+def _mark_inside(
+    xs: np.ndarray,
+    ys: np.ndarray,
+    i0: int,
+    i1: int,
+    px: float,
+    py: float,
+    c: float,
+    s: float,
+    r2_min: float,
+    r2_max: float,
+    cl2: float,
+    inside: np.ndarray,
+) -> None:
     """OR into ``inside`` (uint8, indexed like xs) whether each event lies in the arc (as :func:`arc_sums`)."""
     fpx, fpy, fc, fs = _F(px), _F(py), _F(c), _F(s)
     lo2, hi2, fcl2 = _F(r2_min), _F(r2_max), _F(cl2)
@@ -44,8 +57,18 @@ def _mark_inside(xs: np.ndarray, ys: np.ndarray, i0: int, i1: int, px: float, py
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
-def _nearest_segment(xs: np.ndarray, ys: np.ndarray, i0: int, i1: int, ax: float, ay: float, dx: float, dy: float,
-                     inv_l2: float, best: np.ndarray) -> None:
+def _nearest_segment(
+    xs: np.ndarray,
+    ys: np.ndarray,
+    i0: int,
+    i1: int,
+    ax: float,
+    ay: float,
+    dx: float,
+    dy: float,
+    inv_l2: float,
+    best: np.ndarray,
+) -> None:
     """Lower ``best`` (indexed like xs) to each event's squared distance to the segment (ax, ay) + [0, 1] (dx, dy)."""
     fax, fay, fdx, fdy, finv = _F(ax), _F(ay), _F(dx), _F(dy), _F(inv_l2)
     zero, one = _F(0.0), _F(1.0)
@@ -91,10 +114,24 @@ def _segments(sx: np.ndarray, sy: np.ndarray, root_x: float, root_y: float, seg:
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def window_delta(xs: np.ndarray, ys: np.ndarray, offsets: np.ndarray, width: float, group: int, root_x: float,
-                 root_y: float, area: np.ndarray, reach: np.ndarray, r2_min: np.ndarray, r2_max: np.ndarray,
-                 cl2: float, sx: np.ndarray, sy: np.ndarray, seg: np.ndarray, inside: np.ndarray,
-                 best: np.ndarray) -> tuple[float, int]:
+def window_delta(
+    xs: np.ndarray,
+    ys: np.ndarray,
+    offsets: np.ndarray,
+    width: float,
+    group: int,
+    root_x: float,
+    root_y: float,
+    area: np.ndarray,
+    r2_min: np.ndarray,
+    r2_max: np.ndarray,
+    cl2: float,
+    sx: np.ndarray,
+    sy: np.ndarray,
+    seg: np.ndarray,
+    inside: np.ndarray,
+    best: np.ndarray,
+) -> tuple[float, int]:
     """Sum of squared distances to the centreline (sx, sy) of the window's events in a search area.
 
     Per group of ``group`` buckets, only the areas and centreline segments whose distance to the
@@ -114,8 +151,8 @@ def window_delta(xs: np.ndarray, ys: np.ndarray, offsets: np.ndarray, width: flo
     margin = max(_segments(sx, sy, root_x, root_y, seg), width)
     limit = margin * margin
     n = offsets[n_buckets]
-    inside[:lanes_end(0, n)] = 0
-    best[:lanes_end(0, n)] = _BIG
+    inside[: lanes_end(0, n)] = 0
+    best[: lanes_end(0, n)] = _BIG
     total, count = 0.0, 0
     for b0 in range(0, n_buckets, group):
         b1 = min(b0 + group, n_buckets)
@@ -126,8 +163,9 @@ def window_delta(xs: np.ndarray, ys: np.ndarray, offsets: np.ndarray, width: flo
         hi_rho = b1 * width if b1 < n_buckets else math.inf
         for k in range(n_areas):
             if area[k, 4] <= hi_rho and area[k, 5] >= lo_rho:
-                _mark_inside(xs, ys, i0, i1, area[k, 0], area[k, 1], area[k, 2], area[k, 3], r2_min[k], r2_max[k],
-                             cl2, inside)
+                _mark_inside(
+                    xs, ys, i0, i1, area[k, 0], area[k, 1], area[k, 2], area[k, 3], r2_min[k], r2_max[k], cl2, inside
+                )
         n_in = 0
         iw = inside[i0:i1]
         for i in range(len(iw)):

@@ -54,28 +54,53 @@ def _support(last: np.ndarray, stride: int, x: int, y: int, t_rel: np.int32, win
     up = c - row
     dn = c + row
     since = t_rel - window_us
-    count = ((last[up - one] >= since) + (last[up] >= since) + (last[up + one] >= since)
-             + (last[c - one] >= since) + (last[c + one] >= since) + (last[dn - one] >= since)
-             + (last[dn] >= since) + (last[dn + one] >= since))
+    count = (
+        (last[up - one] >= since)
+        + (last[up] >= since)
+        + (last[up + one] >= since)
+        + (last[c - one] >= since)
+        + (last[c + one] >= since)
+        + (last[dn - one] >= since)
+        + (last[dn] >= since)
+        + (last[dn + one] >= since)
+    )
     last[c] = t_rel
     return count
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _next_k(isolated: int, area_px: float, block_us: int, window_us: int, k_min: int, k_max: int,
-            noise_pass: float, comb: np.ndarray) -> int:
+def _next_k(
+    isolated: int,
+    area_px: float,
+    block_us: int,
+    window_us: int,
+    k_min: int,
+    k_max: int,
+    noise_pass: float,
+    comb: np.ndarray,
+) -> int:
     """Fewest neighbours for the next block, from the isolated events of the last one."""
     p = isolated / (area_px * block_us) * window_us  # chance a given neighbour fired in the window
     p = min(p * math.exp(min(8.0 * p, 8.0)), 1.0)  # isolated events are the noise with no neighbour
     k = k_min
-    while k < k_max and comb[k] * p ** k > noise_pass:
+    while k < k_max and comb[k] * p**k > noise_pass:
         k += 1
     return k
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _required(state: np.ndarray, t: np.int64, x: int, y: int, block_us: int, window_us: int, k_min: int,
-              k_max: int, noise_pass: float, comb: np.ndarray) -> int:
+def _required(
+    state: np.ndarray,
+    t: np.int64,
+    x: np.int64,
+    y: np.int64,
+    block_us: int,
+    window_us: int,
+    k_min: int,
+    k_max: int,
+    noise_pass: float,
+    comb: np.ndarray,
+) -> int:
     """Neighbours an event at (t, x, y) needs; advances the block statistics to its block."""
     if k_max <= k_min:
         return k_min
@@ -94,25 +119,58 @@ def _required(state: np.ndarray, t: np.int64, x: int, y: int, block_us: int, win
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _filter_mask(t: np.ndarray, x: np.ndarray, y: np.ndarray, last: np.ndarray, stride: int, base_us: int,
-                 window_us: int, state: np.ndarray, block_us: int, k_min: int, k_max: int, noise_pass: float,
-                 comb: np.ndarray, keep: np.ndarray) -> None:
+def _filter_mask(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    last: np.ndarray,
+    stride: int,
+    base_us: int,
+    window_us: int,
+    state: np.ndarray,
+    block_us: int,
+    k_min: int,
+    k_max: int,
+    noise_pass: float,
+    comb: np.ndarray,
+    keep: np.ndarray,
+) -> None:
     """Write in ``keep`` (n,) whether each event passes; the map and state advance."""
     window = np.int32(window_us)
     for i in range(len(t)):
         ti = np.int64(t[i])
-        need = _required(state, ti, np.int64(x[i]), np.int64(y[i]), block_us, window_us, k_min, k_max,
-                         noise_pass, comb)
+        need = _required(state, ti, np.int64(x[i]), np.int64(y[i]), block_us, window_us, k_min, k_max, noise_pass, comb)
         n = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
         state[_ISOLATED] += 1 if n == 0 else 0
         keep[i] = n >= need
 
 
+# The kernels below compare and take max() of np.int64 and int (``latest = max(latest, ti)``). numba
+# compiles both as int64 and returns int and bool to Python, as their signatures say; to mypy, with
+# numpy's stubs, np.int64 and np.bool are not int and bool: hence ``type: ignore[assignment]`` there.
 @njit(cache=True, nogil=True, error_model="numpy")
-def _filter_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, i: int, last: np.ndarray, width: int, height: int,
-                 base_us: int, window_us: int, state: np.ndarray, block_us: int, k_min: int, k_max: int,
-                 noise_pass: float, comb: np.ndarray, out_t: np.ndarray, out_x: np.ndarray, out_y: np.ndarray,
-                 j: int, latest: int) -> tuple[int, int, int, bool]:
+def _filter_into(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    i: int,
+    last: np.ndarray,
+    width: int,
+    height: int,
+    base_us: int,
+    window_us: int,
+    state: np.ndarray,
+    block_us: int,
+    k_min: int,
+    k_max: int,
+    noise_pass: float,
+    comb: np.ndarray,
+    out_t: np.ndarray,
+    out_x: np.ndarray,
+    out_y: np.ndarray,
+    j: int,
+    latest: int,
+) -> tuple[int, int, int, bool]:
     """:func:`_filter_mask` and the copy of the kept events in one pass (the hot path), from event ``i``:
     append the kept ones from ``j``, and follow the time order from ``latest`` (the latest time before).
 
@@ -132,8 +190,8 @@ def _filter_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, i: int, last: np.n
             ti, xi, yi = np.int64(t[i]), np.int64(x[i]), np.int64(y[i])
             if xi >= width or yi >= height or abs(ti - base_us) >= _REBASE_US:
                 break
-            ordered &= ti >= latest
-            latest = max(latest, ti)
+            ordered &= ti >= latest  # type: ignore[assignment]
+            latest = max(latest, ti)  # type: ignore[assignment]
             count = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
             out_t[j] = ti  # written always, kept by advancing j: no branch
             out_x[j] = x[i]
@@ -148,8 +206,8 @@ def _filter_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, i: int, last: np.n
         ti, xi, yi = np.int64(t[i]), np.int64(x[i]), np.int64(y[i])
         if xi >= width or yi >= height or abs(ti - base_us) >= _REBASE_US:
             break
-        ordered &= ti >= latest
-        latest = max(latest, ti)
+        ordered &= ti >= latest  # type: ignore[assignment]
+        latest = max(latest, ti)  # type: ignore[assignment]
         max_x, max_y = max(max_x, xi), max(max_y, yi)
         if ti < block_lo or ti >= block_hi:  # ti // block_us != block_now, without a division per event
             block = ti // block_us
@@ -159,8 +217,9 @@ def _filter_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, i: int, last: np.n
             block = block_now
         if block != block_now:
             if block == block_now + 1:
-                k = _next_k(isolated, float((max_x + 1) * (max_y + 1)), block_us, window_us, k_min, k_max,
-                            noise_pass, comb)
+                k = _next_k(
+                    isolated, float((max_x + 1) * (max_y + 1)), block_us, window_us, k_min, k_max, noise_pass, comb
+                )
             else:  # first block, or blocks without events: no evidence of noise
                 k = k_min
             block_now, isolated = block, 0
@@ -182,10 +241,10 @@ def scan_chunk(t: np.ndarray, x: np.ndarray, y: np.ndarray, latest: int) -> tupl
     top, max_x, max_y = latest, 0, 0
     for i in range(len(t)):
         ti = np.int64(t[i])
-        ordered &= ti >= top
-        top = max(top, ti)
-        max_x = max(max_x, np.int64(x[i]))
-        max_y = max(max_y, np.int64(y[i]))
+        ordered &= ti >= top  # type: ignore[assignment]
+        top = max(top, ti)  # type: ignore[assignment]
+        max_x = max(max_x, np.int64(x[i]))  # type: ignore[assignment]
+        max_y = max(max_y, np.int64(y[i]))  # type: ignore[assignment]
     return ordered, top, max_x, max_y
 
 
@@ -216,8 +275,22 @@ class BackgroundActivityFilter:
         if p is None or base_us is None:
             raise RuntimeError("_mask() before _prepare()")
         keep = np.empty(len(events), dtype=np.bool_)
-        _filter_mask(events["t"], events["x"], events["y"], self._last, self._width + 2, base_us, p.window_us,
-                     self._state, p.block_us, p.min_neighbours, p.max_neighbours, p.noise_pass, self._comb, keep)
+        _filter_mask(
+            events["t"],
+            events["x"],
+            events["y"],
+            self._last,
+            self._width + 2,
+            base_us,
+            p.window_us,
+            self._state,
+            p.block_us,
+            p.min_neighbours,
+            p.max_neighbours,
+            p.noise_pass,
+            self._comb,
+            keep,
+        )
         return keep
 
     def _fit(self, max_x: int, max_y: int) -> None:
@@ -225,7 +298,7 @@ class BackgroundActivityFilter:
         width, height = max(self._width, max_x + 1), max(self._height, max_y + 1)
         if (width, height) != (self._width, self._height):
             grown = np.full((height + 2, width + 2), _NEVER, dtype=np.int32)
-            grown[:self._height + 2, :self._width + 2] = self._last.reshape(self._height + 2, self._width + 2)
+            grown[: self._height + 2, : self._width + 2] = self._last.reshape(self._height + 2, self._width + 2)
             self._last = grown.ravel()
             self._width, self._height = width, height
 
@@ -244,12 +317,20 @@ class BackgroundActivityFilter:
     def _rebase(self, base_us: int) -> None:
         """Move the time base of the int32 map to ``base_us`` (times older than the map can hold
         become "never"; they are far older than any window)."""
+        assert self._base_us is not None, "_rebase() before the first time base"
         shift = base_us - self._base_us
         self._last = np.maximum(self._last.astype(np.int64) - shift, _NEVER).astype(np.int32)
         self._base_us = base_us
 
-    def filter_into(self, events: np.ndarray, out_t: np.ndarray, out_x: np.ndarray, out_y: np.ndarray,
-                    start: int, latest_us: int = -(1 << 62)) -> tuple[int, bool, int]:
+    def filter_into(
+        self,
+        events: np.ndarray,
+        out_t: np.ndarray,
+        out_x: np.ndarray,
+        out_y: np.ndarray,
+        start: int,
+        latest_us: int = -(1 << 62),
+    ) -> tuple[int, bool, int]:
         """Append t, x, y of the kept events of ``events`` (EVENT_DTYPE) to the buffers from ``start``.
 
         Args:
@@ -277,8 +358,27 @@ class BackgroundActivityFilter:
         i, end, latest, ordered = 0, start, latest_us, True
         while True:  # the kernel stops where the map needs to grow or its time base to move
             i, end, latest, ordered_part = _filter_into(
-                t, x, y, i, self._last, self._width, self._height, self._base_us, p.window_us, self._state, p.block_us,
-                p.min_neighbours, p.max_neighbours, p.noise_pass, self._comb, out_t, out_x, out_y, end, latest)
+                t,
+                x,
+                y,
+                i,
+                self._last,
+                self._width,
+                self._height,
+                self._base_us,
+                p.window_us,
+                self._state,
+                p.block_us,
+                p.min_neighbours,
+                p.max_neighbours,
+                p.noise_pass,
+                self._comb,
+                out_t,
+                out_x,
+                out_y,
+                end,
+                latest,
+            )
             ordered &= ordered_part
             if i == len(t):
                 return end, ordered, latest
@@ -300,15 +400,23 @@ class BackgroundActivityFilter:
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _copy_into(t: np.ndarray, x: np.ndarray, y: np.ndarray, out_t: np.ndarray, out_x: np.ndarray,
-               out_y: np.ndarray, start: int, latest: int) -> tuple[int, int, bool]:
+def _copy_into(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    out_t: np.ndarray,
+    out_x: np.ndarray,
+    out_y: np.ndarray,
+    start: int,
+    latest: int,
+) -> tuple[int, int, bool]:
     """Append every event (no filtering); return (index after the last, latest time, whether the
     times never decreased from ``latest`` on)."""
     ordered = True
     for i in range(len(t)):
         ti = np.int64(t[i])
-        ordered &= ti >= latest
-        latest = max(latest, ti)
+        ordered &= ti >= latest  # type: ignore[assignment]
+        latest = max(latest, ti)  # type: ignore[assignment]
         out_t[start + i] = ti
         out_x[start + i] = x[i]
         out_y[start + i] = y[i]

@@ -18,9 +18,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from flagtrack.daemon.core.jit import njit
 
 from flagtrack.daemon.core.delta_rms import LANES, lanes_end, window_delta
+from flagtrack.daemon.core.jit import njit
 from flagtrack.daemon.core.smoothing import smooth_one
 
 _F = np.float32
@@ -29,8 +29,19 @@ FAR = 1e18
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
-def bucket_sort(x: np.ndarray, y: np.ndarray, lo: int, hi: int, root_x: float, root_y: float, inv_width: float,
-                xs: np.ndarray, ys: np.ndarray, bucket: np.ndarray, offsets: np.ndarray) -> None:
+def bucket_sort(
+    x: np.ndarray,
+    y: np.ndarray,
+    lo: int,
+    hi: int,
+    root_x: float,
+    root_y: float,
+    inv_width: float,
+    xs: np.ndarray,
+    ys: np.ndarray,
+    bucket: np.ndarray,
+    offsets: np.ndarray,
+) -> None:
     """Stable counting sort of the events ``lo:hi`` by bucket ``floor(rho * inv_width)`` (last = overflow).
 
     Writes the sorted coordinates to ``xs``, ``ys`` (from 0; the LANES values after the last are set
@@ -62,9 +73,23 @@ def bucket_sort(x: np.ndarray, y: np.ndarray, lo: int, hi: int, root_x: float, r
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
-def arc_sums(xs: np.ndarray, ys: np.ndarray, i0: int, i1: int, px: float, py: float, c: float, s: float,
-             r2_min: float, r2_max: float, cl2: float, c2: float, s2: float, cl2b: float, unit: bool
-             ) -> tuple[float, float, int]:
+def arc_sums(
+    xs: np.ndarray,
+    ys: np.ndarray,
+    i0: int,
+    i1: int,
+    px: float,
+    py: float,
+    c: float,
+    s: float,
+    r2_min: float,
+    r2_max: float,
+    cl2: float,
+    c2: float,
+    s2: float,
+    cl2b: float,
+    unit: bool,
+) -> tuple[float, float, int]:
     """Sum over the events ``i0:i1`` inside one arc of their unit vectors (``unit``) or offsets.
 
     Inside: ``r2_min <= d^2 <= r2_max`` from (px, py) and direction within the arc's half-angle of
@@ -103,8 +128,9 @@ def _segment_distance(qx: float, qy: float, ax: float, ay: float, bx: float, by:
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def sector_rho_range(px: float, py: float, c: float, s: float, r_in: float, r_out: float, half_angle: float,
-                     root_x: float, root_y: float) -> tuple[float, float]:
+def sector_rho_range(
+    px: float, py: float, c: float, s: float, r_in: float, r_out: float, half_angle: float, root_x: float, root_y: float
+) -> tuple[float, float]:
     """Smallest and largest distance to the root of the points of a search area.
 
     The area is the annular sector around (px, py) of radii [r_in, r_out] and directions within
@@ -117,8 +143,9 @@ def sector_rho_range(px: float, py: float, c: float, s: float, r_in: float, r_ou
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _sector_rho_range(px: float, py: float, c: float, s: float, r_in: float, r_out: float, half_angle: float,
-                      root_x: float, root_y: float) -> tuple[float, float]:
+def _sector_rho_range(
+    px: float, py: float, c: float, s: float, r_in: float, r_out: float, half_angle: float, root_x: float, root_y: float
+) -> tuple[float, float]:
     """:func:`sector_rho_range` without the slack."""
     rx, ry = root_x - px, root_y - py
     d_root = math.hypot(rx, ry)
@@ -137,8 +164,9 @@ def _sector_rho_range(px: float, py: float, c: float, s: float, r_in: float, r_o
         ch, sh = math.cos(half_angle), math.sin(half_angle)
         for sign in (-1.0, 1.0):  # the two radial edges (and so the arcs' end points)
             ux, uy = c * ch - sign * s * sh, s * ch + sign * c * sh
-            lo = min(lo, _segment_distance(root_x, root_y, px + r_in * ux, py + r_in * uy,
-                                           px + r_out * ux, py + r_out * uy))
+            lo = min(
+                lo, _segment_distance(root_x, root_y, px + r_in * ux, py + r_in * uy, px + r_out * ux, py + r_out * uy)
+            )
     return lo, hi
 
 
@@ -152,10 +180,27 @@ def band(offsets: np.ndarray, inv_width: float, rho_lo: float, rho_hi: float) ->
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def update_sorted(xs: np.ndarray, ys: np.ndarray, offsets: np.ndarray, inv_width: float, root_x: float,
-                  root_y: float, angles: np.ndarray, lengths: np.ndarray, reach: np.ndarray, r2_min: np.ndarray,
-                  r2_max: np.ndarray, cl2: float, cr2: float, half_angle: float, min_events: int, area: np.ndarray,
-                  jx: np.ndarray, jy: np.ndarray, counts: np.ndarray) -> None:
+def update_sorted(
+    xs: np.ndarray,
+    ys: np.ndarray,
+    offsets: np.ndarray,
+    inv_width: float,
+    root_x: float,
+    root_y: float,
+    angles: np.ndarray,
+    lengths: np.ndarray,
+    reach: np.ndarray,
+    r2_min: np.ndarray,
+    r2_max: np.ndarray,
+    cl2: float,
+    cr2: float,
+    half_angle: float,
+    min_events: int,
+    area: np.ndarray,
+    jx: np.ndarray,
+    jy: np.ndarray,
+    counts: np.ndarray,
+) -> None:
     """Update the link directions ``angles`` in place from one window's bucket-sorted events.
 
     Root to tip, link k takes the events of its arc around joint k (already updated): with the
@@ -183,8 +228,9 @@ def update_sorted(xs: np.ndarray, ys: np.ndarray, offsets: np.ndarray, inv_width
         if refine and n > 0:
             norm = math.sqrt(sx * sx + sy * sy)
             if norm > 0.0:
-                sx, sy, n = arc_sums(xs, ys, i0, i1, px, py, c, s, r2_min[k], r2_max[k], cl2, sx / norm, sy / norm,
-                                     cr2, True)
+                sx, sy, n = arc_sums(
+                    xs, ys, i0, i1, px, py, c, s, r2_min[k], r2_max[k], cl2, sx / norm, sy / norm, cr2, True
+                )
         counts[k] = n
         if n >= min_events and (sx != 0.0 or sy != 0.0):
             angles[k] = math.atan2(sy, sx)
@@ -195,11 +241,33 @@ def update_sorted(xs: np.ndarray, ys: np.ndarray, offsets: np.ndarray, inv_width
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def run_updates(x: np.ndarray, y: np.ndarray, lo_idx: np.ndarray, hi_idx: np.ndarray, root_x: float,
-                root_y: float, angles: np.ndarray, lengths: np.ndarray, r2_min: np.ndarray, r2_max: np.ndarray,
-                cl2: float, cr2: float, half_angle: float, min_events: int, bucket_width: float, n_buckets: int,
-                group: int, length: float, rel_tol: float, out_jx: np.ndarray, out_jy: np.ndarray, out_sx: np.ndarray,
-                out_sy: np.ndarray, out_delta: np.ndarray, out_n: np.ndarray) -> None:
+def run_updates(
+    x: np.ndarray,
+    y: np.ndarray,
+    lo_idx: np.ndarray,
+    hi_idx: np.ndarray,
+    root_x: float,
+    root_y: float,
+    angles: np.ndarray,
+    lengths: np.ndarray,
+    r2_min: np.ndarray,
+    r2_max: np.ndarray,
+    cl2: float,
+    cr2: float,
+    half_angle: float,
+    min_events: int,
+    bucket_width: float,
+    n_buckets: int,
+    group: int,
+    length: float,
+    rel_tol: float,
+    out_jx: np.ndarray,
+    out_jy: np.ndarray,
+    out_sx: np.ndarray,
+    out_sy: np.ndarray,
+    out_delta: np.ndarray,
+    out_n: np.ndarray,
+) -> None:
     """Run K consecutive updates (chain, smoothing, Delta_RMS) on a time-sorted float32 event buffer.
 
     Args:
@@ -218,7 +286,11 @@ def run_updates(x: np.ndarray, y: np.ndarray, lo_idx: np.ndarray, hi_idx: np.nda
         n_max = max(n_max, hi_idx[w] - lo_idx[w])
     size = n_max + 2 * LANES
     xs, ys = np.empty(size, dtype=np.float32), np.empty(size, dtype=np.float32)
-    bucket, inside, best = np.empty(size, dtype=np.int32), np.empty(size, dtype=np.uint8), np.empty(size, dtype=np.float32)
+    bucket, inside, best = (
+        np.empty(size, dtype=np.int32),
+        np.empty(size, dtype=np.uint8),
+        np.empty(size, dtype=np.float32),
+    )
     offsets = np.empty(n_buckets + 1, dtype=np.int64)
     counts = np.zeros(n_links, dtype=np.int64)
     area = np.empty((n_links, 6))
@@ -229,10 +301,45 @@ def run_updates(x: np.ndarray, y: np.ndarray, lo_idx: np.ndarray, hi_idx: np.nda
     for w in range(len(lo_idx)):
         bucket_sort(x, y, lo_idx[w], hi_idx[w], root_x, root_y, inv_width, xs, ys, bucket, offsets)
         jx, jy = out_jx[w], out_jy[w]
-        update_sorted(xs, ys, offsets, inv_width, root_x, root_y, angles, lengths, reach, r2_min, r2_max,
-                      cl2, cr2, half_angle, min_events, area, jx, jy, counts)
+        update_sorted(
+            xs,
+            ys,
+            offsets,
+            inv_width,
+            root_x,
+            root_y,
+            angles,
+            lengths,
+            reach,
+            r2_min,
+            r2_max,
+            cl2,
+            cr2,
+            half_angle,
+            min_events,
+            area,
+            jx,
+            jy,
+            counts,
+        )
         smooth_one(jx, jy, lengths, length, rel_tol, work, out_sx[w], out_sy[w])
-        total, used = window_delta(xs, ys, offsets, bucket_width, group, root_x, root_y, area, reach, r2_min,
-                                   r2_max, cl2, out_sx[w], out_sy[w], seg, inside, best)
+        total, used = window_delta(
+            xs,
+            ys,
+            offsets,
+            bucket_width,
+            group,
+            root_x,
+            root_y,
+            area,
+            r2_min,
+            r2_max,
+            cl2,
+            out_sx[w],
+            out_sy[w],
+            seg,
+            inside,
+            best,
+        )
         out_n[w] = used
         out_delta[w] = math.sqrt(total / used) if used > 0 else math.nan

@@ -39,8 +39,9 @@ class AffineMapping:
         units: unit of the output coordinates (``"m"`` by default).
     """
 
-    def __init__(self, matrix: tuple[tuple[float, float], tuple[float, float]], offset: tuple[float, float],
-                 units: str = "m") -> None:
+    def __init__(
+        self, matrix: tuple[tuple[float, float], tuple[float, float]], offset: tuple[float, float], units: str = "m"
+    ) -> None:
         self.matrix = np.asarray(matrix, dtype=np.float64)
         self.offset = np.asarray(offset, dtype=np.float64)
         self.units = units

@@ -115,9 +115,7 @@ def eps_rms(recon: CentrelineBatch, truth: CentrelineBatch) -> tuple[np.ndarray,
     return pair.t_s, np.sqrt(trapezoid(sq, pair.s) / span)
 
 
-def lateral_displacement(
-    x: np.ndarray, y: np.ndarray, root: tuple[float, float], direction_deg: float
-) -> np.ndarray:
+def lateral_displacement(x: np.ndarray, y: np.ndarray, root: tuple[float, float], direction_deg: float) -> np.ndarray:
     """Displacement perpendicular to the rest direction (positive to its left), same shape as ``x``."""
     d = np.deg2rad(direction_deg)
     return -(np.asarray(x) - root[0]) * np.sin(d) + (np.asarray(y) - root[1]) * np.cos(d)
@@ -152,8 +150,9 @@ def travelling_wave_index(lateral: np.ndarray) -> float:
     return float(sv[1] / sv[0]) if sv[0] > 0 else 0.0
 
 
-def cloud_distance(events_x: np.ndarray, events_y: np.ndarray, line_x: np.ndarray, line_y: np.ndarray,
-                   block: int = 4096) -> float:
+def cloud_distance(
+    events_x: np.ndarray, events_y: np.ndarray, line_x: np.ndarray, line_y: np.ndarray, block: int = 4096
+) -> float:
     """Delta_RMS: RMS distance of events to the polyline (line_x, line_y), distance to segments.
 
     Args:
@@ -172,7 +171,7 @@ def cloud_distance(events_x: np.ndarray, events_y: np.ndarray, line_x: np.ndarra
     len2 = np.maximum(dx * dx + dy * dy, 1e-300)
     total = 0.0
     for start in range(0, len(ex), block):
-        px, py = ex[start:start + block, None], ey[start:start + block, None]
+        px, py = ex[start : start + block, None], ey[start : start + block, None]
         u = np.clip(((px - ax) * dx + (py - ay) * dy) / len2, 0.0, 1.0)
         d2 = (px - ax - u * dx) ** 2 + (py - ay - u * dy) ** 2
         total += float(d2.min(axis=1).sum())
@@ -262,7 +261,12 @@ def compare(recon: CentrelineBatch, truth: CentrelineBatch, length: float | None
     twi = travelling_wave_index(lateral_displacement(pair.x[rows], pair.y[rows], root, direction))
     twi_ref = travelling_wave_index(lateral_displacement(pair.x_ref[rows], pair.y_ref[rows], root, direction))
     return Comparison(
-        delta_rms_over_l=rms(delta) / length, max_eps_rms_over_l=float(np.nanmax(eps)) / length,
-        twi=twi, twi_ref=twi_ref, n_common=len(pair.t_s), t_start_s=float(pair.t_s[0]),
-        t_stop_s=float(pair.t_s[-1]), length=length,
+        delta_rms_over_l=rms(delta) / length,
+        max_eps_rms_over_l=float(np.nanmax(eps)) / length,
+        twi=twi,
+        twi_ref=twi_ref,
+        n_common=len(pair.t_s),
+        t_start_s=float(pair.t_s[0]),
+        t_stop_s=float(pair.t_s[-1]),
+        length=length,
     )

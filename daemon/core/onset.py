@@ -78,7 +78,7 @@ class OnsetParams:
             raise ValueError("need 1 < off_ratio < on_ratio")
         if (self.on_rate_hz is None) != (self.off_rate_hz is None):
             raise ValueError("give both on_rate_hz and off_rate_hz, or neither")
-        if self.on_rate_hz is not None and not 0 < self.off_rate_hz < self.on_rate_hz:  # type: ignore[operator]
+        if self.on_rate_hz is not None and self.off_rate_hz is not None and not 0 < self.off_rate_hz < self.on_rate_hz:
             raise ValueError("need 0 < off_rate_hz < on_rate_hz")
 
 
@@ -205,7 +205,9 @@ class OnsetDetector:
         return p.on_ratio * self._baseline_hz, p.off_ratio * self._baseline_hz
 
 
-def detect_states(t_s: Iterable[float], rate_hz: Iterable[float], params: OnsetParams = OnsetParams()) -> list[OnsetReading]:
+def detect_states(
+    t_s: Iterable[float], rate_hz: Iterable[float], params: OnsetParams = OnsetParams()
+) -> list[OnsetReading]:
     """Run a fresh detector over a whole trace; one reading per sample."""
     detector = OnsetDetector(params)
     return [detector.update(float(t), float(r)) for t, r in zip(t_s, rate_hz, strict=True)]

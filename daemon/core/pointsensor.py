@@ -65,8 +65,9 @@ def lateral_to_reading(lateral: np.ndarray, beam: BeamParams) -> np.ndarray:
     return zero + beam.direction * np.asarray(lateral, dtype=np.float64) / beam.units_per_reading
 
 
-def beam_lateral(x: np.ndarray, y: np.ndarray, root: tuple[float, float], direction_deg: float,
-                 x_beam: float, side: int = 1) -> np.ndarray:
+def beam_lateral(
+    x: np.ndarray, y: np.ndarray, root: tuple[float, float], direction_deg: float, x_beam: float, side: int = 1
+) -> np.ndarray:
     """Lateral displacement where each centreline crosses the beam ``xi = x_beam`` of the rest frame.
 
     Args:
@@ -170,8 +171,16 @@ def recon_at(t_recon_s: np.ndarray, y_recon: np.ndarray, t_s: np.ndarray, max_ga
     return out
 
 
-def compare_signals(t_recon_s: np.ndarray, y_recon: np.ndarray, t_sensor_s: np.ndarray, y_sensor: np.ndarray,
-                    length: float, *, match_means: bool = False, max_gap_s: float | None = None) -> SensorComparison:
+def compare_signals(
+    t_recon_s: np.ndarray,
+    y_recon: np.ndarray,
+    t_sensor_s: np.ndarray,
+    y_sensor: np.ndarray,
+    length: float,
+    *,
+    match_means: bool = False,
+    max_gap_s: float | None = None,
+) -> SensorComparison:
     """e(t) at each valid sensor sample inside the reconstruction (the reconstruction interpolated there).
 
     Args:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from flagtrack.daemon.core.jit import njit
 
 REL_TOL = 1e-9
@@ -68,21 +69,26 @@ def hermite_eval(u: np.ndarray, v: np.ndarray, slopes: np.ndarray, uq: np.ndarra
         t = (uq[q] - u[j]) / h
         t2 = t * t
         t3 = t2 * t
-        out[q] = ((2 * t3 - 3 * t2 + 1) * v[j] + (t3 - 2 * t2 + t) * h * slopes[j]
-                  + (-2 * t3 + 3 * t2) * v[j + 1] + (t3 - t2) * h * slopes[j + 1])
+        out[q] = (
+            (2 * t3 - 3 * t2 + 1) * v[j]
+            + (t3 - 2 * t2 + t) * h * slopes[j]
+            + (-2 * t3 + 3 * t2) * v[j + 1]
+            + (t3 - t2) * h * slopes[j + 1]
+        )
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
-def _sampled_length(u: np.ndarray, jx: np.ndarray, jy: np.ndarray, work: np.ndarray,
-                    sx: np.ndarray, sy: np.ndarray) -> float:
+def _sampled_length(
+    u: np.ndarray, jx: np.ndarray, jy: np.ndarray, work: np.ndarray, sx: np.ndarray, sy: np.ndarray
+) -> float:
     """Sample the makima curve through (jx, jy) at n_s even u into sx, sy; return the polyline length.
 
     ``work`` is scratch of at least 3 len(u) + 3 values.
     """
     n = len(u)
     tx = work[:n]
-    ty = work[n:2 * n]
-    m = work[2 * n:3 * n + 3]
+    ty = work[n : 2 * n]
+    m = work[2 * n : 3 * n + 3]
     makima_slopes(u, jx, tx, m)
     makima_slopes(u, jy, ty, m)
     n_s = len(sx)
@@ -116,8 +122,16 @@ def _sampled_length(u: np.ndarray, jx: np.ndarray, jy: np.ndarray, work: np.ndar
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def smooth_one(jx: np.ndarray, jy: np.ndarray, lengths: np.ndarray, length: float, rel_tol: float,
-               work: np.ndarray, sx: np.ndarray, sy: np.ndarray) -> float:
+def smooth_one(
+    jx: np.ndarray,
+    jy: np.ndarray,
+    lengths: np.ndarray,
+    length: float,
+    rel_tol: float,
+    work: np.ndarray,
+    sx: np.ndarray,
+    sy: np.ndarray,
+) -> float:
     """Smooth one chain in place; return the tip link length that gives the exact smoothed length.
 
     Args:
@@ -131,7 +145,7 @@ def smooth_one(jx: np.ndarray, jy: np.ndarray, lengths: np.ndarray, length: floa
     """
     n = len(lengths)
     u = work[: n + 1]
-    scratch = work[n + 1:]
+    scratch = work[n + 1 :]
     u[0] = 0.0
     for k in range(n):
         u[k + 1] = u[k] + lengths[k]
@@ -150,20 +164,20 @@ def smooth_one(jx: np.ndarray, jy: np.ndarray, lengths: np.ndarray, length: floa
     r0, f0 = r_full, excess(r_full)
     if abs(f0) <= tol:
         return r0
-    lo, f_lo, hi, f_hi = 1e-6 * r_full, -math.inf, 4.0 * r_full, math.inf
+    lo, hi = 1e-6 * r_full, 4.0 * r_full
     if f0 > 0:
-        hi, f_hi = r0, f0
+        hi = r0
     else:
-        lo, f_lo = r0, f0
+        lo = r0
     r1 = min(max(r0 - f0, lo), hi)
     for _ in range(60):
         f1 = excess(r1)
         if abs(f1) <= tol:
             return r1
         if f1 > 0:
-            hi, f_hi = r1, f1
+            hi = r1
         else:
-            lo, f_lo = r1, f1
+            lo = r1
         denom = f1 - f0
         r2 = r1 - f1 * (r1 - r0) / denom if denom != 0.0 else 0.5 * (lo + hi)
         if not (lo < r2 < hi):
@@ -174,16 +188,25 @@ def smooth_one(jx: np.ndarray, jy: np.ndarray, lengths: np.ndarray, length: floa
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def smooth_batch(jx: np.ndarray, jy: np.ndarray, lengths: np.ndarray, length: float, rel_tol: float,
-                 sx: np.ndarray, sy: np.ndarray, r_tip: np.ndarray) -> None:
+def smooth_batch(
+    jx: np.ndarray,
+    jy: np.ndarray,
+    lengths: np.ndarray,
+    length: float,
+    rel_tol: float,
+    sx: np.ndarray,
+    sy: np.ndarray,
+    r_tip: np.ndarray,
+) -> None:
     """Smooth K chains: jx, jy (K, N_j + 1) (tip moved in place), sx, sy (K, n_s), r_tip (K,)."""
     work = np.empty(4 * (len(lengths) + 1) + 3)
     for k in range(jx.shape[0]):
         r_tip[k] = smooth_one(jx[k], jy[k], lengths, length, rel_tol, work, sx[k], sy[k])
 
 
-def smooth_chains(joints_x: np.ndarray, joints_y: np.ndarray, lengths: np.ndarray, length: float, n_s: int,
-                  rel_tol: float = REL_TOL) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def smooth_chains(
+    joints_x: np.ndarray, joints_y: np.ndarray, lengths: np.ndarray, length: float, n_s: int, rel_tol: float = REL_TOL
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Smoothed centrelines of K chains (pure; inputs untouched).
 
     Args:

@@ -97,8 +97,9 @@ class ClockSync:
         return self.t_ref_us + (np.asarray(t_sensor_us, dtype=np.float64) - self.t_ref_us - offset) / rate
 
 
-def trigger_sync(camera_us: np.ndarray, sensor_us: np.ndarray, *, prior_offset_us: float = 0.0,
-                 tolerance_us: float = 200.0) -> ClockSync:
+def trigger_sync(
+    camera_us: np.ndarray, sensor_us: np.ndarray, *, prior_offset_us: float = 0.0, tolerance_us: float = 200.0
+) -> ClockSync:
     """Offset and drift from pulses stamped by both clocks (see the module docstring).
 
     Args:
@@ -121,18 +122,36 @@ def trigger_sync(camera_us: np.ndarray, sensor_us: np.ndarray, *, prior_offset_u
     period = float(np.median(np.diff(cam))) if len(cam) > 1 else math.nan
     note = ""
     if math.isfinite(period) and abs(float(np.median(diff)) - prior_offset_us) > 0.25 * period:
-        note = (f"offset {np.median(diff):.0f} us is far from the prior {prior_offset_us:.0f} us "
-                f"(pulse period {period:.0f} us)")
+        note = (
+            f"offset {np.median(diff):.0f} us is far from the prior {prior_offset_us:.0f} us "
+            f"(pulse period {period:.0f} us)"
+        )
     t_ref = float(np.mean(c))
     if len(c) >= 3 and np.ptp(c) > 0:
         slope, intercept = np.polyfit(c - t_ref, s - c, 1)
         residual = (s - c) - (intercept + slope * (c - t_ref))
         scatter = max(float(np.sqrt(np.sum(residual**2) / (len(c) - 2))) if len(c) > 2 else 0.0, _STAMP_RMS_US)
-        return ClockSync("trigger", float(intercept), scatter / math.sqrt(len(c)), float(slope) * 1e6, t_ref, len(c),
-                         float(np.sqrt(np.mean(residual**2))), note)
+        return ClockSync(
+            "trigger",
+            float(intercept),
+            scatter / math.sqrt(len(c)),
+            float(slope) * 1e6,
+            t_ref,
+            len(c),
+            float(np.sqrt(np.mean(residual**2))),
+            note,
+        )
     spread = float(np.std(s - c)) if len(c) > 1 else 0.0
-    return ClockSync("trigger", float(np.mean(s - c)), max(spread, _STAMP_RMS_US) / math.sqrt(len(c)), 0.0, t_ref,
-                     len(c), spread, note or f"only {len(c)} pulse pair(s): drift not estimated")
+    return ClockSync(
+        "trigger",
+        float(np.mean(s - c)),
+        max(spread, _STAMP_RMS_US) / math.sqrt(len(c)),
+        0.0,
+        t_ref,
+        len(c),
+        spread,
+        note or f"only {len(c)} pulse pair(s): drift not estimated",
+    )
 
 
 def _nearest(sorted_values: np.ndarray, at: np.ndarray) -> np.ndarray:
@@ -155,8 +174,9 @@ def _first_of_each(idx: np.ndarray, distance: np.ndarray) -> np.ndarray:
     return keep
 
 
-def coarse_offset_us(sensor_t_us: np.ndarray, sensor_wall_ns: np.ndarray, camera_t_us: np.ndarray,
-                     camera_wall_ns: np.ndarray) -> ClockSync:
+def coarse_offset_us(
+    sensor_t_us: np.ndarray, sensor_wall_ns: np.ndarray, camera_t_us: np.ndarray, camera_wall_ns: np.ndarray
+) -> ClockSync:
     """A rough offset from wall-clock stamps of when each side's data became available.
 
     The camera clock is interpolated (piecewise linearly, so a camera that skips or runs slower
@@ -188,9 +208,18 @@ def _mad(values: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(values - np.median(values)))) if len(values) else 0.0
 
 
-def xcorr_sync(t_recon_s: np.ndarray, y_recon: np.ndarray, t_sensor_us: np.ndarray, y_sensor: np.ndarray, *,
-               prior_offset_us: float = 0.0, max_lag_us: float = 20_000.0, min_correlation: float = 0.8,
-               blocks: int = 8, smooth_samples: float = 2.0) -> ClockSync:
+def xcorr_sync(
+    t_recon_s: np.ndarray,
+    y_recon: np.ndarray,
+    t_sensor_us: np.ndarray,
+    y_sensor: np.ndarray,
+    *,
+    prior_offset_us: float = 0.0,
+    max_lag_us: float = 20_000.0,
+    min_correlation: float = 0.8,
+    blocks: int = 8,
+    smooth_samples: float = 2.0,
+) -> ClockSync:
     """The offset that best lines the sensor signal up with the reconstruction (see the module docstring).
 
     Args:
@@ -225,8 +254,12 @@ def xcorr_sync(t_recon_s: np.ndarray, y_recon: np.ndarray, t_sensor_us: np.ndarr
         hint = " (strongly negative: is beam.direction right?)" if anti else ""
         return ClockSync("none", quality=r, note=f"peak correlation {r:.2f} below {min_correlation:g}{hint}")
     if math.isfinite(lag) and abs(lag - prior_offset_us) > max_lag_us - step:
-        return ClockSync("none", quality=r, note=f"correlation peak at the edge of the search range ({lag:.0f} us, "
-                                                 f"prior {prior_offset_us:.0f} +- {max_lag_us:.0f} us)")
+        return ClockSync(
+            "none",
+            quality=r,
+            note=f"correlation peak at the edge of the search range ({lag:.0f} us, "
+            f"prior {prior_offset_us:.0f} +- {max_lag_us:.0f} us)",
+        )
     per_block = []
     for part in np.array_split(np.arange(len(tr)), blocks):
         if len(part) >= 16:
@@ -251,8 +284,8 @@ def smooth_runs(t: np.ndarray, y: np.ndarray, sigma_samples: float, gap_factor: 
     for a, b in zip(edges[:-1], edges[1:]):
         part = y[a:b]
         weight = np.isfinite(part).astype(np.float64)
-        num = np.convolve(np.where(weight > 0, part, 0.0), kernel)[radius:radius + b - a]
-        den = np.convolve(weight, kernel)[radius:radius + b - a]
+        num = np.convolve(np.where(weight > 0, part, 0.0), kernel)[radius : radius + b - a]
+        den = np.convolve(weight, kernel)[radius : radius + b - a]
         with np.errstate(invalid="ignore", divide="ignore"):
             out[a:b] = np.where((den >= 0.5 * kernel.sum()) & (weight > 0), num / den, np.nan)
     return out
@@ -286,8 +319,9 @@ def _correlation(signal: _Signal, tr: np.ndarray, yr: np.ndarray, lag_us: float)
     return float(a @ b) / denom if denom > 0 else math.nan
 
 
-def _search(signal: _Signal, tr: np.ndarray, yr: np.ndarray, lo_us: float, hi_us: float, step_us: float
-            ) -> tuple[float, float]:
+def _search(
+    signal: _Signal, tr: np.ndarray, yr: np.ndarray, lo_us: float, hi_us: float, step_us: float
+) -> tuple[float, float]:
     """Best lag on a grid, then twice a parabola-refined finer grid; returns (lag, correlation).
 
     The first (widest) grid looks at no more than ``_COARSE_POINTS`` updates, evenly spread.
@@ -301,8 +335,8 @@ def _search(signal: _Signal, tr: np.ndarray, yr: np.ndarray, lo_us: float, hi_us
             return math.nan, math.nan
         k = int(np.nanargmax(scores))
         best, r = float(lags[k]), float(scores[k])
-        if 0 < k < len(lags) - 1 and np.all(np.isfinite(scores[k - 1:k + 2])):
-            a, b, c = scores[k - 1:k + 2]
+        if 0 < k < len(lags) - 1 and np.all(np.isfinite(scores[k - 1 : k + 2])):
+            a, b, c = scores[k - 1 : k + 2]
             denom = a - 2 * b + c
             if denom < 0:
                 best += 0.5 * step_us * (a - c) / denom
@@ -310,8 +344,9 @@ def _search(signal: _Signal, tr: np.ndarray, yr: np.ndarray, lo_us: float, hi_us
     return best, r
 
 
-def _anti(signal: _Signal, tr: np.ndarray, yr: np.ndarray, prior: float, max_lag: float, step: float,
-          min_correlation: float) -> bool:
+def _anti(
+    signal: _Signal, tr: np.ndarray, yr: np.ndarray, prior: float, max_lag: float, step: float, min_correlation: float
+) -> bool:
     """True when the signals are strongly anti-correlated (a sign error in the beam's direction)."""
     lags = np.arange(prior - max_lag, prior + max_lag + 0.5 * step, step)
     scores = np.array([_correlation(signal, tr, yr, float(lag)) for lag in lags])

@@ -19,9 +19,9 @@ import numpy as np
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.chain import AreaGeometry, ChainParams, ChainState
 from flagtrack.daemon.core.denoise import BackgroundActivityFilter, DenoiseParams
+from flagtrack.daemon.core.kernels import run_updates
 from flagtrack.daemon.core.mapping import PointMapping
 from flagtrack.daemon.core.smoothing import REL_TOL, n_samples
-from flagtrack.daemon.core.kernels import run_updates
 from flagtrack.daemon.core.windows import UpdateClock, WindowSchedule
 
 log = logging.getLogger(__name__)
@@ -92,16 +92,16 @@ class _Buffer:
             for name in ("t", "x", "y"):
                 old = getattr(self, name)
                 new = np.empty(cap, dtype=old.dtype)
-                new[:self.n] = old[:self.n]
+                new[: self.n] = old[: self.n]
                 setattr(self, name, new)
 
     def drop_before(self, t_us: float) -> None:
-        cut = int(np.searchsorted(self.t[:self.n], np.int64(math.ceil(t_us)), side="left"))
+        cut = int(np.searchsorted(self.t[: self.n], np.int64(math.ceil(t_us)), side="left"))
         if cut:
             self.last_dropped_t = int(self.t[cut - 1])
             keep = self.n - cut
             for arr in (self.t, self.x, self.y):
-                arr[:keep] = arr[cut:self.n]
+                arr[:keep] = arr[cut : self.n]
             self.n = keep
 
 
@@ -115,8 +115,13 @@ class Tracker:
         sensor_size: (width, height) in pixels if known (sizes the denoise map up front).
     """
 
-    def __init__(self, params: TrackerParams, state: ChainState | None = None,
-                 mapping: PointMapping | None = None, sensor_size: tuple[int, int] = (0, 0)) -> None:
+    def __init__(
+        self,
+        params: TrackerParams,
+        state: ChainState | None = None,
+        mapping: PointMapping | None = None,
+        sensor_size: tuple[int, int] = (0, 0),
+    ) -> None:
         self.params = params
         chain = params.chain
         self._angles = np.array((state or ChainState.at_rest(chain)).angles_rad, dtype=np.float64)
@@ -203,9 +208,9 @@ class Tracker:
             log.warning("events out of time order; sorting them in (later ones are counted, not logged)")
         self.stats.events_out_of_order += late
         buf = self._buffer
-        order = np.argsort(buf.t[:buf.n], kind="stable")
+        order = np.argsort(buf.t[: buf.n], kind="stable")
         for arr in (buf.t, buf.x, buf.y):
-            arr[:buf.n] = arr[:buf.n][order]
+            arr[: buf.n] = arr[: buf.n][order]
 
     def _run(self, complete_before_us: int, started_before_us: int | None) -> CentrelineBatch:
         clock = self._clock
@@ -226,7 +231,7 @@ class Tracker:
 
     def _updates(self, t_us: np.ndarray, lo_us: np.ndarray, hi_us: np.ndarray) -> CentrelineBatch:
         buf, geo, chain = self._buffer, self._geo, self.params.chain
-        times = buf.t[:buf.n]
+        times = buf.t[: buf.n]
         lo_idx = np.searchsorted(times, lo_us, side="left")
         hi_idx = np.searchsorted(times, hi_us, side="left")
         if self.params.max_gap_s is not None and bool((hi_idx == lo_idx).any()):  # gaps are empty windows
@@ -242,23 +247,55 @@ class Tracker:
         jx, jy = np.empty((k, n_j + 1)), np.empty((k, n_j + 1))
         sx, sy = np.empty((k, n_s)), np.empty((k, n_s))
         delta, used = np.empty(k), np.empty(k, dtype=np.int64)
-        run_updates(buf.x, buf.y, lo_idx, hi_idx, float(chain.root[0]), float(chain.root[1]), self._angles,
-                    geo.lengths, geo.r2_min, geo.r2_max, geo.cos_limit_signed_sq, geo.cos_refine_signed_sq,
-                    geo.half_angle_rad, chain.min_events, geo.bucket_width, geo.n_buckets, _DELTA_GROUP,
-                    float(chain.length), self.params.rel_tol, jx, jy, sx, sy, delta, used)
+        run_updates(
+            buf.x,
+            buf.y,
+            lo_idx,
+            hi_idx,
+            float(chain.root[0]),
+            float(chain.root[1]),
+            self._angles,
+            geo.lengths,
+            geo.r2_min,
+            geo.r2_max,
+            geo.cos_limit_signed_sq,
+            geo.cos_refine_signed_sq,
+            geo.half_angle_rad,
+            chain.min_events,
+            geo.bucket_width,
+            geo.n_buckets,
+            _DELTA_GROUP,
+            float(chain.length),
+            self.params.rel_tol,
+            jx,
+            jy,
+            sx,
+            sy,
+            delta,
+            used,
+        )
         self.stats.updates += k
-        return CentrelineBatch(t_s=t_us * 1e-6, s=self.s, x=sx, y=sy, joints_x=jx, joints_y=jy,
-                               delta_rms=delta, n_events=used)
+        return CentrelineBatch(
+            t_s=t_us * 1e-6, s=self.s, x=sx, y=sy, joints_x=jx, joints_y=jy, delta_rms=delta, n_events=used
+        )
 
     def _empty(self) -> CentrelineBatch:
         n_j, n_s = self.params.chain.n_joints, len(self.s)
-        return CentrelineBatch(t_s=np.empty(0), s=self.s, x=np.empty((0, n_s)), y=np.empty((0, n_s)),
-                               joints_x=np.empty((0, n_j + 1)), joints_y=np.empty((0, n_j + 1)),
-                               delta_rms=np.empty(0), n_events=np.empty(0, dtype=np.int64))
+        return CentrelineBatch(
+            t_s=np.empty(0),
+            s=self.s,
+            x=np.empty((0, n_s)),
+            y=np.empty((0, n_s)),
+            joints_x=np.empty((0, n_j + 1)),
+            joints_y=np.empty((0, n_j + 1)),
+            delta_rms=np.empty(0),
+            n_events=np.empty(0, dtype=np.int64),
+        )
 
 
-def track(events: np.ndarray, params: TrackerParams, state: ChainState | None = None,
-          mapping: PointMapping | None = None) -> CentrelineBatch:
+def track(
+    events: np.ndarray, params: TrackerParams, state: ChainState | None = None, mapping: PointMapping | None = None
+) -> CentrelineBatch:
     """Reconstruct a whole in-memory recording (one feed and finish)."""
     tracker = Tracker(params, state, mapping)
     return CentrelineBatch.concatenate([tracker.feed(events), tracker.finish()])

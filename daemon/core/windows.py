@@ -62,8 +62,9 @@ class WindowSchedule:
             raise ValueError(f"schedule segments must have increasing t_from_s, got {starts}")
 
     @staticmethod
-    def uniform(tau_s: float, dt_s: float | None = None, t_start_s: float | None = None,
-                t_stop_s: float | None = None) -> WindowSchedule:
+    def uniform(
+        tau_s: float, dt_s: float | None = None, t_start_s: float | None = None, t_stop_s: float | None = None
+    ) -> WindowSchedule:
         """One segment: windows of ``tau_s`` every ``dt_s`` (default ``tau_s``)."""
         return WindowSchedule((WindowSegment(0.0, dt_s or tau_s, tau_s),), t_start_s, t_stop_s)
 
@@ -120,11 +121,12 @@ class UpdateClock:
     def next_window_start_us(self) -> float:
         """Earliest event time any future window can use, µs (the buffer may drop older events)."""
         t_us, _ = self._peek()
-        later = self.schedule.segments[self._segment:]
+        later = self.schedule.segments[self._segment :]
         return t_us - max(seg.tau_s for seg in later) * 1e6 / 2
 
-    def take(self, complete_before_us: int, started_before_us: int | None = None, limit: int = _MAX_BATCH
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def take(
+        self, complete_before_us: int, started_before_us: int | None = None, limit: int = _MAX_BATCH
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Pop the next updates whose windows end at or before ``complete_before_us``.
 
         Args:
@@ -149,8 +151,7 @@ class UpdateClock:
             # every candidate window starts before ``reach`` (+1 for rounding); bounded count
             n_max = min(limit - taken, max(0, int((reach + tau_us - t_first) // dt_us) + 2))
             if n_max <= _SCALAR_MAX:  # a live packet completes a few windows: plain floats are quicker
-                t_us, lo, hi = self._ready_few(n_max, dt_us, tau_us, complete_before_us, started_before_us,
-                                               seg_end_us)
+                t_us, lo, hi = self._ready_few(n_max, dt_us, tau_us, complete_before_us, started_before_us, seg_end_us)
                 n = len(t_us)
             else:
                 t_us = self._anchor_us + (self._count + np.arange(n_max, dtype=np.float64)) * dt_us
@@ -175,10 +176,18 @@ class UpdateClock:
             return _NONE
         if len(parts) == 1:
             return parts[0]
-        return tuple(np.concatenate(cols) for cols in zip(*parts))  # type: ignore[return-value]
+        t_cols, lo_cols, hi_cols = zip(*parts)
+        return np.concatenate(t_cols), np.concatenate(lo_cols), np.concatenate(hi_cols)
 
-    def _ready_few(self, n_max: int, dt_us: float, tau_us: float, complete_before_us: int,
-                   started_before_us: int | None, seg_end_us: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _ready_few(
+        self,
+        n_max: int,
+        dt_us: float,
+        tau_us: float,
+        complete_before_us: int,
+        started_before_us: int | None,
+        seg_end_us: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The ready windows among the next ``n_max`` of the segment, one by one (the same float
         operations, in the same order, as the array path of :meth:`take`)."""
         t_list: list[float] = []
@@ -192,8 +201,11 @@ class UpdateClock:
             t_list.append(t_us)
             lo_list.append(lo)
             hi_list.append(hi)
-        return (np.array(t_list, dtype=np.float64), np.array(lo_list, dtype=np.int64),
-                np.array(hi_list, dtype=np.int64))
+        return (
+            np.array(t_list, dtype=np.float64),
+            np.array(lo_list, dtype=np.int64),
+            np.array(hi_list, dtype=np.int64),
+        )
 
     def _next_ready(self, complete_before_us: int, started_before_us: int | None) -> bool:
         """Whether the next update can be taken (the cheap test that spares :meth:`take` its arrays
@@ -202,8 +214,9 @@ class UpdateClock:
         return t_us <= self._stop_us and _bounds(t_us, tau_us, complete_before_us, started_before_us)[2]
 
 
-def _bounds(t_us: float, tau_us: float, complete_before_us: int, started_before_us: int | None
-            ) -> tuple[int, int, bool]:
+def _bounds(
+    t_us: float, tau_us: float, complete_before_us: int, started_before_us: int | None
+) -> tuple[int, int, bool]:
     """Integer bounds [lo, hi) of the window centred at ``t_us``, and whether :meth:`UpdateClock.take`
     takes it (complete, or started before the end of the stream); the rounding of its array path."""
     lo, hi = math.ceil(t_us - tau_us / 2), math.ceil(t_us + tau_us / 2)
