@@ -9,6 +9,7 @@ kernel that runs Horner's steps on blocks of points.
 from __future__ import annotations
 
 import numpy as np
+
 from flagtrack.daemon.core.jit import njit
 
 _BLOCK = 256

@@ -198,7 +198,7 @@ def _join(prefix: str, name: str) -> str:
     return f"{prefix}.{name}" if prefix else name
 
 
-def _convert(hint: Any, value: Any, *, path: str | None, key: str) -> Any:
+def _convert(hint: Any, value: Any, *, path: str | None, key: str) -> Any:  # noqa: PLR0912 - one branch per type form
     """Check/convert one value against a type hint; raise ConfigError naming ``key``."""
     origin = typing.get_origin(hint)
     args = typing.get_args(hint)
@@ -251,7 +251,7 @@ def _convert(hint: Any, value: Any, *, path: str | None, key: str) -> Any:
     return _convert_scalar(hint, value, path=path, key=key)
 
 
-def _convert_scalar(hint: Any, value: Any, *, path: str | None, key: str) -> Any:
+def _convert_scalar(hint: Any, value: Any, *, path: str | None, key: str) -> Any:  # noqa: PLR0912 - one per type
     if hint is bool:
         if isinstance(value, bool):
             return value

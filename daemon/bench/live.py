@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed: float, loop: bool,
+def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed: float, loop: bool,  # noqa: PLR0915
              wall_s: float | None) -> dict[str, Any]:
     import numpy as np
 

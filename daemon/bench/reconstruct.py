@@ -89,8 +89,8 @@ def _command(path: Path, out: Path, method: str, env: dict[str, str] | None = No
 
 def _core(path: Path, method: str, max_events: int, repeat: int) -> tuple[float, int]:
     """(events/s, events) of Tracker.feed alone over decoded chunks held in memory (warm, best of repeat)."""
-    from flagtrack.daemon.tracking.section import Method, TrackingConfig
     from flagtrack.daemon.core.tracker import Tracker
+    from flagtrack.daemon.tracking.section import Method, TrackingConfig
     from flagtrack.drivers.formats import open_events
 
     chunks, total = [], 0

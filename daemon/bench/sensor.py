@@ -50,11 +50,11 @@ class TwinPoint:
 def twin_point(speed_mps: float, *, tau_s: float = 0.001, offset_ms: float = 3.0, drift_ppm: float = 0.0,
                noise_over_l: float = 0.002, warm_s: float = 0.3, record_s: float = 1.0, seed: int = 3) -> TwinPoint:
     """Simulate one point: twin -> events -> core tracker, and the twin-reading sensor alongside."""
-    from flagtrack.daemon.typed_yaml import from_mapping
     from flagtrack.daemon.core.centreline import CentrelineBatch
     from flagtrack.daemon.core.pointsensor import BeamParams
     from flagtrack.daemon.core.tracker import Tracker
     from flagtrack.daemon.tracking.section import TrackingConfig
+    from flagtrack.daemon.typed_yaml import from_mapping
     from flagtrack.drivers.camera.simulated import SimulatedCamera, SimulatedCameraConfig, fast_forward, trigger_edges
     from flagtrack.drivers.sensor.record import SensorRecord
     from flagtrack.drivers.sensor.twin import TwinSensor, TwinSensorParams
@@ -114,8 +114,8 @@ def _accuracy(args: argparse.Namespace) -> list[dict[str, Any]]:
 
 def _drivers(duration_s: float) -> list[dict[str, Any]]:
     from flagtrack.daemon.typed_yaml import from_mapping
-    from flagtrack.drivers.sensor.setup import SensorConfig, open_sensor
     from flagtrack.drivers.sensor.device import DeviceParams, SimulatedSensorDevice
+    from flagtrack.drivers.sensor.setup import SensorConfig, open_sensor
 
     cases = [("ascii poll", DeviceParams(), {"driver": "ascii"}),
              ("ascii stream", DeviceParams(rate_hz=1000), {"driver": "ascii", "ascii": {"mode": "stream"}}),

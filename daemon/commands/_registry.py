@@ -42,7 +42,7 @@ def add_subcommands(parser: argparse.ArgumentParser, package: ModuleType, dest: 
     ``args.run``."""
     subparsers = parser.add_subparsers(dest=dest, metavar="COMMAND", required=True)
     for module in discover(package):
-        if only is not None and module.COMMAND != only:
+        if only is not None and only != module.COMMAND:
             continue
         sub = subparsers.add_parser(
             module.COMMAND,

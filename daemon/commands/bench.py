@@ -16,5 +16,5 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_subcommands(parser, bench, "bench")
 
 
-def run(args: argparse.Namespace) -> int:  # pragma: no cover - each benchmark sets its own run
+def run(args: argparse.Namespace) -> int:  # noqa: ARG001  # pragma: no cover - each benchmark sets its own run
     raise SystemExit("flagtrack bench: choose a benchmark")

@@ -107,8 +107,8 @@ def _calibrate(args: argparse.Namespace) -> int:
     from flagtrack.calibration.errors import CalibrationError
     from flagtrack.calibration.fit import Calibration, calibrate_corners
     from flagtrack.calibration.pseudo_image import detect_blink, pseudo_image
-    from flagtrack.drivers.formats.excerpt import read_excerpt
     from flagtrack.calibration.report import report_lines, save_figure, save_image
+    from flagtrack.drivers.formats.excerpt import read_excerpt
 
     board, frame, search, degree = _parse_setup(args)
     path = Path(args.inputs[0])

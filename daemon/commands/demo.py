@@ -59,11 +59,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo and report the simulated and detected onset and decay speeds."""
-    from flagtrack.daemon.rig.run import prepare_services, run_rig
-    from flagtrack.daemon.typed_yaml import from_mapping
     from flagtrack.daemon.rig.config import RigConfig
+    from flagtrack.daemon.rig.run import prepare_services, run_rig
     from flagtrack.daemon.sweep.runlog import read_run
     from flagtrack.daemon.sweep.summary import summary_points, transition_speeds
+    from flagtrack.daemon.typed_yaml import from_mapping
 
     out = (args.out or Path(f"flagtrack-demo-{time.strftime('%Y%m%d-%H%M%S')}")).expanduser().resolve()
     if (out / "sweep").exists():

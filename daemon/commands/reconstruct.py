@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     config = load_tracking_config_file(args.config) if args.config else TrackingConfig()
     setup = tracking_setup(apply_tracking_arguments(config, args), path=str(args.config) if args.config else None)
     started = time.perf_counter()
-    with _progress_bar(args.file, not args.no_progress and sys.stderr.isatty()) as bar:
+    with _ProgressBar(args.file, not args.no_progress and sys.stderr.isatty()) as bar:
         summary = reconstruct_file(args.file, args.output, setup, progress=bar)
     elapsed = time.perf_counter() - started
     rate = summary.events_in / elapsed / 1e6 if elapsed > 0 else 0.0
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-class _progress_bar:
+class _ProgressBar:
     """A tqdm bar over the file's bytes when ``enabled`` (tqdm is imported only then)."""
 
     def __init__(self, path: Path, enabled: bool) -> None:
@@ -71,7 +71,7 @@ class _progress_bar:
             self._bar.update(byte_offset - self._done)
             self._done = byte_offset
 
-    def __enter__(self) -> _progress_bar:
+    def __enter__(self) -> _ProgressBar:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -29,8 +29,8 @@ def add_service_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run_one_service(name: str, args: argparse.Namespace) -> int:
     """Run service ``name`` of the rig config alone until it is stopped (or its work is done)."""
-    from flagtrack.daemon.rig.run import run_rig
     from flagtrack.daemon.rig.config import load_rig
+    from flagtrack.daemon.rig.run import run_rig
 
     # run_rig checks the files and folders of this service, before anything opens
     return run_rig(load_rig(args.config, services=()), [name], shutdown_timeout_s=args.shutdown_timeout).code

@@ -31,11 +31,11 @@ def run(args: argparse.Namespace) -> int:
     """Run or resume the sweep; print where the results are."""
     import dataclasses
 
-    from flagtrack.daemon.rig.run import run_rig
-    from flagtrack.daemon.typed_yaml import from_mapping
     from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.rig.config import RigConfig, load_rig
+    from flagtrack.daemon.rig.run import run_rig
     from flagtrack.daemon.sweep.runlog import read_run
+    from flagtrack.daemon.typed_yaml import from_mapping
 
     if args.config is None and args.resume is None:
         raise ConfigError("give a rig config (-c rig.yaml) or a run to resume (--resume RUN_DIR)")

@@ -77,9 +77,9 @@ def run(args: argparse.Namespace) -> int:
 def _tracking_setup(args: argparse.Namespace, record) -> object:  # noqa: ANN001
     """The tracking set-up of ``--reconstruct``: the ``-c`` file's or the run's own, with the flags applied."""
     from flagtrack.daemon.commands._tracking_args import apply_tracking_arguments
-    from flagtrack.daemon.typed_yaml import from_mapping
     from flagtrack.daemon.tracking.section import TrackingConfig
     from flagtrack.daemon.tracking.setup import load_tracking_config_file, tracking_setup
+    from flagtrack.daemon.typed_yaml import from_mapping
 
     if args.config is not None:
         config, where = load_tracking_config_file(args.config), str(args.config)

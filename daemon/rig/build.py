@@ -8,7 +8,6 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.typed_yaml import with_path
 from flagtrack.daemon.errors import ConfigError, DriverError, FlagtrackError
 from flagtrack.daemon.rig.config import HARDWARE_ADAPTERS, CameraConfig, RigConfig
 from flagtrack.daemon.services.camera import CameraService
@@ -19,6 +18,7 @@ from flagtrack.daemon.services.tracker import TrackerService
 from flagtrack.daemon.services.viewer import ViewerService
 from flagtrack.daemon.tracking.setup import TrackingSetup, processing_attrs, tracking_setup
 from flagtrack.daemon.transport import Bus
+from flagtrack.daemon.typed_yaml import with_path
 from flagtrack.drivers.camera.base import Camera, CameraInfo
 from flagtrack.drivers.tunnel.base import WindTunnel
 

@@ -21,9 +21,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from flagtrack.daemon.typed_yaml import (
-    from_mapping, load_yaml, require_file, require_folder, require_output_file, to_mapping,
-)
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.services.camera import CameraStreamConfig
 from flagtrack.daemon.services.recorder import RecorderConfig, recording_base
@@ -33,6 +30,14 @@ from flagtrack.daemon.services.viewer import ViewerConfig, effective_sink
 from flagtrack.daemon.tracking.section import TrackingConfig
 from flagtrack.daemon.tracking.setup import resolve_calibration
 from flagtrack.daemon.transport import BusConfig
+from flagtrack.daemon.typed_yaml import (
+    from_mapping,
+    load_yaml,
+    require_file,
+    require_folder,
+    require_output_file,
+    to_mapping,
+)
 from flagtrack.drivers.camera.replay import ReplayConfig
 from flagtrack.drivers.camera.simulated import SimulatedCameraConfig
 from flagtrack.drivers.sensor.setup import SensorConfig

@@ -9,7 +9,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.typed_yaml import require_output_file
 from flagtrack.daemon.errors import FlagtrackError
 from flagtrack.daemon.rig.build import build_services, open_camera, open_hardware_camera
 from flagtrack.daemon.rig.config import RigConfig, check_rig
@@ -19,6 +18,7 @@ from flagtrack.daemon.services.tracker import warm_up_kernels
 from flagtrack.daemon.sweep import figures
 from flagtrack.daemon.tracking.setup import TrackingSetup, processing_attrs, tracking_setup
 from flagtrack.daemon.transport import Bus
+from flagtrack.daemon.typed_yaml import require_output_file
 from flagtrack.drivers.camera.simulated import fast_forward
 
 
@@ -69,6 +69,14 @@ def run_rig(rig: RigConfig, names: list[str], *, exit_at_end_of_stream: bool = F
     finally:
         if camera is not None and not camera.handed_over:
             camera.close()  # the rig failed before the camera service took it
+    _report_end(report, services, centrelines, say)
+    code = 1 if report.errors else (130 if report.signal_count else 0)
+    return RigRun(code, services, report)
+
+
+def _report_end(report: RunReport, services: list[Service], centrelines: Path | None,
+                say: Callable[[str], None]) -> None:
+    """Failures and stragglers always, on stderr; where the outputs are unless quiet (``say``)."""
     for name, exc in report.errors.items():
         print(f"flagtrack up: {name} failed: {exc}", file=sys.stderr)
     if report.abandoned:
@@ -78,8 +86,6 @@ def run_rig(rig: RigConfig, names: list[str], *, exit_at_end_of_stream: bool = F
     for service in services:
         if getattr(service, "description", ""):
             say(f"viewer {service.description}")
-    code = 1 if report.errors else (130 if report.signal_count else 0)
-    return RigRun(code, services, report)
 
 
 def prepare_services(rig: RigConfig, names: list[str], say: Callable[[str], None] = lambda text: None,

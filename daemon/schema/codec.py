@@ -69,7 +69,8 @@ def encode(message: Any) -> bytes:
     scalars: dict[str, Any] = {}
     blobs: list[str] = []
     chunks: list[Any] = []  # byte buffers: the arrays themselves (C order), joined without a copy each
-    for name in _field_names(type(message)):
+    message_type: type = type(message)
+    for name in _field_names(message_type):
         value = getattr(message, name)
         if isinstance(value, np.ndarray):
             array = value if value.flags.c_contiguous else np.ascontiguousarray(value)
@@ -287,8 +288,14 @@ _SIMPLE = {"str": str, "int": int, "float": float, "bool": bool}
 @functools.cache
 def _simple_types(cls: type) -> dict[str, type] | None:
     """Name -> exact Python type of each scalar field of ``cls``; ``None`` if one is not simple."""
-    simple = {f.name: _SIMPLE.get(f.type) for f in dataclasses.fields(cls) if not _is_blob(f)}
-    return simple if all(simple.values()) else None  # type: ignore[return-value]
+    simple: dict[str, type] = {}
+    for f in dataclasses.fields(cls):
+        if not _is_blob(f):
+            kind = _SIMPLE.get(f.type) if isinstance(f.type, str) else None
+            if kind is None:
+                return None
+            simple[f.name] = kind
+    return simple
 
 
 def _fast_scalars_ok(cls: type, meta: dict[str, Any]) -> bool:

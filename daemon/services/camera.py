@@ -15,9 +15,9 @@ from typing import Any
 
 from flagtrack.daemon.core.events import make_events
 from flagtrack.daemon.schema import CameraStatus, EventPacket, EventRate
-from flagtrack.daemon.transport import Bus
+from flagtrack.daemon.transport import Bus, Publisher
 from flagtrack.drivers.camera.base import Camera, CameraInfo, EndOfStream
-from flagtrack.drivers.formats.packets import Packet, PacketParams, Packetizer
+from flagtrack.drivers.formats.packets import Packet, Packetizer, PacketParams
 
 log = logging.getLogger(__name__)
 
@@ -123,8 +123,8 @@ class CameraService:
                 packets = packetizer.push(data.events, data.triggers, data.t_until_us)
                 self._publish(packets, data.arrival_ns, info, events_pub, rate_pub, rates)
 
-    def _publish(self, packets: list[Packet], arrival_ns: int, info: CameraInfo, events_pub, rate_pub,
-                 rates: RateCounter, end_of_stream: bool = False) -> None:  # noqa: ANN001
+    def _publish(self, packets: list[Packet], arrival_ns: int, info: CameraInfo, events_pub: Publisher, rate_pub: Publisher,
+                 rates: RateCounter, end_of_stream: bool = False) -> None:
         for i, packet in enumerate(packets):
             events_pub.put(EventPacket(
                 camera_id=self.cfg.id, seq=self.packets, t_first_us=packet.t_first_us, t_last_us=packet.t_last_us,

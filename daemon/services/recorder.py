@@ -45,9 +45,9 @@ from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, RecorderCommand, RecorderStatus, decode
 from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
 from flagtrack.daemon.transport import Bus
-from flagtrack.drivers.formats.packets import stream_preamble
 from flagtrack.drivers.formats import raw_header
 from flagtrack.drivers.formats.centreline import CentrelineShapeError, CentrelineSink
+from flagtrack.drivers.formats.packets import stream_preamble
 
 log = logging.getLogger(__name__)
 

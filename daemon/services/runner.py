@@ -91,7 +91,7 @@ class ServiceGroup:
                 service.run(self.stop)
             finally:
                 self._ended(service)
-        except BaseException as exc:  # noqa: BLE001 - reported, and every other service is stopped
+        except BaseException as exc:
             log.error("service %s failed: %s", service.name, exc, exc_info=log.isEnabledFor(logging.DEBUG))
             with self._lock:
                 self.report.errors[service.name] = exc

@@ -262,7 +262,7 @@ class ViewerService:
         """Run one logging step; a message Rerun (or the logger) cannot take is counted, not fatal."""
         try:
             return step(*args)
-        except Exception as exc:  # noqa: BLE001 - one message must not stop the viewer
+        except Exception as exc:
             self.unusable += 1
             log.debug("viewer: %s failed", getattr(step, "__name__", step), exc_info=exc)
             self.problems.add("messages that could not be shown", f"{type(exc).__name__}: {exc}")

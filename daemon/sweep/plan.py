@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from flagtrack.daemon.typed_yaml import from_mapping, load_yaml
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.sweep.actions import parse_action
+from flagtrack.daemon.typed_yaml import from_mapping, load_yaml
 
 
 class Branch(enum.Enum):

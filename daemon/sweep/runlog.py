@@ -28,9 +28,9 @@ from types import TracebackType
 from typing import Any, Literal
 
 from flagtrack.daemon import __version__
-from flagtrack.daemon.typed_yaml import from_mapping, to_mapping
 from flagtrack.daemon.errors import ConfigError, FormatError
 from flagtrack.daemon.sweep.plan import Point, SweepConfig, plan_points
+from flagtrack.daemon.typed_yaml import from_mapping, to_mapping
 
 log = logging.getLogger(__name__)
 

@@ -16,8 +16,8 @@ from typing import Any
 
 from flagtrack.daemon.core.denoise_params import DenoiseParams
 from flagtrack.daemon.core.windows import WindowSegment
-from flagtrack.daemon.typed_yaml import from_mapping, load_yaml, to_mapping
 from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.typed_yaml import from_mapping, load_yaml, to_mapping
 
 SECTION = "tracker"
 

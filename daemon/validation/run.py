@@ -16,19 +16,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.core.events import empty_triggers
 from flagtrack.daemon.errors import ConfigError, FormatError
-from flagtrack.daemon.tracking.offline import reconstruct_file
-from flagtrack.daemon.tracking.setup import TrackingSetup
+from flagtrack.daemon.sweep.figures import plot_sweep
 from flagtrack.daemon.sweep.runlog import RUN_LOG, PointResult, read_run
 from flagtrack.daemon.sweep.summary import write_summary_csv
+from flagtrack.daemon.tracking.offline import reconstruct_file
+from flagtrack.daemon.tracking.setup import TrackingSetup
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.validation.collect import raw_triggers
-from flagtrack.daemon.sweep.figures import plot_sweep
 from flagtrack.daemon.validation.figures import plot_point
 from flagtrack.daemon.validation.point import FlagFrame, validate_point
-from flagtrack.drivers.sensor.setup import SensorConfig
 from flagtrack.drivers.sensor.record import read_sensor_record
+from flagtrack.drivers.sensor.setup import SensorConfig
 
 log = logging.getLogger(__name__)
 

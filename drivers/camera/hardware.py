@@ -95,7 +95,8 @@ def sdk_version(distribution: str, module: ModuleType) -> str:
     if version:
         return str(version)
     try:
-        from importlib.metadata import PackageNotFoundError, version as dist_version
+        from importlib.metadata import PackageNotFoundError
+        from importlib.metadata import version as dist_version
 
         return dist_version(distribution)
     except (ImportError, PackageNotFoundError, ValueError):

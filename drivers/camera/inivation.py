@@ -18,12 +18,19 @@ from typing import Any
 
 import numpy as np
 
-from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.core.events import EVENT_DTYPE, TRIGGER_DTYPE, empty_events, empty_triggers
 from flagtrack.daemon.errors import ConfigError, DriverError
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.drivers.camera.base import CameraData, CameraInfo
 from flagtrack.drivers.camera.hardware import (
-    KEY, Roi, StallWatch, call_or_none, check_serial, device_label, import_sdk, plain,
+    KEY,
+    Roi,
+    StallWatch,
+    call_or_none,
+    check_serial,
+    device_label,
+    import_sdk,
+    plain,
 )
 
 log = logging.getLogger(__name__)
@@ -120,7 +127,7 @@ class InivationCamera:
                               device=self.label)
         try:
             camera = cameras.open(self.cfg.serial) if self.cfg.serial else cameras.open()
-        except Exception as exc:  # noqa: BLE001 - RuntimeError / IndexError when no camera is there
+        except Exception as exc:
             seen = ", ".join(str(getattr(d, "serialNumber", d)) for d in (call_or_none(cameras, "discover") or []))
             raise DriverError(f"cannot open the camera: {exc} (connected: {seen or 'none'}; check the USB cable "
                               "and the udev rules)", device=self.label) from exc
@@ -154,7 +161,7 @@ class InivationCamera:
                 store = self._camera.getNextEventBatch()
                 triggers = self._camera.getNextTriggerBatch() if self._triggers_on else None
                 running = store is not None or self._camera.isRunning()
-            except Exception as exc:  # noqa: BLE001 - libcaer errors come as RuntimeError
+            except Exception as exc:
                 raise DriverError(f"camera failed or was unplugged: {exc}", device=self.label) from exc
             if not running:
                 raise DriverError("the camera stopped running (unplugged?)", device=self.label)
@@ -228,7 +235,7 @@ def _set(camera: Any, method: str, key: str, *args: Any) -> None:
         raise ConfigError(f"{name} has no such setting ({method})", key=f"{KEY}.{key}")
     try:
         fn(*args)
-    except Exception as exc:  # noqa: BLE001 - the bindings raise ValueError / RuntimeError
+    except Exception as exc:
         raise ConfigError(f"the camera refused {args}: {exc}", key=f"{KEY}.{key}") from exc
 
 

@@ -18,11 +18,20 @@ from typing import Any, Literal
 
 import numpy as np
 
-from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.errors import ConfigError, DriverError
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.drivers.camera.base import CameraData, CameraInfo
 from flagtrack.drivers.camera.hardware import (
-    KEY, RawStream, Roi, StallWatch, call_or_none, check_serial, device_label, import_sdk, parse_encoding, plain,
+    KEY,
+    RawStream,
+    Roi,
+    StallWatch,
+    call_or_none,
+    check_serial,
+    device_label,
+    import_sdk,
+    parse_encoding,
+    plain,
     sdk_version,
 )
 
@@ -145,7 +154,7 @@ class MetavisionCamera:
             try:
                 status = self._events_stream.poll_buffer()
                 raw = self._events_stream.get_latest_raw_data() if status > 0 else None
-            except Exception as exc:  # noqa: BLE001 - HalException and friends
+            except Exception as exc:
                 raise DriverError(f"camera failed or was unplugged: {exc}", device=self.label) from exc
             if status < 0:
                 raise DriverError("the camera's events stream stopped (unplugged?)", device=self.label)
@@ -174,7 +183,7 @@ class MetavisionCamera:
                 device = hal.DeviceDiscovery.open(self.cfg.serial, config)
             else:
                 device = hal.DeviceDiscovery.open(self.cfg.serial)
-        except Exception as exc:  # noqa: BLE001 - HalException
+        except Exception as exc:
             raise DriverError(f"cannot open the camera: {exc}", device=self.label) from exc
         if device is None:
             seen = call_or_none(hal.DeviceDiscovery, "list")
@@ -219,7 +228,7 @@ class MetavisionCamera:
                 raise ConfigError(f"unknown bias (known: {', '.join(sorted(known))})", key=key)
             try:
                 ok = facility.set(name, int(value))
-            except Exception as exc:  # noqa: BLE001 - HalException: out of range, not modifiable
+            except Exception as exc:
                 raise ConfigError(f"the camera refused {value}: {exc}{_allowed(facility, name)}", key=key) from exc
             if ok is False:
                 raise ConfigError(f"the camera refused {value}{_allowed(facility, name)}", key=key)
@@ -236,7 +245,7 @@ class MetavisionCamera:
         try:
             facility.set_window(hal.I_ROI.Window(r.x, r.y, r.width, r.height))
             facility.enable(True)
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:
             raise ConfigError(f"the camera refused the ROI: {exc}", key=f"{KEY}.roi") from exc
         windows = call_or_none(facility, "get_windows")
         if windows:
@@ -253,7 +262,7 @@ class MetavisionCamera:
             try:
                 facility.set_cd_event_rate(int(self.cfg.rate_limiter_events_per_s))
                 facility.enable(True)
-            except Exception as exc:  # noqa: BLE001
+            except Exception as exc:
                 low = call_or_none(facility, "get_min_supported_cd_event_rate")
                 high = call_or_none(facility, "get_max_supported_cd_event_rate")
                 raise ConfigError(f"the camera refused it: {exc} (supported: {low}..{high})", key=key) from exc

@@ -19,11 +19,20 @@ from typing import Any, Literal
 
 import numpy as np
 
-from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.errors import ConfigError, DriverError
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.drivers.camera.base import CameraData, CameraInfo
 from flagtrack.drivers.camera.hardware import (
-    KEY, RawStream, Roi, StallWatch, call_or_none, check_serial, device_label, import_sdk, plain, sdk_version,
+    KEY,
+    RawStream,
+    Roi,
+    StallWatch,
+    call_or_none,
+    check_serial,
+    device_label,
+    import_sdk,
+    plain,
+    sdk_version,
 )
 
 log = logging.getLogger(__name__)
@@ -135,7 +144,7 @@ class PropheseeCamera:
             raise DriverError(f"{listed.name.value} is not supported by this neuromorphic-drivers", device=self.label)
         try:
             device = nd.open(serial=serial, raw=True, iterator_timeout=ITERATOR_TIMEOUT_S)
-        except Exception as exc:  # noqa: BLE001 - the extension raises plain exceptions
+        except Exception as exc:
             raise DriverError(f"cannot open {listed.name.value}: {exc}", device=self.label) from exc
         try:
             bounds = call_or_none(device, "biases_bounds")
@@ -164,7 +173,7 @@ class PropheseeCamera:
                 status, packet = next(self._device)
             except StopIteration:
                 raise DriverError("the camera's stream ended", device=self.label) from None
-            except Exception as exc:  # noqa: BLE001 - unplugged, USB error: the extension raises plain exceptions
+            except Exception as exc:
                 raise DriverError(f"camera failed or was unplugged: {exc}", device=self.label) from exc
             self._note_drops(status)
             if packet:
@@ -183,7 +192,7 @@ class PropheseeCamera:
         """The listed device to open: the one with the configured serial, else the first Prophesee one."""
         try:
             devices = list(nd.list_devices())
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:
             raise DriverError(f"cannot list USB devices: {exc}", device=self.label) from exc
         prophesee = [d for d in devices if not d.name.name.startswith("INIVATION")]
         matches = [d for d in prophesee if not self.cfg.serial or d.serial == self.cfg.serial]

@@ -13,8 +13,8 @@ import numpy as np
 from flagtrack.daemon.core.events import empty_events, empty_triggers
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.camera.base import CameraData, CameraInfo, EndOfStream
-from flagtrack.drivers.formats.packets import slot_table
 from flagtrack.drivers.formats import open_events
+from flagtrack.drivers.formats.packets import slot_table
 
 log = logging.getLogger(__name__)
 

@@ -7,7 +7,14 @@ packets; :func:`raw_header` / :func:`parse_raw_header` handle RAW headers. See d
 """
 
 from flagtrack.drivers.formats.codec import ENCODINGS, Decoder, Encoder, FormatWarning, make_decoder, make_encoder
-from flagtrack.drivers.formats.files import EventWriter, file_format, open_events, open_writer, read_events, write_events
+from flagtrack.drivers.formats.files import (
+    EventWriter,
+    file_format,
+    open_events,
+    open_writer,
+    read_events,
+    write_events,
+)
 from flagtrack.drivers.formats.raw_header import parse_raw_header, raw_header
 from flagtrack.drivers.formats.reader import EventChunk, EventReader, Recording, RecordingInfo
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from flagtrack.daemon.core.jit import njit
 
 OK = 0
@@ -11,7 +12,7 @@ BAD = 2
 
 
 @njit(cache=True, nogil=True)
-def parse_rows(buf, pos, out, n_cols):  # noqa: ANN001, ANN201
+def parse_rows(buf, pos, out, n_cols):
     """Parse lines of ``n_cols`` integers from ``buf[pos:]`` into rows of ``out`` (int64, (n, n_cols)).
 
     Blank lines are skipped, spaces and tabs around numbers and a CR before LF are allowed.
@@ -62,7 +63,7 @@ def parse_rows(buf, pos, out, n_cols):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True, nogil=True)
-def _put_int(out, k, value):  # noqa: ANN001, ANN202
+def _put_int(out, k, value):
     if value < 0:
         out[k] = 45
         k += 1
@@ -83,7 +84,7 @@ def _put_int(out, k, value):  # noqa: ANN001, ANN202
 
 
 @njit(cache=True, nogil=True)
-def format_rows(c0, c1, c2, c3, out):  # noqa: ANN001, ANN201
+def format_rows(c0, c1, c2, c3, out):
     """Write rows ``c0,c1,c2,c3\\n`` into ``out`` (uint8, at least 64 bytes a row); return bytes used."""
     k = 0
     for i in range(len(c0)):

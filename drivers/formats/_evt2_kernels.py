@@ -19,8 +19,8 @@ Decoder state (int64[16]): 0 base set, 1 base µs, 2 loops. Encoder state: 0 sta
 from __future__ import annotations
 
 import numpy as np
-from flagtrack.daemon.core.jit import njit
 
+from flagtrack.daemon.core.jit import njit
 from flagtrack.drivers.formats._timebase import (
     BAD_VALUE,
     BAD_WORD,
@@ -41,7 +41,7 @@ def _reserved_evt2(typ: int) -> bool:
 
 
 @njit(cache=True, nogil=True)
-def _skip_to_time_high(high, i, shift):  # noqa: ANN001, ANN202
+def _skip_to_time_high(high, i, shift):
     """OpenEB skips every word before the first TIME_HIGH: (index of it or len, status)."""
     while i < len(high):
         typ = (np.int64(high[i]) >> shift) & 0xF
@@ -54,7 +54,7 @@ def _skip_to_time_high(high, i, shift):  # noqa: ANN001, ANN202
 
 
 @njit(cache=True, nogil=True)
-def decode_evt2(words, start, state, tt, xyp, tr, width, height, t_offset):  # noqa: ANN001, ANN201
+def decode_evt2(words, start, state, tt, xyp, tr, width, height, t_offset):
     """Decode ``words[start:]`` into events (``tt``/``xyp`` views, see the EVT 3.0 kernel) and triggers.
 
     Returns (next word, n events, n triggers, status).
@@ -107,7 +107,7 @@ def decode_evt2(words, start, state, tt, xyp, tr, width, height, t_offset):  # n
 
 
 @njit(cache=True, nogil=True)
-def decode_evt21(high, low, start, state, tt, xyp, tr, width, height, t_offset):  # noqa: ANN001, ANN201
+def decode_evt21(high, low, start, state, tt, xyp, tr, width, height, t_offset):
     """Decode EVT 2.1 words from their 32-bit halves; return as :func:`decode_evt2`."""
     base_set = state[0]
     base = state[1]
@@ -171,7 +171,7 @@ def decode_evt21(high, low, start, state, tt, xyp, tr, width, height, t_offset):
 
 
 @njit(cache=True, nogil=True)
-def encode_evt2(ev_t, ev_x, ev_y, ev_p, i, tr_t, tr_c, tr_e, j, state, out, t_offset, width, height):  # noqa: ANN001, ANN201
+def encode_evt2(ev_t, ev_x, ev_y, ev_p, i, tr_t, tr_c, tr_e, j, state, out, t_offset, width, height):
     """Encode events from ``i`` and triggers from ``j`` (merged by time) as EVT 2.0 into ``out``.
 
     Returns (next event, next trigger, words written, status) as the EVT 3.0 encoder does.

@@ -21,8 +21,8 @@ Decoder state (int64[16]): 0 base set, 1 base µs, 2 loops, 3 current time µs, 
 from __future__ import annotations
 
 import numpy as np
-from flagtrack.daemon.core.jit import njit
 
+from flagtrack.daemon.core.jit import njit
 from flagtrack.drivers.formats._timebase import (
     BAD_VALUE,
     BAD_WORD,
@@ -40,7 +40,7 @@ MAX_EVENTS_PER_WORD = 12
 
 
 @njit(cache=True, nogil=True)
-def decode_evt3(words, start, state, tt, xyp, tr, width, height, t_offset):  # noqa: ANN001, ANN201, PLR0912, PLR0915
+def decode_evt3(words, start, state, tt, xyp, tr, width, height, t_offset):
     """Decode ``words[start:]`` into events (``tt``/``xyp`` views) and triggers ``tr``.
 
     Returns (next word, n events, n triggers, status).
@@ -145,7 +145,7 @@ def decode_evt3(words, start, state, tt, xyp, tr, width, height, t_offset):  # n
 
 
 @njit(cache=True, nogil=True)
-def _vector_run(ev_t, ev_x, ev_y, ev_p, i, n_ev):  # noqa: ANN001, ANN202
+def _vector_run(ev_t, ev_x, ev_y, ev_p, i, n_ev):
     """Length of the run of events from ``i`` that one VECT_12 can carry (same t, y, p; x rising)."""
     j = i + 1
     while (
@@ -162,7 +162,7 @@ def _vector_run(ev_t, ev_x, ev_y, ev_p, i, n_ev):  # noqa: ANN001, ANN202
 
 
 @njit(cache=True, nogil=True)
-def encode_evt3(ev_t, ev_x, ev_y, ev_p, i, tr_t, tr_c, tr_e, j, state, out, t_offset, width, height):  # noqa: ANN001, ANN201, PLR0912, PLR0915
+def encode_evt3(ev_t, ev_x, ev_y, ev_p, i, tr_t, tr_c, tr_e, j, state, out, t_offset, width, height):
     """Encode events from ``i`` and triggers from ``j`` (merged by time) into ``out``.
 
     Returns (next event, next trigger, words written, status); on an error status the returned

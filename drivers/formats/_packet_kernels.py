@@ -9,8 +9,8 @@ cost more than the encoding itself on 1 ms packets.
 from __future__ import annotations
 
 import numpy as np
-from flagtrack.daemon.core.jit import njit
 
+from flagtrack.daemon.core.jit import njit
 from flagtrack.drivers.formats._evt2_kernels import encode_evt2
 from flagtrack.drivers.formats._evt3_kernels import encode_evt3
 from flagtrack.drivers.formats._timebase import OK
@@ -27,7 +27,7 @@ def packet_words(n_events: np.ndarray, n_triggers: np.ndarray) -> int:
 
 
 @njit(cache=True, nogil=True)
-def encode_packets(evt3, t, x, y, p, starts, stops, horizons, tr_t, tr_c, tr_e, tr_starts, tr_stops,  # noqa: ANN001, ANN201
+def encode_packets(evt3, t, x, y, p, starts, stops, horizons, tr_t, tr_c, tr_e, tr_starts, tr_stops,
                    loop_us, width, height, out, out_ends, t_offsets, n_on):
     """Encode packet q from events ``starts[q]:stops[q]`` and triggers ``tr_starts[q]:tr_stops[q]``.
 
@@ -71,7 +71,7 @@ def encode_packets(evt3, t, x, y, p, starts, stops, horizons, tr_t, tr_c, tr_e, 
 
 
 @njit(cache=True, nogil=True)
-def slot_runs(t, running_max, packet_us, run_starts, run_slots, run_maxima):  # noqa: ANN001, ANN201
+def slot_runs(t, running_max, packet_us, run_starts, run_slots, run_maxima):
     """Cut events into runs of one packet slot: slot = (running maximum of t) // ``packet_us``.
 
     ``running_max`` is the maximum before ``t[0]`` (small steps back in time stay in the slot of the

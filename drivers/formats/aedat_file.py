@@ -58,7 +58,7 @@ class AedatReader(EventReader):
 
         try:
             return aedat.Decoder(str(self.path))
-        except Exception as exc:  # the library raises RuntimeError/OSError without offsets
+        except Exception as exc:  # noqa: BLE001 - the library raises RuntimeError/OSError without offsets
             raise FormatError(f"cannot read the AEDAT 4.0 header: {exc}", path=str(self.path),
                               offset=len(MAGIC)) from None
 
@@ -90,7 +90,7 @@ class AedatReader(EventReader):
                 packet = next(decoder)
             except StopIteration:
                 break
-            except Exception as exc:
+            except Exception as exc:  # noqa: BLE001 - the library's own errors carry no offset
                 if batch or triggers:  # keep what was decoded before the fault
                     yield _chunk(batch, triggers, batch_offset or self.first_packet)
                 offset = next(offsets)  # raises with the offset if the file is cut inside this packet

@@ -108,7 +108,7 @@ class DatWriter:
         if encoding is not None:
             raise FormatError("DAT files have no encoding option", path=str(self.path))
         self._file = self.path.open("wb")
-        now = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+        now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S")
         lines = ["% Data file containing EventCD events.", "% Version 2", f"% Date {now}"]
         if width is not None and height is not None:
             lines += [f"% Height {int(height)}", f"% Width {int(width)}"]

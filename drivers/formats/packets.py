@@ -15,11 +15,10 @@ import numpy as np
 
 from flagtrack.daemon.core.events import empty_triggers
 from flagtrack.daemon.errors import FormatError
-from flagtrack.drivers.formats import make_decoder
 from flagtrack.drivers.formats import _timebase as tb
+from flagtrack.drivers.formats import make_decoder
 from flagtrack.drivers.formats._packet_kernels import encode_packets, packet_words, slot_runs
 from flagtrack.drivers.formats.codec import LOOP_US, Encoder
-
 
 _WORD_DTYPE = {"evt3": "<u2", "evt2": "<u4"}
 

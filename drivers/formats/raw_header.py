@@ -141,7 +141,7 @@ def raw_header(encoding: str, width: int, height: int, extra: Mapping[str, objec
         raise FormatError(f"unknown encoding {encoding!r} (known: evt2, evt21, evt3)")
     fields: dict[str, object] = {
         "camera_integrator_name": "Prophesee",
-        "date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S"),
+        "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S"),
         "evt": _EVT_OUT[encoding],
         "format": f"{_FORMAT_OUT[encoding]};height={int(height)};width={int(width)}",
         "generator": f"flagtrack {__version__}",

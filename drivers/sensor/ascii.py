@@ -29,8 +29,8 @@ from typing import Literal
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.sensor.base import HostClock, SensorInfo, SensorReading, reading
 from flagtrack.drivers.sensor.poll import Poller, PollParams
-from flagtrack.drivers.tunnel.ascii import NUMBER, compile_pattern
 from flagtrack.drivers.serial.adapter import SerialAdapter
+from flagtrack.drivers.tunnel.ascii import NUMBER, compile_pattern
 
 log = logging.getLogger(__name__)
 

@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Literal
 
-from flagtrack.drivers.serial.pty_link import PtyLink
 from flagtrack.drivers.sensor.modbus import ModbusSensorMap
 from flagtrack.drivers.serial import modbus_rtu as rtu
+from flagtrack.drivers.serial.pty_link import PtyLink
 from flagtrack.drivers.tunnel.sim_responders import split_frames, split_lines
 
 log = logging.getLogger(__name__)

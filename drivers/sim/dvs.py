@@ -18,9 +18,9 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from flagtrack.daemon.core.jit import njit
 
 from flagtrack.daemon.core.events import EVENT_DTYPE
+from flagtrack.daemon.core.jit import njit
 
 
 @dataclass(frozen=True)
@@ -72,8 +72,8 @@ def grow_buffers(out_t: np.ndarray, out_i: np.ndarray, out_p: np.ndarray, n_out:
 
 
 @njit(cache=True)
-def advance_pixels(idx, new_levels, t1, level, t_upd, ref, t_ready, c_on, c_off, leak_slope, refractory,  # noqa: ANN001
-                   out_t, out_i, out_p, n_out):  # noqa: ANN001, ANN201
+def advance_pixels(idx, new_levels, t1, level, t_upd, ref, t_ready, c_on, c_off, leak_slope, refractory,  # noqa: ANN001, ANN201 - numba kernel
+                   out_t, out_i, out_p, n_out):  # noqa: ANN001
     """Move pixels ``idx`` from their last update to ``t1``, log level linear in time towards ``new_levels``.
 
     Returns (out_t, out_i, out_p, n_out): the event buffers (grown when needed) and their fill.

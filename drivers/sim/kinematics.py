@@ -17,8 +17,9 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
-from flagtrack.daemon.core.jit import njit
 from scipy.optimize import brentq
+
+from flagtrack.daemon.core.jit import njit
 
 _N_FINE = 256  # Simpson intervals along the flag; position error ~1e-9 L
 
@@ -206,7 +207,7 @@ def sample_kinematics(
 
 
 @njit(cache=True, nogil=True)
-def _positions_kernel(phi, s, n_fine, length, direction, amp, k, w_travel, w_standing, env_root, env_power,  # noqa: ANN001, ANN202
+def _positions_kernel(phi, s, n_fine, length, direction, amp, k, w_travel, w_standing, env_root, env_power,  # noqa: ANN202
                       out_x, out_y):
     """x, y (relative to the root) of :meth:`FlagKinematics.positions_at_phase`, one phase per row.
 

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from flagtrack.daemon.core.jit import njit
 
 from flagtrack.daemon.core.events import EVENT_DTYPE
+from flagtrack.daemon.core.jit import njit
 
 
 class LineKinematics(Protocol):
@@ -138,7 +138,7 @@ def _chunk_events(x: np.ndarray, y: np.ndarray, edges_us: np.ndarray, ds: float,
 
 
 @njit(cache=True, nogil=True)
-def _slice_geometry(x, y):  # noqa: ANN001, ANN202
+def _slice_geometry(x, y):  # noqa: ANN202
     """Unit tangent (tx, ty) at the slice starts (rows of x, y but the last; np.gradient along s),
     displacement (dx, dy) to the next row, and its component along the normal (-ty, tx)."""
     n_rows, n_s = x.shape[0] - 1, x.shape[1]
@@ -156,7 +156,7 @@ def _slice_geometry(x, y):  # noqa: ANN001, ANN202
 
 
 @njit(cache=True, nogil=True)
-def _fill_events(x0, y0, dx, dy, tx, ty, normal_motion, counts, noise, edges_us, ds, width, height,  # noqa: ANN001, ANN202
+def _fill_events(x0, y0, dx, dy, tx, ty, normal_motion, counts, noise, edges_us, ds, width, height,  # noqa: ANN202
                  uniforms, spread, noise_uniforms, out_t, out_x, out_y, out_p):
     """Fill the events slice by slice, each slice sorted by time; return how many are on the sensor.
 

@@ -15,8 +15,8 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from flagtrack.daemon.core.jit import njit
 
+from flagtrack.daemon.core.jit import njit
 from flagtrack.drivers.sim.dvs import EventCamera, advance_pixels
 from flagtrack.drivers.sim.kinematics import FlagKinematics
 from flagtrack.drivers.sim.optics import PlaneCamera
@@ -52,7 +52,7 @@ class LineRenderParams:
 
 
 @njit(cache=True)
-def splat_line(u, v, sigma, peak, width, height, acc, mark, stamp, touched):  # noqa: ANN001, ANN201
+def splat_line(u, v, sigma, peak, width, height, acc, mark, stamp, touched):  # noqa: ANN201
     """Add a Gaussian ridge along polyline (u, v) into ``acc``; return the count of touched pixels.
 
     A pixel first touched at this ``stamp`` is zeroed, marked and listed in ``touched``.
@@ -93,7 +93,7 @@ def splat_line(u, v, sigma, peak, width, height, acc, mark, stamp, touched):  # 
 
 
 @njit(cache=True)
-def line_steps(us, vs, t_steps, t_prev, sigma, peak, background, log_eps, width, height,  # noqa: ANN001, ANN201
+def line_steps(us, vs, t_steps, t_prev, sigma, peak, background, log_eps, width, height,  # noqa: ANN201
                acc, mark, stamp, prev, n_prev, cur, scratch_i, scratch_l,
                level, t_upd, ref, t_ready, c_on, c_off, leak_slope, refractory, out_t, out_i, out_p, n_out):
     """Render the line at each of ``t_steps`` (rows of us, vs) and advance the touched pixels.

@@ -25,7 +25,12 @@ from flagtrack.drivers.sim.kinematics import FlagKinematics, KinematicsFamily, s
 from flagtrack.drivers.sim.optics import PlaneCamera, tilted_pinhole
 from flagtrack.drivers.sim.render import LaserLineScene, LineRenderParams
 from flagtrack.drivers.sim.scenes import (
-    BlinkingPatternScene, BlinkParams, CheckerboardSpec, Scene, checkerboard, simulate_events,
+    BlinkingPatternScene,
+    BlinkParams,
+    CheckerboardSpec,
+    Scene,
+    checkerboard,
+    simulate_events,
 )
 
 log = logging.getLogger(__name__)

@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from flagtrack.daemon.typed_yaml import from_mapping, load_yaml
 from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.typed_yaml import from_mapping, load_yaml
 from flagtrack.drivers.tunnel.ascii import AsciiProtocol, AsciiTunnel
 from flagtrack.drivers.tunnel.base import TunnelLink
 from flagtrack.drivers.tunnel.modbus import ModbusMap, ModbusTunnel

@@ -16,7 +16,14 @@ from typing import Any
 import numpy as np
 
 from flagtrack.daemon.bench.accuracy_suite.plan import (
-    LOSS_THRESHOLD, METHODS, PAPER_JOINTS, PAPER_TAU_OVER_T, SETTLE_PERIODS, START_ON_TRUTH, Task, Variant,
+    LOSS_THRESHOLD,
+    METHODS,
+    PAPER_JOINTS,
+    PAPER_TAU_OVER_T,
+    SETTLE_PERIODS,
+    START_ON_TRUTH,
+    Task,
+    Variant,
 )
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.metrics import align, compare, rms, trapezoid
@@ -40,8 +47,8 @@ def at_paper_params(variant: Variant) -> bool:
 
 def tracking_config(variant: Variant, attrs: dict[str, Any]) -> Any:
     """The :class:`TrackingConfig` of a variant for a recording (truth attributes give root, L, f)."""
-    from flagtrack.daemon.typed_yaml import from_mapping
     from flagtrack.daemon.tracking.section import TrackingConfig
+    from flagtrack.daemon.typed_yaml import from_mapping
 
     tau_s = variant.tau_over_t / float(attrs["kin_frequency_hz"])
     values = {**METHODS[variant.method], "root": [float(v) for v in attrs["kin_root"]], "length": float(attrs["length"]),

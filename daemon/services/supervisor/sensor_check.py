@@ -10,15 +10,15 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.typed_yaml import to_mapping
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.events import empty_triggers
 from flagtrack.daemon.services.supervisor.monitor import Collection
+from flagtrack.daemon.typed_yaml import to_mapping
 from flagtrack.daemon.validation.collect import raw_triggers, record_from_messages
 from flagtrack.daemon.validation.figures import plot_point
 from flagtrack.daemon.validation.point import FlagFrame, validate_point
-from flagtrack.drivers.sensor.setup import SensorConfig
 from flagtrack.drivers.sensor.record import write_sensor_record
+from flagtrack.drivers.sensor.setup import SensorConfig
 
 log = logging.getLogger(__name__)
 

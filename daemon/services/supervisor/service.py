@@ -23,9 +23,9 @@ import numpy as np
 from flagtrack.daemon.errors import DriverError, FlagtrackError
 from flagtrack.daemon.schema import RecorderCommand, SupervisorState, TunnelState
 from flagtrack.daemon.services.supervisor.analysis import point_metrics
-from flagtrack.daemon.services.supervisor.section import SupervisorConfig
 from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor, point_state
+from flagtrack.daemon.services.supervisor.section import SupervisorConfig
 from flagtrack.daemon.sweep.actions import ActionOutcome, PauseAction, parse_action, run_command
 from flagtrack.daemon.sweep.plan import Action, EndPoint, Point, Record, SetSpeed, Wait, plan_points, sweep_plan
 from flagtrack.daemon.sweep.runlog import POINTS_DIR, PointResult, RunLog, completed_points, point_paths, stored_sweep
