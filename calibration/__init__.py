@@ -23,13 +23,31 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from flagtrack.calibration.mapping import PolynomialMapping
 
-__all__ = ["BlinkSearch", "BoardSpec", "CalibrationError", "Direction", "GridFrame", "PolynomialMapping",
-           "calibrate_events", "calibration_attrs", "load_calibration_data", "load_mapping", "save_calibration"]
+__all__ = [
+    "BlinkSearch",
+    "BoardSpec",
+    "CalibrationError",
+    "Direction",
+    "GridFrame",
+    "PolynomialMapping",
+    "calibrate_events",
+    "calibration_attrs",
+    "load_calibration_data",
+    "load_mapping",
+    "save_calibration",
+]
 
 _WHERE = {
-    "BlinkSearch": "pseudo_image", "BoardSpec": "fit", "CalibrationError": "errors", "Direction": "frame",
-    "GridFrame": "frame", "PolynomialMapping": "mapping", "calibrate_events": "fit",
-    "save_calibration": "calfile", "load_calibration_data": "calfile", "calibration_attrs": "calfile",
+    "BlinkSearch": "pseudo_image",
+    "BoardSpec": "fit",
+    "CalibrationError": "errors",
+    "Direction": "frame",
+    "GridFrame": "frame",
+    "PolynomialMapping": "mapping",
+    "calibrate_events": "fit",
+    "save_calibration": "calfile",
+    "load_calibration_data": "calfile",
+    "calibration_attrs": "calfile",
 }
 
 

@@ -15,8 +15,17 @@ from flagtrack.daemon.core.jit import njit
 _BLOCK = 256
 
 
-def evaluate(x: np.ndarray, y: np.ndarray, cx: float, cy: float, inv_scale: float, ax: np.ndarray,
-             ay: np.ndarray, out_x: np.ndarray, out_y: np.ndarray) -> None:
+def evaluate(
+    x: np.ndarray,
+    y: np.ndarray,
+    cx: float,
+    cy: float,
+    inv_scale: float,
+    ax: np.ndarray,
+    ay: np.ndarray,
+    out_x: np.ndarray,
+    out_y: np.ndarray,
+) -> None:
     """``out = P((x - cx) inv_scale, (y - cy) inv_scale)`` for 1-D x, y; picks the kernel by ``ax``'s size."""
     if ax.shape[0] == 4:
         _evaluate3(x, y, cx, cy, inv_scale, ax, ay, out_x, out_y)
@@ -29,10 +38,30 @@ def evaluate(x: np.ndarray, y: np.ndarray, cx: float, cy: float, inv_scale: floa
 @njit(cache=True)
 def _evaluate3(x, y, cx, cy, inv_scale, ax, ay, out_x, out_y):  # noqa: ANN001, ANN202
     """Degree <= 3 (4 x 4 coefficient matrices), unrolled."""
-    a00, a01, a02, a03, a10, a11, a12, a20, a21, a30 = (ax[0, 0], ax[0, 1], ax[0, 2], ax[0, 3], ax[1, 0],
-                                                        ax[1, 1], ax[1, 2], ax[2, 0], ax[2, 1], ax[3, 0])
-    b00, b01, b02, b03, b10, b11, b12, b20, b21, b30 = (ay[0, 0], ay[0, 1], ay[0, 2], ay[0, 3], ay[1, 0],
-                                                        ay[1, 1], ay[1, 2], ay[2, 0], ay[2, 1], ay[3, 0])
+    a00, a01, a02, a03, a10, a11, a12, a20, a21, a30 = (
+        ax[0, 0],
+        ax[0, 1],
+        ax[0, 2],
+        ax[0, 3],
+        ax[1, 0],
+        ax[1, 1],
+        ax[1, 2],
+        ax[2, 0],
+        ax[2, 1],
+        ax[3, 0],
+    )
+    b00, b01, b02, b03, b10, b11, b12, b20, b21, b30 = (
+        ay[0, 0],
+        ay[0, 1],
+        ay[0, 2],
+        ay[0, 3],
+        ay[1, 0],
+        ay[1, 1],
+        ay[1, 2],
+        ay[2, 0],
+        ay[2, 1],
+        ay[3, 0],
+    )
     for k in range(x.size):
         u = (x[k] - cx) * inv_scale
         v = (y[k] - cy) * inv_scale
@@ -51,12 +80,32 @@ def _evaluate5(x, y, cx, cy, inv_scale, ax, ay, out_x, out_y):  # noqa: ANN001, 
     """Degree <= 5 (6 x 6 coefficient matrices), unrolled."""
     a00, a01, a02, a03, a04, a05 = ax[0, 0], ax[0, 1], ax[0, 2], ax[0, 3], ax[0, 4], ax[0, 5]
     a10, a11, a12, a13, a14 = ax[1, 0], ax[1, 1], ax[1, 2], ax[1, 3], ax[1, 4]
-    a20, a21, a22, a23, a30, a31, a32, a40, a41, a50 = (ax[2, 0], ax[2, 1], ax[2, 2], ax[2, 3], ax[3, 0],
-                                                        ax[3, 1], ax[3, 2], ax[4, 0], ax[4, 1], ax[5, 0])
+    a20, a21, a22, a23, a30, a31, a32, a40, a41, a50 = (
+        ax[2, 0],
+        ax[2, 1],
+        ax[2, 2],
+        ax[2, 3],
+        ax[3, 0],
+        ax[3, 1],
+        ax[3, 2],
+        ax[4, 0],
+        ax[4, 1],
+        ax[5, 0],
+    )
     b00, b01, b02, b03, b04, b05 = ay[0, 0], ay[0, 1], ay[0, 2], ay[0, 3], ay[0, 4], ay[0, 5]
     b10, b11, b12, b13, b14 = ay[1, 0], ay[1, 1], ay[1, 2], ay[1, 3], ay[1, 4]
-    b20, b21, b22, b23, b30, b31, b32, b40, b41, b50 = (ay[2, 0], ay[2, 1], ay[2, 2], ay[2, 3], ay[3, 0],
-                                                        ay[3, 1], ay[3, 2], ay[4, 0], ay[4, 1], ay[5, 0])
+    b20, b21, b22, b23, b30, b31, b32, b40, b41, b50 = (
+        ay[2, 0],
+        ay[2, 1],
+        ay[2, 2],
+        ay[2, 3],
+        ay[3, 0],
+        ay[3, 1],
+        ay[3, 2],
+        ay[4, 0],
+        ay[4, 1],
+        ay[5, 0],
+    )
     for k in range(x.size):
         u = (x[k] - cx) * inv_scale
         v = (y[k] - cy) * inv_scale

@@ -51,15 +51,24 @@ def calibration_to_mapping(cal: Calibration) -> dict[str, Any]:
     """The file's content as plain data."""
     m = cal.mapping
     return {
-        "format": FORMAT, "version": VERSION, "units": m.units, "created": cal.created, "source": cal.source,
+        "format": FORMAT,
+        "version": VERSION,
+        "units": m.units,
+        "created": cal.created,
+        "source": cal.source,
         "image_size": list(m.image_size),
         "board": {"inner_corners": list(cal.board.inner_corners), "square_mm": cal.board.square_m * 1e3},
-        "frame": cal.frame.to_mapping(), "degree": m.degree,
-        "forward": m.forward.to_mapping(), "inverse": m.inverse.to_mapping(),
-        "residuals": cal.residuals.to_mapping(), "blink": cal.blink,
-        "corners": {"shape": list(cal.corners_px.shape[:2]),
-                    "pixels": np.round(cal.corners_px.reshape(-1, 2), 4).tolist(),
-                    "plane_m": np.round(cal.plane_m.reshape(-1, 2), 9).tolist()},
+        "frame": cal.frame.to_mapping(),
+        "degree": m.degree,
+        "forward": m.forward.to_mapping(),
+        "inverse": m.inverse.to_mapping(),
+        "residuals": cal.residuals.to_mapping(),
+        "blink": cal.blink,
+        "corners": {
+            "shape": list(cal.corners_px.shape[:2]),
+            "pixels": np.round(cal.corners_px.reshape(-1, 2), 4).tolist(),
+            "plane_m": np.round(cal.plane_m.reshape(-1, 2), 9).tolist(),
+        },
     }
 
 
@@ -89,11 +98,15 @@ def read_calibration_file(path: str | Path) -> dict[str, Any]:
     except yaml.YAMLError as exc:
         raise FormatError(f"not a YAML file: {getattr(exc, 'problem', exc)}", path=str(path)) from exc
     if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise FormatError(f"not a calibration file (no 'format: {FORMAT}'; make one with flagtrack calibrate)",
-                          path=str(path))
+        raise FormatError(
+            f"not a calibration file (no 'format: {FORMAT}'; make one with flagtrack calibrate)", path=str(path)
+        )
     if data.get("version") != VERSION:
-        raise FormatError(f"calibration file version {data.get('version')!r} is not supported (this flagtrack "
-                          f"reads version {VERSION})", path=str(path))
+        raise FormatError(
+            f"calibration file version {data.get('version')!r} is not supported (this flagtrack "
+            f"reads version {VERSION})",
+            path=str(path),
+        )
     return data
 
 
@@ -109,8 +122,13 @@ def _polynomial(data: dict[str, Any], key: str, path: str) -> Polynomial2D:
         centre = tuple(float(v) for v in section["centre"])
         if len(centre) != 2:
             raise ValueError("centre must be [x, y]")
-        return Polynomial2D(degree, (centre[0], centre[1]), float(section["scale"]),
-                            tuple(float(v) for v in section["x"]), tuple(float(v) for v in section["y"]))
+        return Polynomial2D(
+            degree,
+            (centre[0], centre[1]),
+            float(section["scale"]),
+            tuple(float(v) for v in section["x"]),
+            tuple(float(v) for v in section["y"]),
+        )
     except KeyError as exc:
         raise FormatError(f"'{key}' lacks '{exc.args[0]}'", path=path) from exc
     except (TypeError, ValueError) as exc:
@@ -130,8 +148,9 @@ def load_mapping(path: str | Path) -> PolynomialMapping:
         raise FormatError("'image_size' must be [width, height] in pixels", path=str(path))
     if data.get("units", "m") != "m":
         raise FormatError(f"units {data.get('units')!r} not supported (m)", path=str(path))
-    return PolynomialMapping(_polynomial(data, "forward", str(path)), _polynomial(data, "inverse", str(path)),
-                             (size[0], size[1]))
+    return PolynomialMapping(
+        _polynomial(data, "forward", str(path)), _polynomial(data, "inverse", str(path)), (size[0], size[1])
+    )
 
 
 def calibration_attrs(path: str | Path) -> dict[str, Any]:
@@ -145,8 +164,10 @@ def calibration_attrs(path: str | Path) -> dict[str, Any]:
     data = read_calibration_file(path)
     res = data.get("residuals") or {}
     attrs: dict[str, Any] = {
-        "calibration_degree": data.get("degree"), "calibration_created": str(data.get("created")),
-        "calibration_source": str(data.get("source")), "calibration_yaml": Path(path).read_text(),
+        "calibration_degree": data.get("degree"),
+        "calibration_created": str(data.get("created")),
+        "calibration_source": str(data.get("source")),
+        "calibration_yaml": Path(path).read_text(),
     }
     for key in ("mean_mm", "max_mm", "mean_px", "max_px", "loo_max_px", "pixel_size_mm"):
         if key in res:

@@ -74,7 +74,8 @@ def find_grid(image_u8: np.ndarray, board: tuple[int, int]) -> np.ndarray:
             seen = _size_text(grid, n >= m)
             raise CalibrationError(
                 f"the board shows {seen} inner corners, not {n}x{m}: give --board {seen} "
-                f"(the count of INNER corners: a board of 10x7 squares has 9x6)")
+                f"(the count of INNER corners: a board of 10x7 squares has 9x6)"
+            )
         return grid
     found, corners, meta = cv2.findChessboardCornersSBWithMeta(image_u8, (3, 3), flags)
     grid = corners.reshape(*meta.shape[:2], 2).astype(np.float64) if found else None
@@ -82,13 +83,15 @@ def find_grid(image_u8: np.ndarray, board: tuple[int, int]) -> np.ndarray:
         seen = _size_text(grid, n >= m)
         if _touches_border(grid, image_u8.shape):
             raise CalibrationError(
-                f"only part of the board is seen ({seen} of {n}x{m} inner corners): put the whole board "
-                f"in view")
+                f"only part of the board is seen ({seen} of {n}x{m} inner corners): put the whole board in view"
+            )
         raise CalibrationError(
             f"the board shows {seen} inner corners, not {n}x{m}: give --board {seen} "
-            f"(the count of INNER corners: a board of 10x7 squares has 9x6)")
-    raise CalibrationError(f"no {n}x{m} checkerboard found in the pseudo-image (is the board in view, "
-                           f"in focus and blinking?)")
+            f"(the count of INNER corners: a board of 10x7 squares has 9x6)"
+        )
+    raise CalibrationError(
+        f"no {n}x{m} checkerboard found in the pseudo-image (is the board in view, in focus and blinking?)"
+    )
 
 
 def _looks_like_board(image: np.ndarray, grid: np.ndarray) -> bool:
@@ -98,9 +101,9 @@ def _looks_like_board(image: np.ndarray, grid: np.ndarray) -> bool:
     values = []
     for cx, cy in centres.reshape(-1, 2):
         x, y = int(round(cx)), int(round(cy))
-        values.append(float(image[max(y - 1, 0):min(y + 2, h), max(x - 1, 0):min(x + 2, w)].mean()))
+        values.append(float(image[max(y - 1, 0) : min(y + 2, h), max(x - 1, 0) : min(x + 2, w)].mean()))
     cells = np.asarray(values).reshape(centres.shape[:2])
-    jj, ii = np.mgrid[0:cells.shape[0], 0:cells.shape[1]]
+    jj, ii = np.mgrid[0 : cells.shape[0], 0 : cells.shape[1]]
     even, odd = cells[(ii + jj) % 2 == 0], cells[(ii + jj) % 2 == 1]
     light, dark = (even, odd) if even.mean() > odd.mean() else (odd, even)
     return bool(light.min() > dark.max() and light.min() - dark.max() > 0.25 * float(np.percentile(image, 99)))
@@ -114,8 +117,12 @@ def _size_text(grid: np.ndarray, long_first: bool) -> str:
 def _touches_border(grid: np.ndarray, shape: tuple[int, ...]) -> bool:
     """True if the corners one square beyond the grid's edges fall outside the image."""
     h, w = shape[:2]
-    beyond = [2 * grid[0] - grid[1], 2 * grid[-1] - grid[-2], 2 * grid[:, 0] - grid[:, 1],
-              2 * grid[:, -1] - grid[:, -2]]
+    beyond = [
+        2 * grid[0] - grid[1],
+        2 * grid[-1] - grid[-2],
+        2 * grid[:, 0] - grid[:, 1],
+        2 * grid[:, -1] - grid[:, -2],
+    ]
     pts = np.concatenate(beyond)
     return bool(np.any((pts[:, 0] < 0) | (pts[:, 1] < 0) | (pts[:, 0] > w - 1) | (pts[:, 1] > h - 1)))
 
@@ -135,8 +142,11 @@ def order_in_image(grid: np.ndarray) -> np.ndarray:
         grid = grid[::-1, :]
     angle = math.degrees(math.atan2(abs(step_cols[1]), abs(step_cols[0])))
     if angle > 35.0:
-        log.warning("the board is turned %.0f deg in the image: 'left/right/up/down' names are ambiguous; "
-                    "check the origin and axes on the report figure", angle)
+        log.warning(
+            "the board is turned %.0f deg in the image: 'left/right/up/down' names are ambiguous; "
+            "check the origin and axes on the report figure",
+            angle,
+        )
     return np.ascontiguousarray(grid)
 
 
@@ -147,8 +157,9 @@ def _corner_model(q: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
     return a + b * np.tanh(d1 / s) * np.tanh(d2 / s)
 
 
-def refine_corner(image: np.ndarray, xy: np.ndarray, dir1: np.ndarray, dir2: np.ndarray,
-                  radius_px: int) -> np.ndarray | None:
+def refine_corner(
+    image: np.ndarray, xy: np.ndarray, dir1: np.ndarray, dir2: np.ndarray, radius_px: int
+) -> np.ndarray | None:
     """Fit the blurred-corner model around ``xy``; None if the window leaves the image or the fit fails.
 
     Args:
@@ -163,13 +174,17 @@ def refine_corner(image: np.ndarray, xy: np.ndarray, dir1: np.ndarray, dir2: np.
     h, w = image.shape
     if x0 - radius_px < 0 or y0 - radius_px < 0 or x0 + radius_px >= w or y0 + radius_px >= h:
         return None
-    ys, xs = np.mgrid[y0 - radius_px:y0 + radius_px + 1, x0 - radius_px:x0 + radius_px + 1]
+    ys, xs = np.mgrid[y0 - radius_px : y0 + radius_px + 1, x0 - radius_px : x0 + radius_px + 1]
     xs, ys = xs.ravel().astype(np.float64), ys.ravel().astype(np.float64)
-    values = image[y0 - radius_px:y0 + radius_px + 1, x0 - radius_px:x0 + radius_px + 1].ravel()
+    values = image[y0 - radius_px : y0 + radius_px + 1, x0 - radius_px : x0 + radius_px + 1].ravel()
     weight = np.sqrt(np.exp(-((xs - xy[0]) ** 2 + (ys - xy[1]) ** 2) / (2 * (radius_px / 2) ** 2)))
     t1, t2 = math.atan2(dir1[1], dir1[0]), math.atan2(dir2[1], dir2[0])
-    sign = np.sign(np.sum((values - values.mean()) * _corner_model(
-        np.array([xy[0], xy[1], t1, t2, 0.0, 1.0, 1.0]), xs, ys))) or 1.0
+    sign = (
+        np.sign(
+            np.sum((values - values.mean()) * _corner_model(np.array([xy[0], xy[1], t1, t2, 0.0, 1.0, 1.0]), xs, ys))
+        )
+        or 1.0
+    )
     q0 = np.array([xy[0], xy[1], t1, t2, values.mean(), sign * 0.5 * np.ptp(values), 1.0])
     try:
         fit = least_squares(lambda q: weight * (_corner_model(q, xs, ys) - values), q0, method="lm")
@@ -191,8 +206,10 @@ def detect_corners(image: np.ndarray, board: tuple[int, int], refine: bool = Tru
     px = coarse.copy()
     refined = np.zeros(coarse.shape[:2], dtype=bool)
     if refine:
-        spacing = min(np.nanmin(np.hypot(*np.diff(coarse, axis=1).reshape(-1, 2).T)),
-                      np.nanmin(np.hypot(*np.diff(coarse, axis=0).reshape(-1, 2).T)))
+        spacing = min(
+            np.nanmin(np.hypot(*np.diff(coarse, axis=1).reshape(-1, 2).T)),
+            np.nanmin(np.hypot(*np.diff(coarse, axis=0).reshape(-1, 2).T)),
+        )
         radius = int(np.clip(round(0.3 * spacing), 3, 10))
         rows, cols = coarse.shape[:2]
         values = np.asarray(image, dtype=np.float64)

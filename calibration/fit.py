@@ -104,8 +104,9 @@ class Calibration:
     created: str = field(default_factory=lambda: datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"))
 
 
-def fit_mapping(corners_px: np.ndarray, plane_m: np.ndarray, degree: int,
-                image_size: tuple[int, int]) -> PolynomialMapping:
+def fit_mapping(
+    corners_px: np.ndarray, plane_m: np.ndarray, degree: int, image_size: tuple[int, int]
+) -> PolynomialMapping:
     """Least-squares pixel -> plane and plane -> pixel polynomials of total ``degree``.
 
     Args:
@@ -120,19 +121,29 @@ def fit_mapping(corners_px: np.ndarray, plane_m: np.ndarray, degree: int,
     n_terms = len(exponents(degree))
     n = len(corners_px)
     if n < n_terms + 2:
-        raise CalibrationError(f"too few corners ({n}) for a degree-{degree} mapping ({n_terms} coefficients "
-                               f"per axis, at least {n_terms + 2} corners needed): use a board with more corners "
-                               f"or a lower --degree")
+        raise CalibrationError(
+            f"too few corners ({n}) for a degree-{degree} mapping ({n_terms} coefficients "
+            f"per axis, at least {n_terms + 2} corners needed): use a board with more corners "
+            f"or a lower --degree"
+        )
     width, height = image_size
     centre_px = ((width - 1) / 2.0, (height - 1) / 2.0)
     lo, hi = plane_m.min(axis=0), plane_m.max(axis=0)
     centre_m = (float((lo[0] + hi[0]) / 2), float((lo[1] + hi[1]) / 2))
     scale_m = float(max(hi - lo) / 2) or 1.0
     try:
-        forward = Polynomial2D.fit(corners_px[:, 0], corners_px[:, 1], plane_m[:, 0], plane_m[:, 1], degree,
-                                   centre_px, max(width, height) / 2.0)
-        inverse = Polynomial2D.fit(plane_m[:, 0], plane_m[:, 1], corners_px[:, 0], corners_px[:, 1], degree,
-                                   centre_m, scale_m)
+        forward = Polynomial2D.fit(
+            corners_px[:, 0],
+            corners_px[:, 1],
+            plane_m[:, 0],
+            plane_m[:, 1],
+            degree,
+            centre_px,
+            max(width, height) / 2.0,
+        )
+        inverse = Polynomial2D.fit(
+            plane_m[:, 0], plane_m[:, 1], corners_px[:, 0], corners_px[:, 1], degree, centre_m, scale_m
+        )
     except ValueError as exc:
         raise CalibrationError(f"{exc}: use a board with more corners per side or a lower --degree") from exc
     if n < 2 * n_terms:
@@ -155,16 +166,25 @@ def residuals(mapping: PolynomialMapping, corners_px: np.ndarray, plane_m: np.nd
     dist_mm, dist_px = np.hypot(*res_m.T) * 1e3, np.hypot(*res_px.T)
     loo_mm, loo_pxd = np.hypot(*loo_m.T) * 1e3, np.hypot(*loo_px.T)
     summary = Residuals(
-        n_corners=len(corners_px), mean_mm=float(dist_mm.mean()), max_mm=float(dist_mm.max()),
-        rms_mm=float(np.sqrt(np.mean(dist_mm**2))), mean_px=float(dist_px.mean()), max_px=float(dist_px.max()),
-        loo_mean_mm=float(loo_mm.mean()), loo_max_mm=float(loo_mm.max()), loo_mean_px=float(loo_pxd.mean()),
-        loo_max_px=float(loo_pxd.max()), inverse_max_px=float(np.hypot(ix - u, iy - v).max()),
-        pixel_size_mm=float(np.median(mapping.pixel_size_m(u, v)) * 1e3))
+        n_corners=len(corners_px),
+        mean_mm=float(dist_mm.mean()),
+        max_mm=float(dist_mm.max()),
+        rms_mm=float(np.sqrt(np.mean(dist_mm**2))),
+        mean_px=float(dist_px.mean()),
+        max_px=float(dist_px.max()),
+        loo_mean_mm=float(loo_mm.mean()),
+        loo_max_mm=float(loo_mm.max()),
+        loo_mean_px=float(loo_pxd.mean()),
+        loo_max_px=float(loo_pxd.max()),
+        inverse_max_px=float(np.hypot(ix - u, iy - v).max()),
+        pixel_size_mm=float(np.median(mapping.pixel_size_m(u, v)) * 1e3),
+    )
     return summary, res_m
 
 
-def calibrate_corners(grid: CornerGrid, board: BoardSpec, frame: GridFrame, degree: int,
-                      image_size: tuple[int, int]) -> Calibration:
+def calibrate_corners(
+    grid: CornerGrid, board: BoardSpec, frame: GridFrame, degree: int, image_size: tuple[int, int]
+) -> Calibration:
     """Fit the mapping on detected corners (plane coordinates from ``board`` and ``frame``).
 
     Raises:
@@ -178,14 +198,26 @@ def calibrate_corners(grid: CornerGrid, board: BoardSpec, frame: GridFrame, degr
     px_flat, plane_flat = grid.px.reshape(-1, 2), plane.reshape(-1, 2)
     mapping = fit_mapping(px_flat, plane_flat, degree, image_size)
     summary, res_m = residuals(mapping, px_flat, plane_flat)
-    return Calibration(mapping=mapping, board=board, frame=frame, corners_px=grid.px, plane_m=plane,
-                       residuals=summary, residual_m=res_m.reshape(plane.shape))
+    return Calibration(
+        mapping=mapping,
+        board=board,
+        frame=frame,
+        corners_px=grid.px,
+        plane_m=plane,
+        residuals=summary,
+        residual_m=res_m.reshape(plane.shape),
+    )
 
 
-def calibrate_events(events: np.ndarray, image_size: tuple[int, int], board: BoardSpec,
-                     frame: GridFrame = GridFrame(), degree: int = DEFAULT_DEGREE,
-                     search: BlinkSearch = BlinkSearch(), source: str | None = None,
-                     ) -> tuple[Calibration, np.ndarray, BlinkTiming]:
+def calibrate_events(
+    events: np.ndarray,
+    image_size: tuple[int, int],
+    board: BoardSpec,
+    frame: GridFrame = GridFrame(),
+    degree: int = DEFAULT_DEGREE,
+    search: BlinkSearch = BlinkSearch(),
+    source: str | None = None,
+) -> tuple[Calibration, np.ndarray, BlinkTiming]:
     """Calibrate from the events of a blinking board (EVENT_DTYPE, time-sorted).
 
     Returns:
@@ -201,6 +233,13 @@ def calibrate_events(events: np.ndarray, image_size: tuple[int, int], board: Boa
     cal = calibrate_corners(grid, board, frame, degree, image_size)
     cal = Calibration(**{**cal.__dict__, "blink": timing.to_attrs(), "source": source})
     r = cal.residuals
-    log.info("%d corners, degree %d: residual mean %.3f mm (%.3f px), max %.3f mm (%.3f px)",
-             r.n_corners, degree, r.mean_mm, r.mean_px, r.max_mm, r.max_px)
+    log.info(
+        "%d corners, degree %d: residual mean %.3f mm (%.3f px), max %.3f mm (%.3f px)",
+        r.n_corners,
+        degree,
+        r.mean_mm,
+        r.mean_px,
+        r.max_mm,
+        r.max_px,
+    )
     return cal, image, timing

@@ -32,8 +32,12 @@ class Direction(Enum):
 
     def counter_clockwise(self) -> Direction:
         """The direction a quarter turn counter-clockwise on the image (right -> up)."""
-        return {Direction.RIGHT: Direction.UP, Direction.UP: Direction.LEFT, Direction.LEFT: Direction.DOWN,
-                Direction.DOWN: Direction.RIGHT}[self]
+        return {
+            Direction.RIGHT: Direction.UP,
+            Direction.UP: Direction.LEFT,
+            Direction.LEFT: Direction.DOWN,
+            Direction.DOWN: Direction.RIGHT,
+        }[self]
 
 
 _NAMED_CORNERS = ("top-left", "top-right", "bottom-left", "bottom-right")
@@ -57,8 +61,9 @@ class GridFrame:
 
     def __post_init__(self) -> None:
         if self.origin_corner not in _NAMED_CORNERS and not re.fullmatch(r"\s*\d+\s*,\s*\d+\s*", self.origin_corner):
-            raise ValueError(f"origin corner must be one of {', '.join(_NAMED_CORNERS)} or 'i,j', "
-                             f"got {self.origin_corner!r}")
+            raise ValueError(
+                f"origin corner must be one of {', '.join(_NAMED_CORNERS)} or 'i,j', got {self.origin_corner!r}"
+            )
         if np.dot(self.x_step, self.y_step) != 0:
             raise ValueError(f"y axis ({self.y_dir.value}) must be perpendicular to x axis ({self.x_axis.value})")
 
@@ -83,14 +88,20 @@ class GridFrame:
         Raises:
             ValueError: an ``i,j`` outside the grid.
         """
-        named = {"top-left": (0, 0), "top-right": (n_cols - 1, 0), "bottom-left": (0, n_rows - 1),
-                 "bottom-right": (n_cols - 1, n_rows - 1)}
+        named = {
+            "top-left": (0, 0),
+            "top-right": (n_cols - 1, 0),
+            "bottom-left": (0, n_rows - 1),
+            "bottom-right": (n_cols - 1, n_rows - 1),
+        }
         if self.origin_corner in named:
             return named[self.origin_corner]
         i, j = (int(v) for v in self.origin_corner.split(","))
         if not (0 <= i < n_cols and 0 <= j < n_rows):
-            raise ValueError(f"origin corner {i},{j} is outside the {n_cols}x{n_rows} grid "
-                             f"(i = 0..{n_cols - 1} from the left, j = 0..{n_rows - 1} from the top)")
+            raise ValueError(
+                f"origin corner {i},{j} is outside the {n_cols}x{n_rows} grid "
+                f"(i = 0..{n_cols - 1} from the left, j = 0..{n_rows - 1} from the top)"
+            )
         return i, j
 
     def plane_coordinates(self, n_cols: int, n_rows: int, square_m: float) -> np.ndarray:
@@ -105,5 +116,9 @@ class GridFrame:
 
     def to_mapping(self) -> dict[str, object]:
         """Plain data for the calibration file."""
-        return {"origin_corner": self.origin_corner, "x_axis": self.x_axis.value, "y_axis": self.y_dir.value,
-                "origin_offset_mm": [v * 1e3 for v in self.origin_offset_m]}
+        return {
+            "origin_corner": self.origin_corner,
+            "x_axis": self.x_axis.value,
+            "y_axis": self.y_dir.value,
+            "origin_offset_mm": [v * 1e3 for v in self.origin_offset_m],
+        }

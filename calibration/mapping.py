@@ -61,5 +61,8 @@ class PolynomialMapping:
 
     def to_attrs(self) -> dict[str, object]:
         """Flat summary for output attributes."""
-        return {"calibration_units": self.units, "calibration_degree": self.degree,
-                "calibration_image_size": list(self.image_size)}
+        return {
+            "calibration_units": self.units,
+            "calibration_degree": self.degree,
+            "calibration_image_size": list(self.image_size),
+        }

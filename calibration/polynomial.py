@@ -48,8 +48,10 @@ class Polynomial2D:
     def __post_init__(self) -> None:
         n = len(exponents(self.degree))
         if self.degree < 1 or len(self.coef_x) != n or len(self.coef_y) != n:
-            raise ValueError(f"a degree-{self.degree} polynomial needs {n} coefficients per output "
-                             f"(got {len(self.coef_x)} and {len(self.coef_y)})")
+            raise ValueError(
+                f"a degree-{self.degree} polynomial needs {n} coefficients per output "
+                f"(got {len(self.coef_x)} and {len(self.coef_y)})"
+            )
         if not self.scale > 0:
             raise ValueError("Polynomial2D.scale must be > 0")
         size = 4 if self.degree <= 3 else 6 if self.degree <= 5 else self.degree + 1  # kernels' padded sizes
@@ -61,8 +63,15 @@ class Polynomial2D:
         object.__setattr__(self, "_ay", ay)
 
     @staticmethod
-    def fit(x: np.ndarray, y: np.ndarray, out_x: np.ndarray, out_y: np.ndarray, degree: int,
-            centre: tuple[float, float], scale: float) -> Polynomial2D:
+    def fit(
+        x: np.ndarray,
+        y: np.ndarray,
+        out_x: np.ndarray,
+        out_y: np.ndarray,
+        degree: int,
+        centre: tuple[float, float],
+        scale: float,
+    ) -> Polynomial2D:
         """Least-squares fit of (out_x, out_y) = P(x, y) over n points (arrays (n,)).
 
         Raises:
@@ -71,11 +80,17 @@ class Polynomial2D:
         u, v = (np.asarray(x, np.float64) - centre[0]) / scale, (np.asarray(y, np.float64) - centre[1]) / scale
         a = design_matrix(u, v, degree)
         if a.shape[0] < a.shape[1] or np.linalg.matrix_rank(a) < a.shape[1]:
-            raise ValueError(f"{a.shape[0]} points do not determine the {a.shape[1]} coefficients of a "
-                             f"degree-{degree} polynomial")
+            raise ValueError(
+                f"{a.shape[0]} points do not determine the {a.shape[1]} coefficients of a degree-{degree} polynomial"
+            )
         coef, *_ = np.linalg.lstsq(a, np.column_stack([out_x, out_y]), rcond=None)
-        return Polynomial2D(degree, (float(centre[0]), float(centre[1])), float(scale),
-                            tuple(float(c) for c in coef[:, 0]), tuple(float(c) for c in coef[:, 1]))
+        return Polynomial2D(
+            degree,
+            (float(centre[0]), float(centre[1])),
+            float(scale),
+            tuple(float(c) for c in coef[:, 0]),
+            tuple(float(c) for c in coef[:, 1]),
+        )
 
     def __call__(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Evaluate at points of any matching shape and numeric dtype; float64 outputs of that shape."""
@@ -86,8 +101,17 @@ class Polynomial2D:
         if flat_x.dtype.kind not in "fiu":
             flat_x, flat_y = flat_x.astype(np.float64), flat_y.astype(np.float64)
         out_x, out_y = np.empty(flat_x.size), np.empty(flat_x.size)
-        evaluate(flat_x, flat_y, self.centre[0], self.centre[1], 1.0 / self.scale, self._ax, self._ay,  # type: ignore[attr-defined]
-                 out_x, out_y)
+        evaluate(
+            flat_x,
+            flat_y,
+            self.centre[0],
+            self.centre[1],
+            1.0 / self.scale,
+            self._ax,
+            self._ay,  # type: ignore[attr-defined]
+            out_x,
+            out_y,
+        )
         return out_x.reshape(x_arr.shape), out_y.reshape(x_arr.shape)
 
     def evaluate_numpy(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -111,10 +135,14 @@ class Polynomial2D:
             jac[..., 1, 1] += cy * dv
         return jac / self.scale
 
-    def leave_one_out(self, x: np.ndarray, y: np.ndarray, out_x: np.ndarray,
-                      out_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def leave_one_out(
+        self, x: np.ndarray, y: np.ndarray, out_x: np.ndarray, out_y: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Residuals (prediction - data) of each point predicted by the fit without it (exact, hat matrix)."""
-        u, v = (np.asarray(x, np.float64) - self.centre[0]) / self.scale, (np.asarray(y, np.float64) - self.centre[1]) / self.scale
+        u, v = (
+            (np.asarray(x, np.float64) - self.centre[0]) / self.scale,
+            (np.asarray(y, np.float64) - self.centre[1]) / self.scale,
+        )
         a = design_matrix(u, v, self.degree)
         q, _ = np.linalg.qr(a)
         leverage = np.minimum(np.sum(q**2, axis=1), 1.0 - 1e-12)
@@ -123,6 +151,11 @@ class Polynomial2D:
 
     def to_mapping(self) -> dict[str, object]:
         """Plain data for YAML: degree, centre, scale, exponents, coefficients."""
-        return {"degree": self.degree, "centre": list(self.centre), "scale": self.scale,
-                "exponents": [list(e) for e in exponents(self.degree)],
-                "x": list(self.coef_x), "y": list(self.coef_y)}
+        return {
+            "degree": self.degree,
+            "centre": list(self.centre),
+            "scale": self.scale,
+            "exponents": [list(e) for e in exponents(self.degree)],
+            "x": list(self.coef_x),
+            "y": list(self.coef_y),
+        }

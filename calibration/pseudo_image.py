@@ -86,10 +86,15 @@ class BlinkTiming:
 
     def to_attrs(self) -> dict[str, float | int]:
         """Summary for the calibration file."""
-        return {"period_us": round(float(self.period_us), 3), "n_on": len(self.on_us), "n_off": len(self.off_us),
-                "half_window_us": round(self.half_window_us, 3), "strength": round(self.strength, 4),
-                "step_snr": round(self.step_snr, 1) if math.isfinite(self.step_snr) else None,
-                "first_on_us": round(self.on_us[0], 3) if self.on_us else None}
+        return {
+            "period_us": round(float(self.period_us), 3),
+            "n_on": len(self.on_us),
+            "n_off": len(self.off_us),
+            "half_window_us": round(self.half_window_us, 3),
+            "strength": round(self.strength, 4),
+            "step_snr": round(self.step_snr, 1) if math.isfinite(self.step_snr) else None,
+            "first_on_us": round(self.on_us[0], 3) if self.on_us else None,
+        }
 
 
 def blink_level(t_us: np.ndarray, p: np.ndarray, bin_us: float) -> tuple[np.ndarray, float]:
@@ -190,34 +195,43 @@ def detect_blink(t_us: np.ndarray, p: np.ndarray, search: BlinkSearch = BlinkSea
         if not math.isfinite(lag):
             raise CalibrationError(
                 f"recording of {duration_us / 1e6:.3f} s is too short to find a blink period of "
-                f"{search.min_period_us / 1e6:g}-{search.max_period_us / 1e6:g} s (record at least 2 periods)")
+                f"{search.min_period_us / 1e6:g}-{search.max_period_us / 1e6:g} s (record at least 2 periods)"
+            )
     grid = np.arange(len(ac))
     strength = 0.5 * float(np.interp(lag, grid, ac) - np.interp(lag / 2, grid, ac))
     if not strength >= search.min_strength:
         raise CalibrationError(
             f"no blinking pattern found: the event level is not a square wave (score {strength:.2f} < "
-            f"{search.min_strength}; is the pattern blinking on and off, and in view?)")
+            f"{search.min_strength}; is the pattern blinking on and off, and in view?)"
+        )
     period_us = lag * bin_us
-    on = _refine_switches(level, bin_us, _find_steps(level, bin_us, period_us, +1.0, margin), period_us, +1.0,
-                          margin)
-    off = _refine_switches(level, bin_us, _find_steps(level, bin_us, period_us, -1.0, margin), period_us, -1.0,
-                           margin)
+    on = _refine_switches(level, bin_us, _find_steps(level, bin_us, period_us, +1.0, margin), period_us, +1.0, margin)
+    off = _refine_switches(level, bin_us, _find_steps(level, bin_us, period_us, -1.0, margin), period_us, -1.0, margin)
     period_us = _fit_period(on, off, period_us)
     snr = _step_snr(level, bin_us, on, off, margin)
     if not snr >= search.min_step_snr:
         raise CalibrationError(
             f"no blinking pattern found: the event level has no clear steps (step {snr:.1f} x its spread < "
-            f"{search.min_step_snr}; is the pattern blinking on and off, and in view?)")
+            f"{search.min_step_snr}; is the pattern blinking on and off, and in view?)"
+        )
     gap = float(np.median([(t - on[0]) % period_us for t in off])) if on and off else period_us / 2
     half = 0.5 * min(gap, period_us - gap)
     first, last = float(t_us[0]) + half, float(t_us[-1]) - half
     on = tuple(float(t0 + t) for t in on if first <= t0 + t <= last)
     off = tuple(float(t0 + t) for t in off if first <= t0 + t <= last)
     if not on or not off:
-        raise CalibrationError(f"recording of {duration_us / 1e6:.3f} s holds no full blink period of "
-                               f"{period_us / 1e6:.4f} s (record at least 2 periods)")
-    log.info("blink period %.1f us (score %.2f, steps %.0f x spread), %d on / %d off switches", period_us,
-             strength, snr, len(on), len(off))
+        raise CalibrationError(
+            f"recording of {duration_us / 1e6:.3f} s holds no full blink period of "
+            f"{period_us / 1e6:.4f} s (record at least 2 periods)"
+        )
+    log.info(
+        "blink period %.1f us (score %.2f, steps %.0f x spread), %d on / %d off switches",
+        period_us,
+        strength,
+        snr,
+        len(on),
+        len(off),
+    )
     return BlinkTiming(float(period_us), on, off, float(half), float(strength), float(snr))
 
 
@@ -235,13 +249,15 @@ def _step_snr(level: np.ndarray, bin_us: float, on_us: list[float], off_us: list
         lo, hi = int(math.ceil(a)) + margin, int(math.floor(b)) - margin
         if hi - lo < 4:
             return 0.0
-        plateau = level[lo:hi + 1]
+        plateau = level[lo : hi + 1]
         medians.append(float(np.median(plateau)))
         spreads.append(np.abs(plateau - medians[-1]))
     if len(medians) < 2:
         return 0.0
-    steps = [sign * (after - before) for (_, sign), before, after in zip(switches[1:-1], medians[:-1], medians[1:],
-                                                                         strict=True)]
+    steps = [
+        sign * (after - before)
+        for (_, sign), before, after in zip(switches[1:-1], medians[:-1], medians[1:], strict=True)
+    ]
     spread = 1.4826 * float(np.median(np.concatenate(spreads)))
     return float(np.median(steps)) / max(spread, 1e-9 * (float(np.max(np.abs(level))) + 1.0))
 
@@ -253,8 +269,8 @@ def _find_steps(level: np.ndarray, bin_us: float, period_us: float, sign: float,
     reach = max(1, int(round(period_us / 8 / bin_us)))
     if len(level) <= 2 * (reach + margin) + 2:
         return []
-    rise = sign * (level[2 * reach:] - level[:-2 * reach])  # rise[k]: across index k + reach
-    rise[:margin] = rise[len(rise) - margin:] = -np.inf
+    rise = sign * (level[2 * reach :] - level[: -2 * reach])  # rise[k]: across index k + reach
+    rise[:margin] = rise[len(rise) - margin :] = -np.inf
     top = float(rise.max())
     if not top > 0:
         return []
@@ -268,8 +284,9 @@ def _find_steps(level: np.ndarray, bin_us: float, period_us: float, sign: float,
     return sorted(k + reach for k in found)
 
 
-def _refine_switches(level: np.ndarray, bin_us: float, centres: list[int], period_us: float,
-                     sign: float, margin: int) -> list[float]:
+def _refine_switches(
+    level: np.ndarray, bin_us: float, centres: list[int], period_us: float, sign: float, margin: int
+) -> list[float]:
     """Switch times: where the level crosses halfway between its values a period / 8 before and after
     each step centre (rising for sign +1, falling for -1), interpolated between samples.
 
@@ -282,7 +299,7 @@ def _refine_switches(level: np.ndarray, bin_us: float, centres: list[int], perio
         lo, hi = c - reach, c + reach
         if lo < margin or hi > len(level) - 1 - margin:  # the step's neighbourhood is not all recorded
             continue
-        rel = sign * (level[lo:hi + 1] - 0.5 * (level[lo] + level[hi]))
+        rel = sign * (level[lo : hi + 1] - 0.5 * (level[lo] + level[hi]))
         crossings = np.flatnonzero((rel[:-1] < 0) & (rel[1:] >= 0))
         if not len(crossings):
             continue

@@ -31,8 +31,10 @@ def report_lines(cal: Calibration) -> list[str]:
     ]
     if cal.blink:
         b = cal.blink
-        lines.append(f"blink period {float(b['period_us']) / 1e3:.3f} ms, {b['n_on']} on + {b['n_off']} off "
-                     f"switches accumulated (score {b['strength']})")
+        lines.append(
+            f"blink period {float(b['period_us']) / 1e3:.3f} ms, {b['n_on']} on + {b['n_off']} off "
+            f"switches accumulated (score {b['strength']})"
+        )
     return lines
 
 
@@ -55,14 +57,23 @@ def save_figure(path: str | Path, image: np.ndarray, cal: Calibration) -> Path:
     fig, ax = plt.subplots(figsize=(w / 80 + 1, h / 80 + 1.2), dpi=100)
     ax.imshow(image, cmap="gray", vmin=0, vmax=max(float(np.percentile(image, 99.5)), 1e-9))
     ax.plot(px[..., 0].ravel(), px[..., 1].ravel(), "r.", ms=4)
-    ax.quiver(px[..., 0], px[..., 1], gain * res_px[..., 0], gain * res_px[..., 1], color="yellow",
-              angles="xy", scale_units="xy", scale=1.0, width=0.003)
+    ax.quiver(
+        px[..., 0],
+        px[..., 1],
+        gain * res_px[..., 0],
+        gain * res_px[..., 1],
+        color="yellow",
+        angles="xy",
+        scale_units="xy",
+        scale=1.0,
+        width=0.003,
+    )
     for i in range(n_cols):
-        ax.annotate(str(i), px[0, i], xytext=(0, 8), textcoords="offset points", color="cyan", fontsize=7,
-                    ha="center")
+        ax.annotate(str(i), px[0, i], xytext=(0, 8), textcoords="offset points", color="cyan", fontsize=7, ha="center")
     for j in range(n_rows):
-        ax.annotate(str(j), px[j, 0], xytext=(-10, 0), textcoords="offset points", color="orange", fontsize=7,
-                    va="center")
+        ax.annotate(
+            str(j), px[j, 0], xytext=(-10, 0), textcoords="offset points", color="orange", fontsize=7, va="center"
+        )
     i0, j0 = cal.frame.origin_index(n_cols, n_rows)
     origin = px[j0, i0]
     for step, colour, name in ((cal.frame.x_step, "red", "x"), (cal.frame.y_step, "lime", "y")):
@@ -73,8 +84,11 @@ def save_figure(path: str | Path, image: np.ndarray, cal: Calibration) -> Path:
         ax.annotate(name, tip, color=colour, fontsize=10, fontweight="bold")
     ax.plot(*origin, "o", mfc="none", mec="red", ms=10)
     r = cal.residuals
-    ax.set_title(f"degree {cal.mapping.degree}: residual mean {r.mean_mm:.3f} mm ({r.mean_px:.3f} px), "
-                 f"max {r.max_mm:.3f} mm ({r.max_px:.3f} px); vectors x{gain:g}", fontsize=9)
+    ax.set_title(
+        f"degree {cal.mapping.degree}: residual mean {r.mean_mm:.3f} mm ({r.mean_px:.3f} px), "
+        f"max {r.max_mm:.3f} mm ({r.max_px:.3f} px); vectors x{gain:g}",
+        fontsize=9,
+    )
     ax.set_xlim(-0.5, w - 0.5)
     ax.set_ylim(h - 0.5, -0.5)
     fig.tight_layout()

@@ -26,12 +26,22 @@ log = logging.getLogger(__name__)
 class _VersionAction(argparse.Action):
     """``--version``: print the installed version and exit (looked up only when asked)."""
 
-    def __init__(self, option_strings: Sequence[str], dest: str = argparse.SUPPRESS,
-                 default: Any = argparse.SUPPRESS, help: str = "show the version and exit") -> None:  # noqa: A002
+    def __init__(
+        self,
+        option_strings: Sequence[str],
+        dest: str = argparse.SUPPRESS,
+        default: Any = argparse.SUPPRESS,
+        help: str = "show the version and exit",  # noqa: A002 - argparse.Action's own keyword
+    ) -> None:
         super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
 
-    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
-                 option_string: str | None = None) -> None:
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
         from flagtrack.daemon import __version__
 
         print(f"flagtrack {__version__}")  # on stdout, as argparse's own version action does
@@ -59,8 +69,15 @@ def _named_command(argv: Sequence[str]) -> str | None:
 
 def _print_warnings_as_lines(command: str) -> None:
     """Warnings (a damaged file's words skipped, a truncated end) print as one line, as errors do."""
-    def show(message: Warning | str, category: type[Warning], filename: str, lineno: int,  # noqa: ARG001
-             file: Any = None, line: str | None = None) -> None:  # noqa: ARG001
+
+    def show(
+        message: Warning | str,
+        _category: type[Warning],
+        _filename: str,
+        _lineno: int,
+        _file: Any = None,
+        _line: str | None = None,
+    ) -> None:
         print(f"flagtrack {command}: warning: {message}", file=sys.stderr)
 
     warnings.showwarning = show

@@ -38,9 +38,7 @@ class FormatError(FlagtrackError):
     def __init__(self, message: str, *, path: str | None = None, offset: int | None = None) -> None:
         self.path = path
         self.offset = offset
-        where = ", ".join(
-            part for part in (path and f"{path}", offset is not None and f"byte {offset}") if part
-        )
+        where = ", ".join(part for part in (path and f"{path}", offset is not None and f"byte {offset}") if part)
         super().__init__(f"{where}: {message}" if where else message)
 
 

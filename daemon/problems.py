@@ -21,8 +21,9 @@ class ProblemLog:
         level: logging level of the lines.
     """
 
-    def __init__(self, logger: logging.Logger, service: str, interval_s: float = 5.0,
-                 level: int = logging.WARNING) -> None:
+    def __init__(
+        self, logger: logging.Logger, service: str, interval_s: float = 5.0, level: int = logging.WARNING
+    ) -> None:
         self.logger = logger
         self.service = service
         self.interval_s = interval_s
@@ -54,7 +55,15 @@ class ProblemLog:
         if unlogged == total:
             self.logger.log(self.level, "%s: %s [%s: %d]", self.service, self._latest[kind], kind, total)
         else:
-            self.logger.log(self.level, "%s: %d more %s in the last %.0f s (%d in all); latest: %s", self.service,
-                            unlogged, kind, now - self._logged_at[kind], total, self._latest[kind])
+            self.logger.log(
+                self.level,
+                "%s: %d more %s in the last %.0f s (%d in all); latest: %s",
+                self.service,
+                unlogged,
+                kind,
+                now - self._logged_at[kind],
+                total,
+                self._latest[kind],
+            )
         self._unlogged[kind] = 0
         self._logged_at[kind] = now

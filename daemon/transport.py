@@ -84,7 +84,9 @@ class Channel:
         self.dropped_bytes = 0
 
     def _full(self, size: int) -> bool:
-        return len(self._items) >= self._capacity or (self._max_bytes is not None and self.bytes + size > self._max_bytes)
+        return len(self._items) >= self._capacity or (
+            self._max_bytes is not None and self.bytes + size > self._max_bytes
+        )
 
     def push(self, key: str, payload: bytes) -> None:
         """Called from Zenoh's thread: never blocks beyond a short lock. O(1) amortised."""
@@ -232,8 +234,15 @@ class Bus:
         self._keep(pub)
         return Publisher(pub, key)
 
-    def subscribe(self, key: str, expected: type | None = None, *, capacity: int = 10_000, ring: bool = False,
-                  max_bytes: int | None = None) -> Subscription:
+    def subscribe(
+        self,
+        key: str,
+        expected: type | None = None,
+        *,
+        capacity: int = 10_000,
+        ring: bool = False,
+        max_bytes: int | None = None,
+    ) -> Subscription:
         """Subscribe to ``key`` into a channel (FIFO by default, ring for live views; at most
         ``capacity`` samples and ``max_bytes`` payload bytes, see :class:`Channel`)."""
         channel = Channel(capacity, ring, max_bytes)

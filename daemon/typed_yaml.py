@@ -100,7 +100,7 @@ def with_path(exc: ConfigError, path: str | None) -> ConfigError:
         return exc
     text = str(exc)
     prefix = f"key '{exc.key}': " if exc.key else ""
-    message = text[len(prefix):] if prefix and text.startswith(prefix) else text
+    message = text[len(prefix) :] if prefix and text.startswith(prefix) else text
     return ConfigError(message, key=exc.key, path=path)
 
 

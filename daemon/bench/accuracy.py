@@ -15,12 +15,15 @@ from pathlib import Path
 
 COMMAND = "accuracy"
 HELP = "accuracy of the tracker on simulated recordings (paper section 3): tables, figures, report"
-DESCRIPTION = __doc__ + """
+DESCRIPTION = (
+    __doc__
+    + """
 examples:
   flagtrack bench accuracy -o bench-accuracy --quick          # a few minutes
   flagtrack bench accuracy -o bench-accuracy                  # 400 kinematics and every sweep
   flagtrack bench accuracy -o out --method paper --parts family --n 50
 """
+)
 
 METHOD_CHOICES = ("paper", "robust-classic", "robust")
 PART_CHOICES = ("family", "leak", "shot", "params")
@@ -29,23 +32,38 @@ PART_CHOICES = ("family", "leak", "shot", "params")
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of the accuracy benchmark."""
     parser.add_argument("-o", "--output", type=Path, default=Path("bench-accuracy"), help="results folder")
-    parser.add_argument("--quick", action="store_true", help="small preset (24 kinematics, 2 sweep kinematics, "
-                        "4 cycles, fewer levels): a few minutes")
-    parser.add_argument("--n", type=int, default=None, help="kinematics of the family, part (a) (default 400; "
-                        "24 with --quick)")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="small preset (24 kinematics, 2 sweep kinematics, 4 cycles, fewer levels): a few minutes",
+    )
+    parser.add_argument(
+        "--n", type=int, default=None, help="kinematics of the family, part (a) (default 400; 24 with --quick)"
+    )
     parser.add_argument("--sweep-kinematics", type=int, default=None, help="kinematics of the sweeps (b)-(d)")
     parser.add_argument("--cycles", type=float, default=None, help="periods of each sweep recording")
-    parser.add_argument("--method", action="append", choices=METHOD_CHOICES, default=None,
-                        help="tracking method (repeat for several; default: all three)")
-    parser.add_argument("--parts", default=",".join(PART_CHOICES),
-                        help=f"comma-separated parts to run (default {','.join(PART_CHOICES)})")
+    parser.add_argument(
+        "--method",
+        action="append",
+        choices=METHOD_CHOICES,
+        default=None,
+        help="tracking method (repeat for several; default: all three)",
+    )
+    parser.add_argument(
+        "--parts",
+        default=",".join(PART_CHOICES),
+        help=f"comma-separated parts to run (default {','.join(PART_CHOICES)})",
+    )
     parser.add_argument("--size", default=None, metavar="WxH", help="sensor size (default 640x480; the flag scales)")
     parser.add_argument("--seed", type=int, default=0, help="benchmark seed (every recording's seed derives from it)")
     parser.add_argument("--jobs", type=int, default=0, help="processes (0: all cores)")
     parser.add_argument("--keep-recordings", action="store_true", help="keep the simulated files in OUTPUT/recordings")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.add_argument("--report-only", action="store_true",
-                        help="rewrite the figures and report.md of OUTPUT from its CSV tables and run.json")
+    parser.add_argument(
+        "--report-only",
+        action="store_true",
+        help="rewrite the figures and report.md of OUTPUT from its CSV tables and run.json",
+    )
 
 
 def settings_from_args(args: argparse.Namespace) -> object:
@@ -78,10 +96,16 @@ def settings_from_args(args: argparse.Namespace) -> object:
         if int(changes.get(key, 1)) < 0:  # type: ignore[call-overload]
             raise ConfigError(f"{key} must be >= 0", key=key)
     methods = tuple(dict.fromkeys(args.method)) if args.method else METHOD_CHOICES
-    return RunSettings(preset=replace(preset, **changes), parts=parts, methods=methods, seed=args.seed,
-                       jobs=args.jobs if args.jobs > 0 else os.cpu_count() or 1,
-                       work_dir=args.output / "recordings", keep_recordings=args.keep_recordings,
-                       progress=not args.no_progress)
+    return RunSettings(
+        preset=replace(preset, **changes),
+        parts=parts,
+        methods=methods,
+        seed=args.seed,
+        jobs=args.jobs if args.jobs > 0 else os.cpu_count() or 1,
+        work_dir=args.output / "recordings",
+        keep_recordings=args.keep_recordings,
+        progress=not args.no_progress,
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -92,8 +116,11 @@ def run(args: argparse.Namespace) -> int:
     settings = settings_from_args(args)
     if args.report_only:
         return _report_only(args.output, settings)
-    command = "flagtrack bench accuracy " + " ".join(sys.argv[3:]) if sys.argv[1:3] == ["bench", "accuracy"] else \
-        "flagtrack bench accuracy"
+    command = (
+        "flagtrack bench accuracy " + " ".join(sys.argv[3:])
+        if sys.argv[1:3] == ["bench", "accuracy"]
+        else "flagtrack bench accuracy"
+    )
     started = time.perf_counter()
     result = run_benchmark(settings)  # type: ignore[arg-type]
     headline = write_results(args.output, result, settings, command)  # type: ignore[arg-type]
@@ -103,11 +130,15 @@ def run(args: argparse.Namespace) -> int:
         except OSError:
             pass
     for entry in headline["family"]:
-        print(f"family {entry['method']:>15s}: delta_RMS/L median {100 * entry['delta_rms_over_l_median']:.2f} % "
-              f"(range {100 * entry['delta_rms_over_l_min']:.2f}-{100 * entry['delta_rms_over_l_max']:.2f} %), "
-              f"max eps_RMS/L {100 * entry['max_eps_rms_over_l_min']:.2f}-{100 * entry['max_eps_rms_over_l_max']:.2f} %")
-    print(f"{result.recordings} recordings, {result.events / 1e6:.0f} M events in {time.perf_counter() - started:.0f} s "
-          f"-> {args.output / 'report.md'}")
+        print(
+            f"family {entry['method']:>15s}: delta_RMS/L median {100 * entry['delta_rms_over_l_median']:.2f} % "
+            f"(range {100 * entry['delta_rms_over_l_min']:.2f}-{100 * entry['delta_rms_over_l_max']:.2f} %), "
+            f"max eps_RMS/L {100 * entry['max_eps_rms_over_l_min']:.2f}-{100 * entry['max_eps_rms_over_l_max']:.2f} %"
+        )
+    print(
+        f"{result.recordings} recordings, {result.events / 1e6:.0f} M events in {time.perf_counter() - started:.0f} s "
+        f"-> {args.output / 'report.md'}"
+    )
     return 0
 
 
@@ -122,8 +153,7 @@ def _report_only(out: Path, settings: object) -> int:
     if not (out / "run.json").is_file():
         raise ConfigError(f"no run.json in {out}: nothing to rewrite", key="output")
     result, run = rows_from_folder(out)
-    methods = tuple(sorted(dict.fromkeys(r["method"] for r in result.rows), key=method_rank)) or \
-        settings.methods  # type: ignore[attr-defined]
+    methods = tuple(sorted(dict.fromkeys(r["method"] for r in result.rows), key=method_rank)) or settings.methods  # type: ignore[attr-defined]
     jobs = run.get("settings", {}).get("jobs", 0)
     write_results(out, result, replace(settings, methods=methods, jobs=jobs), run["command"])  # type: ignore[type-var]
     print(f"rewrote {out / 'report.md'} from {len(result.rows)} rows")

@@ -33,8 +33,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--chunk", type=int, default=100_000, help="events per map call (default 100 k)")
     parser.add_argument("--repeat", type=int, default=5, help="timed repetitions (best kept)")
     parser.add_argument("--degree", type=int, default=3, help="degree used inside the tracker (default 3)")
-    parser.add_argument("--tracker-seconds", type=float, default=1.0,
-                        help="seconds of flapping line for the tracker comparison (default 1, ~6 M events)")
+    parser.add_argument(
+        "--tracker-seconds",
+        type=float,
+        default=1.0,
+        help="seconds of flapping line for the tracker comparison (default 1, ~6 M events)",
+    )
     parser.add_argument("--all-cores", action="store_true", help="do not pin to one core")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
@@ -73,7 +77,7 @@ def _map_rates(n: int, chunk: int, repeat: int) -> list[dict[str, float]]:
 
     def chunked(fn) -> None:  # noqa: ANN001
         for i in starts:
-            fn(x[i:i + chunk], y[i:i + chunk])
+            fn(x[i : i + chunk], y[i : i + chunk])
 
     warm = _fit(3, near_identity=False)
     for _ in range(3):  # let the pinned core and the allocator settle before the first timing
@@ -93,8 +97,18 @@ def _tracker_rates(seconds: float, degree: int) -> dict[str, float]:
     from flagtrack.daemon.tracking.section import TrackingConfig
     from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
 
-    chunks = list(line_events(WavyFlag(length=LENGTH, root=ROOT), 0, int(seconds * 1e6), 640, 480,
-                              QuickLineParams(events_per_px2=20), seed=0, chunk_us=50_000))
+    chunks = list(
+        line_events(
+            WavyFlag(length=LENGTH, root=ROOT),
+            0,
+            int(seconds * 1e6),
+            640,
+            480,
+            QuickLineParams(events_per_px2=20),
+            seed=0,
+            chunk_us=50_000,
+        )
+    )
     total = sum(len(c) for c in chunks)
     params = TrackingConfig(root=ROOT, length=LENGTH, tau_s=TAU_S).tracker_params()
     mapping = _TimedMapping(_fit(degree, near_identity=True))
@@ -139,15 +153,20 @@ def run(args: argparse.Namespace) -> int:
         maps = _map_rates(args.events, args.chunk, args.repeat)
         tracker = _tracker_rates(args.tracker_seconds, args.degree)
     if args.json:
-        print(json.dumps({"map": maps, "tracker": tracker, "degree_in_tracker": args.degree, "one_core": pin},
-                         indent=1))
+        print(
+            json.dumps({"map": maps, "tracker": tracker, "degree_in_tracker": args.degree, "one_core": pin}, indent=1)
+        )
         return 0
     for row in maps:
-        print(f"map degree {row['degree']}   {row['map_mev_s']:7.1f} Mev/s compiled   "
-              f"{row['numpy_mev_s']:6.1f} Mev/s numpy design matrix  ({args.events / 1e6:.0f} M float32 events, "
-              f"{args.chunk} per call)")
-    print(f"tracker core   {tracker['tracker_none_mev_s']:.1f} Mev/s without mapping, "
-          f"{tracker['tracker_polynomial_mev_s']:.1f} Mev/s with degree {args.degree} "
-          f"(mapping calls: {100 * tracker['mapping_share']:.1f} % of its time), {tracker['events'] / 1e6:.1f} M events"
-          f"{', one core' if pin else ''}")
+        print(
+            f"map degree {row['degree']}   {row['map_mev_s']:7.1f} Mev/s compiled   "
+            f"{row['numpy_mev_s']:6.1f} Mev/s numpy design matrix  ({args.events / 1e6:.0f} M float32 events, "
+            f"{args.chunk} per call)"
+        )
+    print(
+        f"tracker core   {tracker['tracker_none_mev_s']:.1f} Mev/s without mapping, "
+        f"{tracker['tracker_polynomial_mev_s']:.1f} Mev/s with degree {args.degree} "
+        f"(mapping calls: {100 * tracker['mapping_share']:.1f} % of its time), {tracker['events'] / 1e6:.1f} M events"
+        f"{', one core' if pin else ''}"
+    )
     return 0

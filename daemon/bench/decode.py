@@ -29,8 +29,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of the decode benchmark."""
     parser.add_argument("--events", type=int, default=6_000_000, help="events in the recording (>= 5e6 for the report)")
     parser.add_argument("--repeat", type=int, default=5, help="timed passes per decoder (best is kept)")
-    parser.add_argument("--cache", type=Path, default=None, help="folder for the recordings "
-                        "(default: $XDG_CACHE_HOME/flagtrack/bench or ~/.cache/flagtrack/bench)")
+    parser.add_argument(
+        "--cache",
+        type=Path,
+        default=None,
+        help="folder for the recordings (default: $XDG_CACHE_HOME/flagtrack/bench or ~/.cache/flagtrack/bench)",
+    )
     parser.add_argument("--all-cores", action="store_true", help="do not pin the process to one core")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
@@ -96,7 +100,9 @@ def _evt3_lib(path: Path):  # noqa: ANN202
     import numpy as np
 
     def full():  # noqa: ANN202
-        parts = [(b.timestamp.copy(), b.x.copy(), b.y.copy(), b.polarity.copy()) for b in evt3.decode_file_batches(str(path))]
+        parts = [
+            (b.timestamp.copy(), b.x.copy(), b.y.copy(), b.polarity.copy()) for b in evt3.decode_file_batches(str(path))
+        ]
         return tuple(np.concatenate([p[i] for p in parts]) for i in range(4))
 
     def count() -> int:
@@ -131,9 +137,13 @@ def _exact(result, events) -> bool:  # noqa: ANN001
     if isinstance(result, np.ndarray):
         result = (result["t"], result["x"], result["y"], result["p"])
     t, x, y, p = result
-    return (len(t) == len(events) and np.array_equal(np.asarray(t, np.int64), events["t"])
-            and np.array_equal(x, events["x"]) and np.array_equal(y, events["y"])
-            and np.array_equal(np.asarray(p, np.uint8), events["p"]))
+    return (
+        len(t) == len(events)
+        and np.array_equal(np.asarray(t, np.int64), events["t"])
+        and np.array_equal(x, events["x"])
+        and np.array_equal(y, events["y"])
+        and np.array_equal(np.asarray(p, np.uint8), events["p"])
+    )
 
 
 def _best_rates(counters: dict[str, Callable[[], int]], repeat: int) -> dict[str, float]:
@@ -168,10 +178,15 @@ def _measure(encoding: str, path: Path, events, repeat: int) -> dict:  # noqa: A
     best = max(exact_refs, key=lambda k: refs[k]["mev_s"]) if exact_refs else None
     ours = rates["flagtrack"] / 1e6
     return {
-        "encoding": encoding, "events": len(events), "file_bytes": path.stat().st_size,
-        "flagtrack_mev_s": ours, "flagtrack_exact": exact["flagtrack"],
-        "reference": best, "reference_mev_s": refs[best]["mev_s"] if best else None,
-        "ratio": ours / refs[best]["mev_s"] if best else None, "all_references": refs,
+        "encoding": encoding,
+        "events": len(events),
+        "file_bytes": path.stat().st_size,
+        "flagtrack_mev_s": ours,
+        "flagtrack_exact": exact["flagtrack"],
+        "reference": best,
+        "reference_mev_s": refs[best]["mev_s"] if best else None,
+        "ratio": ours / refs[best]["mev_s"] if best else None,
+        "all_references": refs,
     }
 
 
@@ -188,12 +203,19 @@ def _print(rows: list[dict], as_json: bool) -> None:
     if as_json:
         print(json.dumps(rows, indent=1))
         return
-    print(f"{'encoding':8} {'events':>10} {'flagtrack Mev/s':>16} {'reference':>10} {'ref Mev/s':>10} {'ratio':>6}  others")
+    print(
+        f"{'encoding':8} {'events':>10} {'flagtrack Mev/s':>16} {'reference':>10} {'ref Mev/s':>10} {'ratio':>6}  others"
+    )
     for r in rows:
-        others = ", ".join(f"{k} {v['mev_s']:.1f}{'' if v['exact'] else ' (NOT exact)'}"
-                           for k, v in r["all_references"].items() if k != r["reference"])
+        others = ", ".join(
+            f"{k} {v['mev_s']:.1f}{'' if v['exact'] else ' (NOT exact)'}"
+            for k, v in r["all_references"].items()
+            if k != r["reference"]
+        )
         ref = f"{r['reference_mev_s']:10.1f} {r['ratio']:6.2f}" if r["reference"] else f"{'-':>10} {'-':>6}"
         exact = "" if r["flagtrack_exact"] else " (NOT exact)"
-        print(f"{r['encoding']:8} {r['events']:10d} {r['flagtrack_mev_s']:16.1f} {r['reference'] or '-':>10} {ref}  "
-              f"{others}{exact}")
+        print(
+            f"{r['encoding']:8} {r['events']:10d} {r['flagtrack_mev_s']:16.1f} {r['reference'] or '-':>10} {ref}  "
+            f"{others}{exact}"
+        )
     sys.stdout.flush()

@@ -45,8 +45,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--latency-rate", type=float, default=5.0, help="event rate of the latency run, Mev/s")
     parser.add_argument("--latency-seconds", type=float, default=4.0, help="wall time of the latency run, s")
     parser.add_argument("--tau", type=float, default=2.5e-4, help="tracker update interval, s")
-    parser.add_argument("--packet-us", type=int, default=1000, help="camera time per event packet, us (the default "
-                        "of camera.packet_us); the replay hands over as much per read when paced")
+    parser.add_argument(
+        "--packet-us",
+        type=int,
+        default=1000,
+        help="camera time per event packet, us (the default "
+        "of camera.packet_us); the replay hands over as much per read when paced",
+    )
     parser.add_argument("--cache", type=Path, default=None, help="folder for the recording")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
@@ -73,32 +78,51 @@ def run(args: argparse.Namespace) -> int:
     speed = args.latency_rate * 1e6 / file_rate
     latency = _measure(recording, tracker, args.packet_us, speed=speed, loop=True, wall_s=args.latency_seconds)
     results = {
-        "events": n_events, "file_rate_mev_s": file_rate / 1e6, "packet_us": args.packet_us,
+        "events": n_events,
+        "file_rate_mev_s": file_rate / 1e6,
+        "packet_us": args.packet_us,
         "sustained_mev_s": n_events / throughput["elapsed_s"] / 1e6 if throughput["complete"] else None,
-        "throughput_missing_packets": throughput["missing_packets"], "throughput_updates": throughput["updates"],
-        "latency_rate_mev_s": args.latency_rate, "latency_updates": latency["updates"],
-        "latency_p50_ms": latency["p50_ms"], "latency_p99_ms": latency["p99_ms"],
-        "publish_latency_p50_ms": latency["publish_p50_ms"], "publish_latency_p99_ms": latency["publish_p99_ms"],
+        "throughput_missing_packets": throughput["missing_packets"],
+        "throughput_updates": throughput["updates"],
+        "latency_rate_mev_s": args.latency_rate,
+        "latency_updates": latency["updates"],
+        "latency_p50_ms": latency["p50_ms"],
+        "latency_p99_ms": latency["p99_ms"],
+        "publish_latency_p50_ms": latency["publish_p50_ms"],
+        "publish_latency_p99_ms": latency["publish_p99_ms"],
         "latency_missing_packets": latency["missing_packets"],
-        "throughput_cpu_cores": throughput["cpu_cores"], "latency_cpu_cores": latency["cpu_cores"],
-        "wakeup_late_p50_ms": wakeup[0], "wakeup_late_p99_ms": wakeup[1],
+        "throughput_cpu_cores": throughput["cpu_cores"],
+        "latency_cpu_cores": latency["cpu_cores"],
+        "wakeup_late_p50_ms": wakeup[0],
+        "wakeup_late_p99_ms": wakeup[1],
     }
     if args.json:
         print(json.dumps(results))
     else:
-        print(f"camera -> Zenoh -> tracker, separate processes, {n_events / 1e6:.1f} M events "
-              f"({file_rate / 1e6:.1f} Mev/s of camera data), tau = {args.tau * 1e6:g} us, "
-              f"packets of {args.packet_us} us")
+        print(
+            f"camera -> Zenoh -> tracker, separate processes, {n_events / 1e6:.1f} M events "
+            f"({file_rate / 1e6:.1f} Mev/s of camera data), tau = {args.tau * 1e6:g} us, "
+            f"packets of {args.packet_us} us"
+        )
         sustained = results["sustained_mev_s"]
-        print(f"  throughput: {sustained:.1f} Mev/s sustained, {throughput['missing_packets']} packets lost"
-              if sustained else "  throughput: the tracker did not finish the stream")
-        print(f"  latency at {args.latency_rate:g} Mev/s over {latency['updates']} updates, "
-              f"{latency['missing_packets']} packets lost:")
-        print(f"    to publication by the tracker: p50 {latency['publish_p50_ms']:.2f} ms, "
-              f"p99 {latency['publish_p99_ms']:.2f} ms")
+        print(
+            f"  throughput: {sustained:.1f} Mev/s sustained, {throughput['missing_packets']} packets lost"
+            if sustained
+            else "  throughput: the tracker did not finish the stream"
+        )
+        print(
+            f"  latency at {args.latency_rate:g} Mev/s over {latency['updates']} updates, "
+            f"{latency['missing_packets']} packets lost:"
+        )
+        print(
+            f"    to publication by the tracker: p50 {latency['publish_p50_ms']:.2f} ms, "
+            f"p99 {latency['publish_p99_ms']:.2f} ms"
+        )
         print(f"    to arrival at a subscriber:    p50 {latency['p50_ms']:.2f} ms, p99 {latency['p99_ms']:.2f} ms")
-        print(f"  this machine, idle: a 1 ms sleep wakes up p50 {wakeup[0]:.2f} ms, p99 {wakeup[1]:.2f} ms late "
-              f"(every hop of the pipeline waits for such a wake-up)")
+        print(
+            f"  this machine, idle: a 1 ms sleep wakes up p50 {wakeup[0]:.2f} ms, p99 {wakeup[1]:.2f} ms late "
+            f"(every hop of the pipeline waits for such a wake-up)"
+        )
         for label, cores in (("throughput run", throughput["cpu_cores"]), ("latency run", latency["cpu_cores"])):
             if cores:
                 used = ", ".join(f"{name} {value:.2f}" for name, value in cores.items())
@@ -106,8 +130,15 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed: float, loop: bool,  # noqa: PLR0915
-             wall_s: float | None) -> dict[str, Any]:
+def _measure(  # noqa: PLR0915 - one measurement, step by step
+    recording: Path,
+    tracker: dict[str, Any],
+    packet_us: int,
+    *,
+    speed: float,
+    loop: bool,
+    wall_s: float | None,
+) -> dict[str, Any]:
     import numpy as np
 
     from flagtrack.daemon.schema import CentrelineMessage, TrackerStatus
@@ -119,10 +150,19 @@ def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed:
         tracker_cfg, camera_cfg = Path(tmp) / "tracker.yaml", Path(tmp) / "camera.yaml"
         common = {"rig": rig, "tracker": tracker, "tracker_service": {"batch_updates": 64, "max_batch_delay_s": 0.001}}
         tracker_cfg.write_text(json.dumps({**common, "bus": {"listen": [f"tcp/127.0.0.1:{port}"]}}))
-        camera_cfg.write_text(json.dumps({**common, "bus": {"connect": [f"tcp/127.0.0.1:{port}"]},
-                                          "camera": {"adapter": "replay", "packet_us": packet_us,
-                                                     "replay": {"path": str(recording), "speed": speed, "loop": loop,
-                                                                "slice_us": packet_us}}}))
+        camera_cfg.write_text(
+            json.dumps(
+                {
+                    **common,
+                    "bus": {"connect": [f"tcp/127.0.0.1:{port}"]},
+                    "camera": {
+                        "adapter": "replay",
+                        "packet_us": packet_us,
+                        "replay": {"path": str(recording), "speed": speed, "loop": loop, "slice_us": packet_us},
+                    },
+                }
+            )
+        )
         tracker_proc = _start("tracker", tracker_cfg)
         procs = [tracker_proc]
         try:
@@ -171,7 +211,10 @@ def _measure(recording: Path, tracker: dict[str, Any], packet_us: int, *, speed:
     lat = np.concatenate(latencies) if latencies else np.zeros(0)
     pub = np.concatenate(published) if published else np.zeros(0)
     return {
-        "complete": complete, "updates": updates, "missing_packets": missing, "cpu_cores": cpu,
+        "complete": complete,
+        "updates": updates,
+        "missing_packets": missing,
+        "cpu_cores": cpu,
         "elapsed_s": ((last_ns or 0) - (first_ns or 0)) * 1e-9,
         "p50_ms": float(np.percentile(lat, 50)) if len(lat) else float("nan"),
         "p99_ms": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
@@ -206,8 +249,11 @@ def _cpu_snapshot(procs: dict[str, subprocess.Popen]) -> dict[str, float]:
 def _cpu_use(start: dict[str, float], end: dict[str, float]) -> dict[str, float]:
     """Cores each process used between two snapshots (1.0 = one core busy all the time)."""
     wall = max(end["wall"] - start["wall"], 1e-9)
-    return {name: (end[name] - start[name]) / wall for name in ("camera", "tracker", "bench")
-            if name in start and name in end}
+    return {
+        name: (end[name] - start[name]) / wall
+        for name in ("camera", "tracker", "bench")
+        if name in start and name in end
+    }
 
 
 def _process_cpu_s(pid: int) -> float | None:
@@ -220,8 +266,12 @@ def _process_cpu_s(pid: int) -> float | None:
 
 
 def _start(service: str, config: Path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "flagtrack.daemon", service, "-c", str(config)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "flagtrack.daemon", service, "-c", str(config)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 def _free_port() -> int:

@@ -49,7 +49,9 @@ class RateModel:
     burst_s: tuple[float, float] = (0.05, 1.0)
 
 
-def rate_trace(model: RateModel, duration_s: float, flapping: np.ndarray | None, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def rate_trace(
+    model: RateModel, duration_s: float, flapping: np.ndarray | None, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """Times (s) and rates (events/s) of a trace; ``flapping`` is a bool per sample (or None)."""
     n = int(round(duration_s / model.dt_s))
     t = np.arange(n) * model.dt_s
@@ -69,7 +71,9 @@ def rate_trace(model: RateModel, duration_s: float, flapping: np.ndarray | None,
     return t, counts / model.dt_s
 
 
-def false_alarms_per_hour(params: OnsetParams, model: RateModel, hours: float, seed: int, *, flapping: bool = False) -> float:
+def false_alarms_per_hour(
+    params: OnsetParams, model: RateModel, hours: float, seed: int, *, flapping: bool = False
+) -> float:
     """Wrong changes per hour: to flapping on still traces, or back to still on flapping traces.
 
     One-hour pieces with a fresh detector each. On still traces the detector learns its baseline
@@ -125,7 +129,7 @@ def detection_delays(params: OnsetParams, model: RateModel, trials: int, seed: i
             continue
         onset.append(on[0])
         decay.append(off[0])
-    q = (lambda v, p: float(np.percentile(v, p)) if v else math.nan)  # noqa: E731
+    q = lambda v, p: float(np.percentile(v, p)) if v else math.nan  # noqa: E731
     return Delays(q(onset, 50), q(onset, 95), q(decay, 50), q(decay, 95), missed, trials)
 
 
@@ -134,7 +138,9 @@ def report(params: OnsetParams, hours: float = 20.0, trials: int = 40, seed: int
     base = RateModel()
     fa = false_alarms_per_hour(params, base, hours, seed)
     fd = false_alarms_per_hour(params, base, hours, seed + 1, flapping=True)
-    fd_steady = false_alarms_per_hour(params, dataclasses.replace(base, walk_per_sqrt_h=0.0), hours, seed + 2, flapping=True)
+    fd_steady = false_alarms_per_hour(
+        params, dataclasses.replace(base, walk_per_sqrt_h=0.0), hours, seed + 2, flapping=True
+    )
     rows = [f"false onsets: {fa:.2f} per hour over {hours:g} h of still traces (bursts {base.bursts_per_hour:g}/h, "
             f"2-10x, up to {base.burst_s[1]:g} s; log-rate sigma {base.sigma:g}, drift {base.walk_per_sqrt_h:g}/sqrt(h))",
             f"false decays: {fd:.2f} per hour over {hours:g} h of flapping traces (ratio {base.flap_ratio:g}); "

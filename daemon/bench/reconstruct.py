@@ -34,14 +34,19 @@ ROOT, LENGTH, TAU_S = (100.0, 240.0), 200.0, 2.5e-4
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of the reconstruct benchmark."""
-    parser.add_argument("--seconds", type=float, default=6.0,
-                        help="recording length, s (6 s of flapping ~ 36 M events; >= 1.7 s for 10 M)")
+    parser.add_argument(
+        "--seconds",
+        type=float,
+        default=6.0,
+        help="recording length, s (6 s of flapping ~ 36 M events; >= 1.7 s for 10 M)",
+    )
     parser.add_argument("--method", choices=("robust", "paper"), default="robust", help="tracker method")
     parser.add_argument("--format", choices=("raw", "npy"), default="raw", help="file format (raw = EVT 3.0)")
     parser.add_argument("--repeat", type=int, default=3, help="timed runs of the command (best is kept)")
     parser.add_argument("--core-events", type=int, default=10_000_000, help="events timed for the core alone")
-    parser.add_argument("--cache", type=Path, default=None, help="folder for the recordings (default: "
-                        "$TMPDIR/flagtrack-bench)")
+    parser.add_argument(
+        "--cache", type=Path, default=None, help="folder for the recordings (default: $TMPDIR/flagtrack-bench)"
+    )
     parser.add_argument("--all-cores", action="store_true", help="do not pin to one core")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
@@ -53,8 +58,16 @@ def make_recording(path: Path, seconds: float, seed: int = 0) -> None:
 
     tmp = path.with_name(path.name + ".part" + path.suffix)
     with open_writer(tmp, width=640, height=480, encoding="evt3" if path.suffix == ".raw" else None) as writer:
-        for chunk in line_events(WavyFlag(length=LENGTH, root=ROOT), 0, int(seconds * 1e6), 640, 480,
-                                 QuickLineParams(events_per_px2=20), seed=seed, chunk_us=50_000):
+        for chunk in line_events(
+            WavyFlag(length=LENGTH, root=ROOT),
+            0,
+            int(seconds * 1e6),
+            640,
+            480,
+            QuickLineParams(events_per_px2=20),
+            seed=seed,
+            chunk_us=50_000,
+        ):
             writer.write(chunk)
     tmp.replace(path)
 
@@ -70,9 +83,25 @@ def _recording(cache: Path, seconds: float, fmt: str) -> Path:
 
 def _command(path: Path, out: Path, method: str, env: dict[str, str] | None = None) -> tuple[float, float, int]:
     """Run ``flagtrack reconstruct``; return (wall s, peak RSS MB, events)."""
-    cmd = [sys.executable, "-m", "flagtrack.daemon", "reconstruct", str(path), "-o", str(out), "--root",
-           str(ROOT[0]), str(ROOT[1]), "--length", str(LENGTH), "--tau", str(TAU_S), "--method", method,
-           "--no-progress"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "flagtrack.daemon",
+        "reconstruct",
+        str(path),
+        "-o",
+        str(out),
+        "--root",
+        str(ROOT[0]),
+        str(ROOT[1]),
+        "--length",
+        str(LENGTH),
+        "--tau",
+        str(TAU_S),
+        "--method",
+        method,
+        "--no-progress",
+    ]
     with tempfile.TemporaryFile("w+") as log:
         start = time.perf_counter()
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log, env=env)
@@ -130,21 +159,32 @@ def run(args: argparse.Namespace) -> int:
         wall, rss, events = min(runs)
         core_rate, core_events = _core(path, args.method, args.core_events, args.repeat)
     result = {
-        "file": str(path), "format": args.format, "file_bytes": path.stat().st_size, "events": events,
-        "method": args.method, "command_s": wall, "command_mev_s": events / wall / 1e6,
-        "startup_s": startup, "steady_mev_s": events / max(wall - startup, 1e-9) / 1e6,
-        "peak_rss_mb": rss, "core_mev_s": core_rate / 1e6, "core_events": core_events,
+        "file": str(path),
+        "format": args.format,
+        "file_bytes": path.stat().st_size,
+        "events": events,
+        "method": args.method,
+        "command_s": wall,
+        "command_mev_s": events / wall / 1e6,
+        "startup_s": startup,
+        "steady_mev_s": events / max(wall - startup, 1e-9) / 1e6,
+        "peak_rss_mb": rss,
+        "core_mev_s": core_rate / 1e6,
+        "core_events": core_events,
         "one_core": pin,
     }
     if args.json:
         print(json.dumps(result, indent=1))
     else:
-        print(f"recording      {events / 1e6:.1f} M events, {result['file_bytes'] / 1e6:.0f} MB ({args.format}), "
-              f"method {args.method}{', one core' if pin else ''}")
-        print(f"command        {wall:.2f} s  {result['command_mev_s']:.1f} Mev/s end to end, "
-              f"peak RSS {rss:.0f} MB")
+        print(
+            f"recording      {events / 1e6:.1f} M events, {result['file_bytes'] / 1e6:.0f} MB ({args.format}), "
+            f"method {args.method}{', one core' if pin else ''}"
+        )
+        print(f"command        {wall:.2f} s  {result['command_mev_s']:.1f} Mev/s end to end, peak RSS {rss:.0f} MB")
         print(f"start-up       {startup:.2f} s (same command on 0.1 s of data)")
         print(f"steady         {result['steady_mev_s']:.1f} Mev/s (command minus start-up)")
-        print(f"core alone     {result['core_mev_s']:.1f} Mev/s (Tracker.feed on {core_events / 1e6:.1f} M "
-              f"decoded events)")
+        print(
+            f"core alone     {result['core_mev_s']:.1f} Mev/s (Tracker.feed on {core_events / 1e6:.1f} M "
+            f"decoded events)"
+        )
     return 0

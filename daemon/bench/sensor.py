@@ -47,8 +47,17 @@ class TwinPoint:
     triggers: np.ndarray
 
 
-def twin_point(speed_mps: float, *, tau_s: float = 0.001, offset_ms: float = 3.0, drift_ppm: float = 0.0,
-               noise_over_l: float = 0.002, warm_s: float = 0.3, record_s: float = 1.0, seed: int = 3) -> TwinPoint:
+def twin_point(
+    speed_mps: float,
+    *,
+    tau_s: float = 0.001,
+    offset_ms: float = 3.0,
+    drift_ppm: float = 0.0,
+    noise_over_l: float = 0.002,
+    warm_s: float = 0.3,
+    record_s: float = 1.0,
+    seed: int = 3,
+) -> TwinPoint:
     """Simulate one point: twin -> events -> core tracker, and the twin-reading sensor alongside."""
     from flagtrack.daemon.core.centreline import CentrelineBatch
     from flagtrack.daemon.core.pointsensor import BeamParams
@@ -59,14 +68,33 @@ def twin_point(speed_mps: float, *, tau_s: float = 0.001, offset_ms: float = 3.0
     from flagtrack.drivers.sensor.record import SensorRecord
     from flagtrack.drivers.sensor.twin import TwinSensor, TwinSensorParams
 
-    camera = SimulatedCamera(from_mapping(SimulatedCameraConfig, {
-        "speed_mps": speed_mps, "events_per_px2": 1.0, "trigger_period_ms": 50, "seed": seed,
-        "slice_us": 4000,
-        "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4, "tau_amp_s": 0.1}}))
+    camera = SimulatedCamera(
+        from_mapping(
+            SimulatedCameraConfig,
+            {
+                "speed_mps": speed_mps,
+                "events_per_px2": 1.0,
+                "trigger_period_ms": 50,
+                "seed": seed,
+                "slice_us": 4000,
+                "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4, "tau_amp_s": 0.1},
+            },
+        )
+    )
     camera.open()
-    sensor = TwinSensor(TwinSensorParams(rate_hz=1000, noise_over_l=noise_over_l, latency_ms=2.0,
-                                         clock_offset_ms=offset_ms, drift_ppm=drift_ppm, seed=seed),
-                        BeamParams(**BEAM), camera, "mm")
+    sensor = TwinSensor(
+        TwinSensorParams(
+            rate_hz=1000,
+            noise_over_l=noise_over_l,
+            latency_ms=2.0,
+            clock_offset_ms=offset_ms,
+            drift_ppm=drift_ppm,
+            seed=seed,
+        ),
+        BeamParams(**BEAM),
+        camera,
+        "mm",
+    )
     sensor.open()
     readings, events = [], []
     slice_s = camera.cfg.slice_us * 1e-6
@@ -81,8 +109,15 @@ def twin_point(speed_mps: float, *, tau_s: float = 0.001, offset_ms: float = 3.0
     t_us = np.concatenate([r.t_us for r in readings])
     pulses = np.concatenate([r.trigger_t_us for r in readings])
     keep = sensor.camera_us(t_us) >= warm_s * 1e6
-    record = SensorRecord("twin", "mm", "sensor", t_us[keep], np.concatenate([r.value for r in readings])[keep],
-                          pulses[sensor.camera_us(pulses) >= warm_s * 1e6], sum(r.missing for r in readings))
+    record = SensorRecord(
+        "twin",
+        "mm",
+        "sensor",
+        t_us[keep],
+        np.concatenate([r.value for r in readings])[keep],
+        pulses[sensor.camera_us(pulses) >= warm_s * 1e6],
+        sum(r.missing for r in readings),
+    )
     triggers = trigger_edges(camera.cfg, round(warm_s * 1e6), round((warm_s + record_s) * 1e6))
     return TwinPoint(camera, sensor, lines, record, triggers)
 
@@ -95,20 +130,38 @@ def _accuracy(args: argparse.Namespace) -> list[dict[str, Any]]:
     rows = []
     for tau_s in args.tau:
         for speed in args.speeds:
-            point = twin_point(speed, tau_s=tau_s, offset_ms=args.offset_ms, noise_over_l=args.noise,
-                               record_s=args.record)
+            point = twin_point(
+                speed, tau_s=tau_s, offset_ms=args.offset_ms, noise_over_l=args.noise, record_s=args.record
+            )
             started = time.perf_counter()
-            v = validate_point(point.lines, point.record, point.triggers, FlagFrame(L_PX, (150.0, 240.0), 0.0),
-                               BeamParams(**BEAM), SyncParams(), "px")
+            v = validate_point(
+                point.lines,
+                point.record,
+                point.triggers,
+                FlagFrame(L_PX, (150.0, 240.0), 0.0),
+                BeamParams(**BEAM),
+                SyncParams(),
+                "px",
+            )
             check_s = time.perf_counter() - started
             f = v.fields()
             d_mean, _ = v.delta_rms_over_l
-            rows.append({"speed_mps": speed, "tau_s": tau_s, "a_over_l": point.camera.state.amp_over_l,
-                         "f_hz": point.camera.state.frequency_hz, "e_rms_over_l": f["sensor_error_rms_over_l"],
-                         "e_max_over_l": f["sensor_error_max_over_l"], "delta_rms_over_l": d_mean,
-                         "trigger_offset_us": f["sensor_offset_us"], "trigger_unc_us": f["sensor_offset_unc_us"],
-                         "xcorr_offset_us": f["sensor_xcorr_offset_us"], "xcorr_unc_us": f["sensor_xcorr_unc_us"],
-                         "check_s": check_s})
+            rows.append(
+                {
+                    "speed_mps": speed,
+                    "tau_s": tau_s,
+                    "a_over_l": point.camera.state.amp_over_l,
+                    "f_hz": point.camera.state.frequency_hz,
+                    "e_rms_over_l": f["sensor_error_rms_over_l"],
+                    "e_max_over_l": f["sensor_error_max_over_l"],
+                    "delta_rms_over_l": d_mean,
+                    "trigger_offset_us": f["sensor_offset_us"],
+                    "trigger_unc_us": f["sensor_offset_unc_us"],
+                    "xcorr_offset_us": f["sensor_xcorr_offset_us"],
+                    "xcorr_unc_us": f["sensor_xcorr_unc_us"],
+                    "check_s": check_s,
+                }
+            )
     return rows
 
 
@@ -117,14 +170,17 @@ def _drivers(duration_s: float) -> list[dict[str, Any]]:
     from flagtrack.drivers.sensor.device import DeviceParams, SimulatedSensorDevice
     from flagtrack.drivers.sensor.setup import SensorConfig, open_sensor
 
-    cases = [("ascii poll", DeviceParams(), {"driver": "ascii"}),
-             ("ascii stream", DeviceParams(rate_hz=1000), {"driver": "ascii", "ascii": {"mode": "stream"}}),
-             ("modbus", DeviceParams(protocol="modbus"), {"driver": "modbus", "modbus": {"scale": 0.01}})]
+    cases = [
+        ("ascii poll", DeviceParams(), {"driver": "ascii"}),
+        ("ascii stream", DeviceParams(rate_hz=1000), {"driver": "ascii", "ascii": {"mode": "stream"}}),
+        ("modbus", DeviceParams(protocol="modbus"), {"driver": "modbus", "modbus": {"scale": 0.01}}),
+    ]
     rows = []
     for name, params, values in cases:
         with SimulatedSensorDevice(params, lambda t_us: 100.0) as device:
-            sensor = open_sensor(from_mapping(SensorConfig, {**values, "port": device.port, "timeout_s": 0.1,
-                                                              "poll": {"rate_hz": 1000}}))
+            sensor = open_sensor(
+                from_mapping(SensorConfig, {**values, "port": device.port, "timeout_s": 0.1, "poll": {"rate_hz": 1000}})
+            )
             sensor.open()
             n = missing = 0
             started = time.perf_counter()
@@ -135,8 +191,14 @@ def _drivers(duration_s: float) -> list[dict[str, Any]]:
                     missing += got.missing
             finally:
                 sensor.close()
-            rows.append({"driver": name, "requested_hz": 1000, "rate_hz": n / (time.perf_counter() - started),
-                         "missing": missing})
+            rows.append(
+                {
+                    "driver": name,
+                    "requested_hz": 1000,
+                    "rate_hz": n / (time.perf_counter() - started),
+                    "missing": missing,
+                }
+            )
     return rows
 
 
@@ -148,16 +210,24 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({"accuracy": accuracy, "drivers": drivers, "offset_us": args.offset_ms * 1e3}))
         return 0
-    print(f"twin, sensor at x/L = 0.73, noise {100 * args.noise:.1f} % L, 1 kHz, injected offset "
-          f"{args.offset_ms:.3f} ms, {args.record:g} s per point")
-    print(f"{'U m/s':>6} {'tau ms':>6} {'A/L':>5} {'f Hz':>5} {'e RMS %':>8} {'e max %':>8} {'dRMS %':>7} "
-          f"{'trigger ms':>11} {'± us':>5} {'xcorr ms':>9} {'± us':>5} {'check s':>7}")
+    print(
+        f"twin, sensor at x/L = 0.73, noise {100 * args.noise:.1f} % L, 1 kHz, injected offset "
+        f"{args.offset_ms:.3f} ms, {args.record:g} s per point"
+    )
+    print(
+        f"{'U m/s':>6} {'tau ms':>6} {'A/L':>5} {'f Hz':>5} {'e RMS %':>8} {'e max %':>8} {'dRMS %':>7} "
+        f"{'trigger ms':>11} {'± us':>5} {'xcorr ms':>9} {'± us':>5} {'check s':>7}"
+    )
     for r in accuracy:
-        print(f"{r['speed_mps']:>6.2f} {1e3 * r['tau_s']:>6.2f} {r['a_over_l']:>5.2f} {r['f_hz']:>5.1f} "
-              f"{100 * r['e_rms_over_l']:>8.2f} {100 * r['e_max_over_l']:>8.2f} {100 * r['delta_rms_over_l']:>7.2f} "
-              f"{r['trigger_offset_us'] / 1e3:>11.4f} {r['trigger_unc_us']:>5.1f} {r['xcorr_offset_us'] / 1e3:>9.4f} "
-              f"{r['xcorr_unc_us']:>5.1f} {r['check_s']:>7.3f}")
+        print(
+            f"{r['speed_mps']:>6.2f} {1e3 * r['tau_s']:>6.2f} {r['a_over_l']:>5.2f} {r['f_hz']:>5.1f} "
+            f"{100 * r['e_rms_over_l']:>8.2f} {100 * r['e_max_over_l']:>8.2f} {100 * r['delta_rms_over_l']:>7.2f} "
+            f"{r['trigger_offset_us'] / 1e3:>11.4f} {r['trigger_unc_us']:>5.1f} {r['xcorr_offset_us'] / 1e3:>9.4f} "
+            f"{r['xcorr_unc_us']:>5.1f} {r['check_s']:>7.3f}"
+        )
     for r in drivers:
-        print(f"{r['driver']:>12}: {r['rate_hz']:7.0f} samples/s of {r['requested_hz']} requested, "
-              f"{r['missing']} missing (pty)")
+        print(
+            f"{r['driver']:>12}: {r['rate_hz']:7.0f} samples/s of {r['requested_hz']} requested, "
+            f"{r['missing']} missing (pty)"
+        )
     return 0

@@ -31,10 +31,15 @@ def _measure(n: int, duration_s: float, jobs: int, out_dir: str, seed0: int) -> 
     wall_s = time.perf_counter() - start
     n_events = sum(r.n_events for r in results)
     camera_s = sum(r.wall_s for r in results)
-    return {"jobs": jobs, "recordings": n, "events": n_events, "wall_s": wall_s,
-            "events_per_s": n_events / wall_s,
-            "camera_events_per_s": n_events / camera_s,  # events + file writing only, per process
-            "simulated_s_per_wall_s": n * duration_s / wall_s}
+    return {
+        "jobs": jobs,
+        "recordings": n,
+        "events": n_events,
+        "wall_s": wall_s,
+        "events_per_s": n_events / wall_s,
+        "camera_events_per_s": n_events / camera_s,  # events + file writing only, per process
+        "simulated_s_per_wall_s": n * duration_s / wall_s,
+    }
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,7 +59,9 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(figures))
         return 0
     for label, row in (("1 core", one), (f"{jobs} processes", many)):
-        print(f"{label:>12s}: {row['events']:>10d} events in {row['wall_s']:7.2f} s = "
-              f"{row['events_per_s'] / 1e6:6.2f} Mev/s  ({row['simulated_s_per_wall_s']:.3f} simulated s per s; "
-              f"camera alone {row['camera_events_per_s'] / 1e6:.2f} Mev/s per process)")
+        print(
+            f"{label:>12s}: {row['events']:>10d} events in {row['wall_s']:7.2f} s = "
+            f"{row['events_per_s'] / 1e6:6.2f} Mev/s  ({row['simulated_s_per_wall_s']:.3f} simulated s per s; "
+            f"camera alone {row['camera_events_per_s'] / 1e6:.2f} Mev/s per process)"
+        )
     return 0

@@ -22,8 +22,13 @@ DESCRIPTION = __doc__
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of the twin benchmark."""
-    parser.add_argument("--events-per-px2", type=float, nargs="+", default=[2.0, 10.0],
-                        help="event densities to measure (2: the demo's default, ~1 Mev/s)")
+    parser.add_argument(
+        "--events-per-px2",
+        type=float,
+        nargs="+",
+        default=[2.0, 10.0],
+        help="event densities to measure (2: the demo's default, ~1 Mev/s)",
+    )
     parser.add_argument("--speed-mps", type=float, default=6.0, help="wind speed (flapping above 4.9 m/s)")
     parser.add_argument("--seconds", type=float, default=2.0, help="camera time generated per measurement")
     parser.add_argument("--all-cores", action="store_true", help="do not pin to one core")
@@ -43,9 +48,15 @@ def measure(events_per_px2: float, speed_mps: float, seconds: float) -> dict[str
     events = sum(len(chunk) for chunk in fast_forward(camera, seconds))
     wall_s = time.perf_counter() - start
     camera_rate = events / seconds
-    return {"events_per_px2": events_per_px2, "speed_mps": speed_mps, "flapping": bool(camera.state.flapping),
-            "events": events, "camera_mev_s": camera_rate / 1e6, "generated_mev_s": events / wall_s / 1e6,
-            "real_time_margin": seconds / wall_s}
+    return {
+        "events_per_px2": events_per_px2,
+        "speed_mps": speed_mps,
+        "flapping": bool(camera.state.flapping),
+        "events": events,
+        "camera_mev_s": camera_rate / 1e6,
+        "generated_mev_s": events / wall_s / 1e6,
+        "real_time_margin": seconds / wall_s,
+    }
 
 
 def run(args: argparse.Namespace) -> int:
@@ -57,7 +68,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"simulated camera at {args.speed_mps:g} m/s, {args.seconds:g} s of camera time{', one core' if pin else ''}")
     for row in rows:
-        print(f"  events_per_px2 {row['events_per_px2']:5.1f}: {row['camera_mev_s']:5.2f} Mev/s of camera data, "
-              f"generated at {row['generated_mev_s']:5.2f} Mev/s: real-time margin x{row['real_time_margin']:.1f}"
-              f"{'' if row['flapping'] else ' (flag not flapping)'}")
+        print(
+            f"  events_per_px2 {row['events_per_px2']:5.1f}: {row['camera_mev_s']:5.2f} Mev/s of camera data, "
+            f"generated at {row['generated_mev_s']:5.2f} Mev/s: real-time margin x{row['real_time_margin']:.1f}"
+            f"{'' if row['flapping'] else ' (flag not flapping)'}"
+        )
     return 0

@@ -36,8 +36,7 @@ def discover(package: ModuleType) -> list[Any]:
     return sorted(found, key=lambda m: m.COMMAND)
 
 
-def add_subcommands(parser: argparse.ArgumentParser, package: ModuleType, dest: str,
-                    only: str | None = None) -> None:
+def add_subcommands(parser: argparse.ArgumentParser, package: ModuleType, dest: str, only: str | None = None) -> None:
     """Add one subparser per command module of ``package`` (or only the one named ``only``); each sets
     ``args.run``."""
     subparsers = parser.add_subparsers(dest=dest, metavar="COMMAND", required=True)

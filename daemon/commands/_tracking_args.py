@@ -26,8 +26,12 @@ def add_tracking_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--t-start", type=float, metavar="S", help="first update time, s")
     parser.add_argument("--t-stop", type=float, metavar="S", help="last update time, s")
     parser.add_argument("--method", choices=("robust", "paper"), help="robust (default) or the paper's update")
-    parser.add_argument("--calibration", type=Path, metavar="CAL.yaml",
-                        help="pixel -> metre calibration (flagtrack calibrate); outputs are then in metres")
+    parser.add_argument(
+        "--calibration",
+        type=Path,
+        metavar="CAL.yaml",
+        help="pixel -> metre calibration (flagtrack calibrate); outputs are then in metres",
+    )
 
 
 def apply_tracking_arguments(config: TrackingConfig, args: argparse.Namespace) -> TrackingConfig:
@@ -35,9 +39,17 @@ def apply_tracking_arguments(config: TrackingConfig, args: argparse.Namespace) -
     from flagtrack.daemon.tracking.section import Method
 
     config = config.with_overrides(
-        root=tuple(args.root) if args.root else None, length=args.length, direction_deg=args.direction,
-        joints=args.joints, alpha=args.alpha, tau_s=args.tau, dt_s=args.dt, ds=args.ds,
-        t_start_s=args.t_start, t_stop_s=args.t_stop, method=Method(args.method) if args.method else None,
+        root=tuple(args.root) if args.root else None,
+        length=args.length,
+        direction_deg=args.direction,
+        joints=args.joints,
+        alpha=args.alpha,
+        tau_s=args.tau,
+        dt_s=args.dt,
+        ds=args.ds,
+        t_start_s=args.t_start,
+        t_stop_s=args.t_stop,
+        method=Method(args.method) if args.method else None,
         calibration=getattr(args, "calibration", None),
     )
     if (args.tau is not None or args.dt is not None) and config.schedule:

@@ -35,26 +35,46 @@ Use the calibration with `flagtrack reconstruct -c cfg.yaml` where cfg.yaml has
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Positional inputs (a recording, or ``map CAL X Y ...``) and the calibration options."""
-    parser.add_argument("inputs", nargs="+", metavar="REC | map CAL X Y",
-                        help="the recording of the blinking board, or: map CAL.yaml X Y [X Y ...]")
+    parser.add_argument(
+        "inputs",
+        nargs="+",
+        metavar="REC | map CAL X Y",
+        help="the recording of the blinking board, or: map CAL.yaml X Y [X Y ...]",
+    )
     parser.add_argument("-o", "--output", type=Path, help="calibration file to write (YAML)")
     parser.add_argument("--board", help="inner corners NxM, e.g. 9x6 (a board of 10x7 squares)")
     parser.add_argument("--square-mm", type=float, help="side of one square on the plane, mm")
-    parser.add_argument("--origin-corner", default="top-left",
-                        help="corner at (0, 0): top-left, top-right, bottom-left, bottom-right or I,J (default "
-                             "top-left)")
-    parser.add_argument("--x-axis", choices=("right", "left", "up", "down"), default="right",
-                        help="image direction of plane +x, downstream (default right)")
-    parser.add_argument("--y-axis", choices=("right", "left", "up", "down"),
-                        help="image direction of plane +y (default: x turned counter-clockwise on the image)")
-    parser.add_argument("--origin-offset-mm", type=float, nargs=2, metavar=("DX", "DY"), default=(0.0, 0.0),
-                        help="plane position of the origin corner relative to the root, mm (default 0 0)")
+    parser.add_argument(
+        "--origin-corner",
+        default="top-left",
+        help="corner at (0, 0): top-left, top-right, bottom-left, bottom-right or I,J (default top-left)",
+    )
+    parser.add_argument(
+        "--x-axis",
+        choices=("right", "left", "up", "down"),
+        default="right",
+        help="image direction of plane +x, downstream (default right)",
+    )
+    parser.add_argument(
+        "--y-axis",
+        choices=("right", "left", "up", "down"),
+        help="image direction of plane +y (default: x turned counter-clockwise on the image)",
+    )
+    parser.add_argument(
+        "--origin-offset-mm",
+        type=float,
+        nargs=2,
+        metavar=("DX", "DY"),
+        default=(0.0, 0.0),
+        help="plane position of the origin corner relative to the root, mm (default 0 0)",
+    )
     parser.add_argument("--degree", type=int, help="total degree of the polynomial (default 3)")
     parser.add_argument("--period-ms", type=float, help="blink period if known, ms (default: detected)")
     parser.add_argument("--min-period-ms", type=float, default=10.0, help="shortest period searched, ms (10)")
     parser.add_argument("--max-period-ms", type=float, default=5000.0, help="longest period searched, ms (5000)")
-    parser.add_argument("--max-seconds", type=float, default=10.0,
-                        help="use the first S seconds of the recording (default 10)")
+    parser.add_argument(
+        "--max-seconds", type=float, default=10.0, help="use the first S seconds of the recording (default 10)"
+    )
     parser.add_argument("--size", type=int, nargs=2, metavar=("W", "H"), help="sensor size if the file lacks it")
     parser.add_argument("--figure", type=Path, help="figure to write (default: OUTPUT with .png)")
     parser.add_argument("--no-figure", action="store_true", help="write no figure")
@@ -69,8 +89,11 @@ def run(args: argparse.Namespace) -> int:
 
     if len(args.inputs) != 1:
         raise ConfigError(f"give one recording (or: map CAL.yaml X Y ...), got {' '.join(args.inputs)}")
-    missing = [flag for flag, value in (("--board", args.board), ("--square-mm", args.square_mm),
-                                        ("-o/--output", args.output)) if value is None]
+    missing = [
+        flag
+        for flag, value in (("--board", args.board), ("--square-mm", args.square_mm), ("-o/--output", args.output))
+        if value is None
+    ]
     if missing:
         raise ConfigError(f"calibrating needs {', '.join(missing)}")
     return _calibrate(args)
@@ -88,11 +111,17 @@ def _parse_setup(args: argparse.Namespace) -> tuple:
         raise ConfigError(f"--board must look like 9x6 (inner corners), got {args.board!r}", key="board") from exc
     try:
         board = BoardSpec((n, m), args.square_mm * 1e-3)
-        frame = GridFrame(args.origin_corner, Direction(args.x_axis),
-                          Direction(args.y_axis) if args.y_axis else None,
-                          (args.origin_offset_mm[0] * 1e-3, args.origin_offset_mm[1] * 1e-3))
-        search = BlinkSearch(min_period_us=int(args.min_period_ms * 1e3), max_period_us=int(args.max_period_ms * 1e3),
-                             period_us=args.period_ms * 1e3 if args.period_ms else None)
+        frame = GridFrame(
+            args.origin_corner,
+            Direction(args.x_axis),
+            Direction(args.y_axis) if args.y_axis else None,
+            (args.origin_offset_mm[0] * 1e-3, args.origin_offset_mm[1] * 1e-3),
+        )
+        search = BlinkSearch(
+            min_period_us=int(args.min_period_ms * 1e3),
+            max_period_us=int(args.max_period_ms * 1e3),
+            period_us=args.period_ms * 1e3 if args.period_ms else None,
+        )
     except ValueError as exc:
         raise ConfigError(str(exc)) from exc
     degree = DEFAULT_DEGREE if args.degree is None else args.degree
@@ -133,8 +162,16 @@ def _calibrate(args: argparse.Namespace) -> int:
     if figure is not None:
         save_figure(figure, image, cal)
     if args.json:
-        print(json.dumps({"output": str(args.output), "figure": str(figure) if figure else None,
-                          "residuals": cal.residuals.to_mapping(), "blink": cal.blink}))
+        print(
+            json.dumps(
+                {
+                    "output": str(args.output),
+                    "figure": str(figure) if figure else None,
+                    "residuals": cal.residuals.to_mapping(),
+                    "blink": cal.blink,
+                }
+            )
+        )
     else:
         for line in report_lines(cal):
             print(line)

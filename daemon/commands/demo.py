@@ -23,28 +23,52 @@ ONSET_MPS, DECAY_MPS, STEP_MPS = 4.9, 4.4, 0.25
 
 def demo_rig(out: Path, headless: bool, quick: bool = False) -> dict[str, Any]:
     """The demo's rig config (the same sections a user writes in YAML); ``quick``: 5 points, not 17."""
-    sweep = ({"range": {"start": 4.2, "stop": 5.2, "step": 0.5}, "settle_s": 1.0, "record_s": 1.5} if quick else
-             {"range": {"start": 4.0, "stop": 6.0, "step": STEP_MPS}, "settle_s": 1.5, "record_s": 2.0})
+    sweep = (
+        {"range": {"start": 4.2, "stop": 5.2, "step": 0.5}, "settle_s": 1.0, "record_s": 1.5}
+        if quick
+        else {"range": {"start": 4.0, "stop": 6.0, "step": STEP_MPS}, "settle_s": 1.5, "record_s": 2.0}
+    )
     return {
         "rig": f"demo{int(time.time() * 1000) % 100000}",
         # a light twin (0.25-0.36 Mev/s flapping) in 4 ms packets: the whole rig shares one Python process (one
         # GIL) on a small machine; with 2 ms packets the process was GIL-bound while the flag flapped and
         # the twin fell behind real time in about half the runs (1 in 9 with 4 ms, 2-core VM)
-        "camera": {"id": "cam0", "adapter": "simulated", "packet_us": 4000,
-                   "simulated": {"events_per_px2": 0.6, "noise_rate_hz": 5000, "max_lag_s": 1.0,
-                                 "flutter": {"onset_speed_mps": ONSET_MPS, "decay_speed_mps": DECAY_MPS,
-                                             "tau_amp_s": 0.3}}},
+        "camera": {
+            "id": "cam0",
+            "adapter": "simulated",
+            "packet_us": 4000,
+            "simulated": {
+                "events_per_px2": 0.6,
+                "noise_rate_hz": 5000,
+                "max_lag_s": 1.0,
+                "flutter": {"onset_speed_mps": ONSET_MPS, "decay_speed_mps": DECAY_MPS, "tau_amp_s": 0.3},
+            },
+        },
         "tracker": {"root": [150, 240], "length": 300, "direction_deg": 0, "tau_s": 0.001},
         "tracker_service": {"batch_updates": 128, "max_batch_delay_s": 0.01},
         "recorder": {"directory": str(out / "recordings")},
         "viewer": {"sink": "rrd" if headless else "auto", "rrd_path": str(out / "demo.rrd"), "geometry_rate_hz": 10},
-        "tunnel": {"driver": "simulated",
-                   "safety": {"max_speed_mps": 10, "max_ramp_mps2": 2.0, "ramp_period_s": 0.1, "tolerance_mps": 0.15,
-                              "settle_timeout_s": 10, "poll_period_s": 0.05, "keepalive_s": 0.5, "watchdog_s": 2.0},
-                   "sim": {"tau_s": 0.2, "ramp_mps2": 3.0, "watchdog_s": 2.0}},
-        "supervisor": {"mode": "sweep", "runs_dir": str(out), "run_name": "sweep",
-                       "onset": {"learn_s": 2.0},
-                       "sweep": {**sweep, "branches": ["up", "down"]}},
+        "tunnel": {
+            "driver": "simulated",
+            "safety": {
+                "max_speed_mps": 10,
+                "max_ramp_mps2": 2.0,
+                "ramp_period_s": 0.1,
+                "tolerance_mps": 0.15,
+                "settle_timeout_s": 10,
+                "poll_period_s": 0.05,
+                "keepalive_s": 0.5,
+                "watchdog_s": 2.0,
+            },
+            "sim": {"tau_s": 0.2, "ramp_mps2": 3.0, "watchdog_s": 2.0},
+        },
+        "supervisor": {
+            "mode": "sweep",
+            "runs_dir": str(out),
+            "run_name": "sweep",
+            "onset": {"learn_s": 2.0},
+            "sweep": {**sweep, "branches": ["up", "down"]},
+        },
         "services": ["camera", "tracker", "recorder", "viewer", "supervisor"],
     }
 
@@ -52,7 +76,9 @@ def demo_rig(out: Path, headless: bool, quick: bool = False) -> dict[str, Any]:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``flagtrack demo``."""
     parser.add_argument("--out", type=Path, help="output folder (default: ./flagtrack-demo-<time>)")
-    parser.add_argument("--headless", action="store_true", help="no viewer window: write the Rerun view to an .rrd file")
+    parser.add_argument(
+        "--headless", action="store_true", help="no viewer window: write the Rerun view to an .rrd file"
+    )
     parser.add_argument("--json", action="store_true", help="end with one JSON object of the results")
     parser.add_argument("--quick", action="store_true", help="a 5-point sweep (4.2, 4.7, 5.2 m/s) in about 30 s")
 
@@ -74,9 +100,12 @@ def run(args: argparse.Namespace) -> int:
     rig = from_mapping(RigConfig, config, key="demo")
     speeds = rig.supervisor.sweep.speed_values()  # type: ignore[union-attr]
     step_mps = float(speeds[1] - speeds[0])
-    print(f"flagtrack demo: simulated onset {ONSET_MPS} m/s going up, decay {DECAY_MPS} m/s coming down; "
-          f"sweeping {speeds[0]:g} -> {speeds[-1]:g} -> {speeds[0]:g} m/s in {step_mps:g} m/s steps "
-          f"(about {'30 s' if args.quick else '2 minutes'}) into {out}", file=sys.stderr)
+    print(
+        f"flagtrack demo: simulated onset {ONSET_MPS} m/s going up, decay {DECAY_MPS} m/s coming down; "
+        f"sweeping {speeds[0]:g} -> {speeds[-1]:g} -> {speeds[0]:g} m/s in {step_mps:g} m/s steps "
+        f"(about {'30 s' if args.quick else '2 minutes'}) into {out}",
+        file=sys.stderr,
+    )
     prepare_services(rig, list(rig.services), lambda text: print(f"flagtrack demo: {text} ...", file=sys.stderr))
     started = time.monotonic()
     result = run_rig(rig, list(rig.services), shutdown_timeout_s=30.0, quiet=True, prepared=True)
@@ -87,17 +116,27 @@ def run(args: argparse.Namespace) -> int:
     onset, decay = transition_speeds(points)
     rrd = Path(viewer.cfg.rrd_path).resolve() if viewer is not None and "recording to" in viewer.description else None
     summary = {
-        "onset_mps_simulated": ONSET_MPS, "decay_mps_simulated": DECAY_MPS,
-        "onset_mps_detected": onset, "decay_mps_detected": decay, "step_mps": step_mps,
-        "points": len(points), "summary_csv": str(run_dir / "summary.csv"), "log": str(run_dir / "run.jsonl"),
+        "onset_mps_simulated": ONSET_MPS,
+        "decay_mps_simulated": DECAY_MPS,
+        "onset_mps_detected": onset,
+        "decay_mps_detected": decay,
+        "step_mps": step_mps,
+        "points": len(points),
+        "summary_csv": str(run_dir / "summary.csv"),
+        "log": str(run_dir / "run.jsonl"),
         "rrd": str(rrd) if rrd else None,
     }
     reason = supervisor.stop_reason if supervisor is not None else "not run"
     print(f"flagtrack demo: {reason} after {time.monotonic() - started:.0f} s, {len(points)} points", file=sys.stderr)
-    print(f"  onset  detected {onset} m/s (simulated {ONSET_MPS})\n  decay  detected {decay} m/s (simulated {DECAY_MPS})",
-          file=sys.stderr)
-    print(f"  summary {summary['summary_csv']}\n  figure  {run_dir / 'amplitude.png'}\n  log     {summary['log']}"
-          + (f"\n  view    {rrd} (open with: rerun {rrd})" if rrd else ""), file=sys.stderr)
+    print(
+        f"  onset  detected {onset} m/s (simulated {ONSET_MPS})\n  decay  detected {decay} m/s (simulated {DECAY_MPS})",
+        file=sys.stderr,
+    )
+    print(
+        f"  summary {summary['summary_csv']}\n  figure  {run_dir / 'amplitude.png'}\n  log     {summary['log']}"
+        + (f"\n  view    {rrd} (open with: rerun {rrd})" if rrd else ""),
+        file=sys.stderr,
+    )
     if args.json:
         print(json.dumps(summary))
     return result.code or (0 if reason == "finished" else 1)

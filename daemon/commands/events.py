@@ -27,21 +27,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     convert = actions.add_parser("convert", help="convert between formats (chosen by the extensions)")
     convert.add_argument("input", type=Path)
     convert.add_argument("output", type=Path)
-    convert.add_argument("--encoding", choices=("evt2", "evt3"), help="EVT encoding of a .raw output "
-                         "(default: the input's if it is EVT 2.0/3.0, else evt3)")
+    convert.add_argument(
+        "--encoding",
+        choices=("evt2", "evt3"),
+        help="EVT encoding of a .raw output (default: the input's if it is EVT 2.0/3.0, else evt3)",
+    )
     convert.add_argument("--width", type=int, help="sensor width, when the input does not give it")
     convert.add_argument("--height", type=int, help="sensor height, when the input does not give it")
     for sub in (info, convert):
-        sub.add_argument("--strict", action="store_true", help="fail on a fault instead of keeping the events "
-                         "before it and warning")
+        sub.add_argument(
+            "--strict", action="store_true", help="fail on a fault instead of keeping the events before it and warning"
+        )
         sub.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def _progress(total: int, description: str, disabled: bool):  # noqa: ANN202
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=description, unit="B", unit_scale=True, file=sys.stderr, leave=False,
-                disable=disabled or not sys.stderr.isatty())
+    return tqdm(
+        total=total,
+        desc=description,
+        unit="B",
+        unit_scale=True,
+        file=sys.stderr,
+        leave=False,
+        disable=disabled or not sys.stderr.isatty(),
+    )
 
 
 def file_summary(path: Path, *, strict: bool = False, progress: bool = False) -> dict:
@@ -61,8 +72,17 @@ def file_summary(path: Path, *, strict: bool = False, progress: bool = False) ->
                 t_last = int(chunk.events["t"][-1])
             triggers += len(chunk.triggers)
             bar.update(max(chunk.byte_offset - bar.n, 0))
-    summary = {"format": info.format, "encoding": info.encoding, "width": info.width, "height": info.height,
-               "events": events, "on": on, "off": events - on, "t_first_us": t_first, "t_last_us": t_last}
+    summary = {
+        "format": info.format,
+        "encoding": info.encoding,
+        "width": info.width,
+        "height": info.height,
+        "events": events,
+        "on": on,
+        "off": events - on,
+        "t_first_us": t_first,
+        "t_last_us": t_last,
+    }
     return {**summary, "triggers": triggers, "path": str(info.path)}
 
 
@@ -93,13 +113,16 @@ def run_convert(args: argparse.Namespace) -> int:
         if out_kind == "raw":
             encoding = args.encoding or (info.encoding if info.encoding in ("evt2", "evt3") else "evt3")
             if width is None or height is None:
-                raise FormatError("the input does not give the sensor size; pass --width and --height",
-                                  path=str(args.input))
+                raise FormatError(
+                    "the input does not give the sensor size; pass --width and --height", path=str(args.input)
+                )
         elif args.encoding:
             raise FormatError("--encoding applies to .raw outputs only", path=str(args.output))
         count = 0
-        with open_writer(args.output, width=width, height=height, encoding=encoding) as writer, \
-                _progress(reader.size_bytes, args.input.name, args.no_progress) as bar:
+        with (
+            open_writer(args.output, width=width, height=height, encoding=encoding) as writer,
+            _progress(reader.size_bytes, args.input.name, args.no_progress) as bar,
+        ):
             for chunk in reader:
                 writer.write(chunk.events, chunk.triggers)
                 count += len(chunk.events)

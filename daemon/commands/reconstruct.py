@@ -49,9 +49,11 @@ def run(args: argparse.Namespace) -> int:
         summary = reconstruct_file(args.file, args.output, setup, progress=bar)
     elapsed = time.perf_counter() - started
     rate = summary.events_in / elapsed / 1e6 if elapsed > 0 else 0.0
-    print(f"{summary.updates} updates from {summary.events_in} events "
-          f"({summary.events_kept} after denoising) in {elapsed:.2f} s ({rate:.1f} Mev/s) -> {args.output}",
-          file=sys.stderr)
+    print(
+        f"{summary.updates} updates from {summary.events_in} events "
+        f"({summary.events_kept} after denoising) in {elapsed:.2f} s ({rate:.1f} Mev/s) -> {args.output}",
+        file=sys.stderr,
+    )
     return 0
 
 

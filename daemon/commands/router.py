@@ -23,10 +23,16 @@ second one forces the process out (exit 130), as for the other services.
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``flagtrack router``."""
-    parser.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
-                        help="endpoint to listen on (default tcp/0.0.0.0:7447); repeatable")
-    parser.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
-                        help="another router to join; repeatable")
+    parser.add_argument(
+        "--listen",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="endpoint to listen on (default tcp/0.0.0.0:7447); repeatable",
+    )
+    parser.add_argument(
+        "--connect", action="append", default=[], metavar="ENDPOINT", help="another router to join; repeatable"
+    )
     parser.add_argument("--shutdown-timeout", type=float, default=10.0, help="seconds to wait for the router to close")
 
 
@@ -53,8 +59,12 @@ def run(args: argparse.Namespace) -> int:
     from flagtrack.daemon.services.runner import run_services
     from flagtrack.daemon.transport import Bus, BusConfig
 
-    cfg = BusConfig(namespace="flagtrack", mode="router", listen=tuple(args.listen or ["tcp/0.0.0.0:7447"]),
-                    connect=tuple(args.connect))
+    cfg = BusConfig(
+        namespace="flagtrack",
+        mode="router",
+        listen=tuple(args.listen or ["tcp/0.0.0.0:7447"]),
+        connect=tuple(args.connect),
+    )
     bus = Bus(cfg)  # a bad endpoint or a busy port: one clear line (ConfigError), before any signal handling
     print(f"flagtrack router: listening on {', '.join(cfg.listen)}", file=sys.stderr, flush=True)
     report = run_services([RouterService(bus)], shutdown_timeout_s=args.shutdown_timeout)

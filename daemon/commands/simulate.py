@@ -55,19 +55,42 @@ def run(args: argparse.Namespace) -> int:
     if args.n < 1 or args.width < 16 or args.height < 16:
         raise ConfigError("need --n >= 1 and a sensor of at least 16 x 16 px")
     try:
-        dvs = DvsParams(contrast_on=args.contrast, contrast_off=args.contrast, refractory_us=args.refractory_us,
-                        leak_rate_hz=args.leak_rate, shot_noise_hz=args.shot_noise)
+        dvs = DvsParams(
+            contrast_on=args.contrast,
+            contrast_off=args.contrast,
+            refractory_us=args.refractory_us,
+            leak_rate_hz=args.leak_rate,
+            shot_noise_hz=args.shot_noise,
+        )
     except ValueError as exc:
         raise ConfigError(str(exc)) from exc
     if args.checkerboard:
         return _checkerboard(args, dvs, simulate_checkerboard)
     jobs = args.jobs if args.jobs > 0 else os.cpu_count() or 1
-    specs = [RecordingSpec(seed=args.seed + i, duration_s=args.duration, width=args.width, height=args.height,
-                           tilted=args.tilted, dvs=dvs) for i in range(args.n)]
+    specs = [
+        RecordingSpec(
+            seed=args.seed + i,
+            duration_s=args.duration,
+            width=args.width,
+            height=args.height,
+            tilted=args.tilted,
+            dvs=dvs,
+        )
+        for i in range(args.n)
+    ]
     for result in simulate_many(specs, args.out_dir, jobs=jobs):
-        print(json.dumps({"events": result.events_path, "truth": result.truth_path, "n_events": result.n_events,
-                          "duration_s": round(result.duration_s, 6), "wall_s": round(result.wall_s, 3),
-                          "events_per_s": round(result.events_per_s)}))
+        print(
+            json.dumps(
+                {
+                    "events": result.events_path,
+                    "truth": result.truth_path,
+                    "n_events": result.n_events,
+                    "duration_s": round(result.duration_s, 6),
+                    "wall_s": round(result.wall_s, 3),
+                    "events_per_s": round(result.events_per_s),
+                }
+            )
+        )
     return 0
 
 
@@ -80,10 +103,12 @@ def _checkerboard(args: argparse.Namespace, dvs: object, simulate_checkerboard: 
     except ValueError as exc:
         raise ConfigError(f"--corners must look like 9x6, got {args.corners!r}", key="corners") from exc
     square = args.square_mm * 1e-3
-    spec = CheckerboardSpec(inner_corners=(n, m), square=square, origin=(0.09 - square * (n - 1) / 2,
-                                                                         -square * (m - 1) / 2))
+    spec = CheckerboardSpec(
+        inner_corners=(n, m), square=square, origin=(0.09 - square * (n - 1) / 2, -square * (m - 1) / 2)
+    )
     blink = BlinkParams(period_us=int(args.blink_ms * 1e3))
-    result = simulate_checkerboard(args.out_dir, spec, blink, n_periods=args.periods, width=args.width,
-                                   height=args.height, dvs=dvs, seed=args.seed)  # type: ignore[operator]
+    result = simulate_checkerboard(
+        args.out_dir, spec, blink, n_periods=args.periods, width=args.width, height=args.height, dvs=dvs, seed=args.seed
+    )  # type: ignore[operator]
     print(json.dumps({"events": result.events_path, "params": result.params_path, "n_events": result.n_events}))
     return 0

@@ -49,8 +49,9 @@ def run(args: argparse.Namespace) -> int:
     if args.resume is None and rig.supervisor.sweep is None:
         raise ConfigError("needs a 'sweep:' plan", key="supervisor.sweep", path=str(args.config))
     try:
-        supervisor = dataclasses.replace(rig.supervisor, mode="sweep", exit_when_done=True,
-                                         runs_dir=args.runs_dir or rig.supervisor.runs_dir)
+        supervisor = dataclasses.replace(
+            rig.supervisor, mode="sweep", exit_when_done=True, runs_dir=args.runs_dir or rig.supervisor.runs_dir
+        )
     except ValueError as exc:
         raise ConfigError(str(exc), key="supervisor", path=str(args.config or args.resume)) from exc
     rig = dataclasses.replace(rig, supervisor=supervisor)
@@ -60,8 +61,10 @@ def run(args: argparse.Namespace) -> int:
     if supervisor_service is not None and supervisor_service.run_dir is not None:
         run_dir = supervisor_service.run_dir
         print(f"flagtrack sweep: {supervisor_service.stop_reason}; run folder {run_dir}", file=sys.stderr)
-        print(f"  log {run_dir / 'run.jsonl'}\n  summary {run_dir / 'summary.csv'}\n  figure {run_dir / 'amplitude.png'}",
-              file=sys.stderr)
+        print(
+            f"  log {run_dir / 'run.jsonl'}\n  summary {run_dir / 'summary.csv'}\n  figure {run_dir / 'amplitude.png'}",
+            file=sys.stderr,
+        )
         if supervisor_service.stop_reason != "finished":
             print(f"  resume with: flagtrack sweep --resume {run_dir}", file=sys.stderr)
             return result.code or 1

@@ -35,12 +35,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sim.add_argument("--watchdog-s", type=float, help="communication-loss watchdog, s")
     sim.add_argument("--ramp-mps2", type=float, help="the controller's own ramp limit, m/s^2")
     sim.add_argument("--initial-speed-mps", type=float, help="speed at start, m/s")
-    for name, text in (("get", "read speed and fault"), ("set", "ramp to a speed and hold it"), ("stop", "ramp to zero")):
+    for name, text in (
+        ("get", "read speed and fault"),
+        ("set", "ramp to a speed and hold it"),
+        ("stop", "ramp to zero"),
+    ):
         sub = actions.add_parser(name, help=text)
         if name == "set":
             sub.add_argument("speed_mps", type=float, help="target speed, m/s")
-            sub.add_argument("--no-hold", action="store_true",
-                             help="exit once reached (the controller's watchdog then stops the fan)")
+            sub.add_argument(
+                "--no-hold",
+                action="store_true",
+                help="exit once reached (the controller's watchdog then stops the fan)",
+            )
         sub.add_argument("-c", "--config", required=True, help="rig config with a tunnel section")
         sub.add_argument("--port", help="override tunnel.port (and use it with the configured driver)")
 

@@ -47,8 +47,13 @@ def run(args: argparse.Namespace) -> int:
     from flagtrack.daemon.rig.run import run_rig
 
     rig, names = rig_from_args(args)
-    return run_rig(rig, names, exit_at_end_of_stream=args.exit_at_eof, centrelines=args.centrelines,
-                   shutdown_timeout_s=args.shutdown_timeout).code
+    return run_rig(
+        rig,
+        names,
+        exit_at_end_of_stream=args.exit_at_eof,
+        centrelines=args.centrelines,
+        shutdown_timeout_s=args.shutdown_timeout,
+    ).code
 
 
 def rig_from_args(args: argparse.Namespace) -> tuple[RigConfig, list[str]]:
@@ -68,8 +73,12 @@ def rig_from_args(args: argparse.Namespace) -> tuple[RigConfig, list[str]]:
     if args.replay is not None:
         if not args.replay.is_file():
             raise ConfigError(f"no such recording: {args.replay}", key="--replay")
-        camera = CameraConfig(id=rig.camera.id, adapter="replay", packet_us=rig.camera.packet_us,
-                              replay=ReplayConfig(args.replay, speed=args.speed, loop=args.loop))
+        camera = CameraConfig(
+            id=rig.camera.id,
+            adapter="replay",
+            packet_us=rig.camera.packet_us,
+            replay=ReplayConfig(args.replay, speed=args.speed, loop=args.loop),
+        )
         rig = dataclasses.replace(rig, camera=camera)
         for name in ("camera", "tracker"):
             if name not in names:

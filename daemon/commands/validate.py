@@ -30,14 +30,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``flagtrack validate``."""
     parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="a sweep's run folder")
     parser.add_argument("-o", "--out", type=Path, help="output folder (default RUN_DIR/validation)")
-    parser.add_argument("--centrelines", type=Path, metavar="DIR",
-                        help="use DIR/<point>_centrelines.h5 (or DIR/<point>.h5) instead of the run's centrelines")
-    parser.add_argument("--reconstruct", action="store_true",
-                        help="reconstruct each raw file first, with the run's tracker section and the flags below")
-    parser.add_argument("-c", "--config", type=Path,
-                        help="with --reconstruct: a YAML file whose tracker: section is used")
-    parser.add_argument("--sync", choices=("auto", "trigger", "xcorr", "none"),
-                        help="clock sync mode (default: the run's)")
+    parser.add_argument(
+        "--centrelines",
+        type=Path,
+        metavar="DIR",
+        help="use DIR/<point>_centrelines.h5 (or DIR/<point>.h5) instead of the run's centrelines",
+    )
+    parser.add_argument(
+        "--reconstruct",
+        action="store_true",
+        help="reconstruct each raw file first, with the run's tracker section and the flags below",
+    )
+    parser.add_argument(
+        "-c", "--config", type=Path, help="with --reconstruct: a YAML file whose tracker: section is used"
+    )
+    parser.add_argument(
+        "--sync", choices=("auto", "trigger", "xcorr", "none"), help="clock sync mode (default: the run's)"
+    )
     parser.add_argument("--x-over-l", type=float, metavar="F", help="beam position x/L (default: the run's)")
     parser.add_argument("--max-lag-ms", type=float, metavar="MS", help="cross-correlation search half-width")
     parser.add_argument("--window", type=float, default=0.3, metavar="S", help="time shown per point figure, s")
@@ -57,17 +66,28 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"no run log in {args.run_dir}", key="RUN_DIR")
     record = read_run(args.run_dir)
     sensor = run_sensor_config(record, str(args.run_dir / RUN_LOG))
-    sync = dataclasses.replace(sensor.sync, **{k: v for k, v in (("mode", args.sync), ("max_lag_ms", args.max_lag_ms))
-                                                if v is not None})
+    sync = dataclasses.replace(
+        sensor.sync, **{k: v for k, v in (("mode", args.sync), ("max_lag_ms", args.max_lag_ms)) if v is not None}
+    )
     beam = sensor.beam if args.x_over_l is None else dataclasses.replace(sensor.beam, x_over_l=args.x_over_l)
     sensor = dataclasses.replace(sensor, sync=sync, beam=beam)
     tracking = _tracking_setup(args, record) if args.reconstruct else None
-    result = validate_run(args.run_dir, out_dir=args.out, centrelines_dir=args.centrelines, sensor=sensor,
-                          reconstruct=tracking, window_s=args.window)
+    result = validate_run(
+        args.run_dir,
+        out_dir=args.out,
+        centrelines_dir=args.centrelines,
+        sensor=sensor,
+        reconstruct=tracking,
+        window_s=args.window,
+    )
     rows = [_row(p) for p in result.points if p.sensor_status is not None]
     if args.json:
-        print(json.dumps({"csv": str(result.csv.resolve()), "figure": str(result.figure.resolve()), "points": rows},
-                         allow_nan=False))
+        print(
+            json.dumps(
+                {"csv": str(result.csv.resolve()), "figure": str(result.figure.resolve()), "points": rows},
+                allow_nan=False,
+            )
+        )
     else:
         _print_table(rows)
         print(f"flagtrack validate: {len(rows)} points -> {result.csv} and {result.figure}", file=sys.stderr)
@@ -90,10 +110,24 @@ def _tracking_setup(args: argparse.Namespace, record) -> object:  # noqa: ANN001
     return tracking_setup(apply_tracking_arguments(config, args), path=where)
 
 
-_COLUMNS = ("point_id", "speed_mps", "state", "sensor_status", "sensor_sync", "sensor_offset_us",
-            "sensor_offset_unc_us", "sensor_xcorr_offset_us", "sensor_error_rms_over_l", "sensor_error_max_over_l",
-            "sensor_error_mean_over_l", "sensor_error_std_over_l", "delta_rms_over_l", "delta_rms_std_over_l",
-            "sensor_samples", "sensor_missing")
+_COLUMNS = (
+    "point_id",
+    "speed_mps",
+    "state",
+    "sensor_status",
+    "sensor_sync",
+    "sensor_offset_us",
+    "sensor_offset_unc_us",
+    "sensor_xcorr_offset_us",
+    "sensor_error_rms_over_l",
+    "sensor_error_max_over_l",
+    "sensor_error_mean_over_l",
+    "sensor_error_std_over_l",
+    "delta_rms_over_l",
+    "delta_rms_std_over_l",
+    "sensor_samples",
+    "sensor_missing",
+)
 
 
 def _row(point) -> dict[str, object]:  # noqa: ANN001
@@ -102,14 +136,18 @@ def _row(point) -> dict[str, object]:  # noqa: ANN001
 
 
 def _print_table(rows: list[dict[str, object]]) -> None:
-    print(f"{'point':<16} {'U m/s':>6} {'state':<9} {'sync':<8} {'offset ms':>10} {'± us':>7} {'xcorr ms':>9} "
-          f"{'e RMS %':>8} {'e max %':>8} {'dRMS %':>7} {'missing':>8}  status")
+    print(
+        f"{'point':<16} {'U m/s':>6} {'state':<9} {'sync':<8} {'offset ms':>10} {'± us':>7} {'xcorr ms':>9} "
+        f"{'e RMS %':>8} {'e max %':>8} {'dRMS %':>7} {'missing':>8}  status"
+    )
     for r in rows:
-        print(f"{r['point_id']:<16} {r['speed_mps']:>6.2f} {r['state']:<9} {r['sensor_sync'] or '-':<8} "
-              f"{_fmt(r['sensor_offset_us'], 1e-3, 3):>10} {_fmt(r['sensor_offset_unc_us'], 1, 1):>7} "
-              f"{_fmt(r['sensor_xcorr_offset_us'], 1e-3, 3):>9} {_fmt(r['sensor_error_rms_over_l'], 100, 2):>8} "
-              f"{_fmt(r['sensor_error_max_over_l'], 100, 2):>8} {_fmt(r['delta_rms_over_l'], 100, 2):>7} "
-              f"{r['sensor_missing']:>8}  {r['sensor_status']}")
+        print(
+            f"{r['point_id']:<16} {r['speed_mps']:>6.2f} {r['state']:<9} {r['sensor_sync'] or '-':<8} "
+            f"{_fmt(r['sensor_offset_us'], 1e-3, 3):>10} {_fmt(r['sensor_offset_unc_us'], 1, 1):>7} "
+            f"{_fmt(r['sensor_xcorr_offset_us'], 1e-3, 3):>9} {_fmt(r['sensor_error_rms_over_l'], 100, 2):>8} "
+            f"{_fmt(r['sensor_error_max_over_l'], 100, 2):>8} {_fmt(r['delta_rms_over_l'], 100, 2):>7} "
+            f"{r['sensor_missing']:>8}  {r['sensor_status']}"
+        )
 
 
 def _fmt(value: object, scale: float, digits: int) -> str:

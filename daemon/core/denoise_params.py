@@ -34,8 +34,9 @@ class DenoiseParams:
         if self.window_us <= 0:
             raise ValueError(f"window_us must be positive, got {self.window_us}")
         if not 1 <= self.min_neighbours <= self.max_neighbours <= 8:
-            raise ValueError(f"need 1 <= min_neighbours <= max_neighbours <= 8, got "
-                             f"{self.min_neighbours}, {self.max_neighbours}")
+            raise ValueError(
+                f"need 1 <= min_neighbours <= max_neighbours <= 8, got {self.min_neighbours}, {self.max_neighbours}"
+            )
         if not 0 < self.noise_pass < 1:
             raise ValueError(f"noise_pass must be in (0, 1), got {self.noise_pass}")
         if self.block_us <= 0:

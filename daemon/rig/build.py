@@ -25,7 +25,9 @@ from flagtrack.drivers.tunnel.base import WindTunnel
 log = logging.getLogger(__name__)
 
 
-def open_camera(cfg: CameraConfig, speed_source: Callable[[], float] | None = None, rig_path: str | None = None) -> Camera:
+def open_camera(
+    cfg: CameraConfig, speed_source: Callable[[], float] | None = None, rig_path: str | None = None
+) -> Camera:
     """The camera adapter the ``camera:`` section names (hardware SDKs are imported only here)."""
     if cfg.adapter == "replay":
         from flagtrack.drivers.camera.replay import ReplayCamera
@@ -95,8 +97,9 @@ def open_hardware_camera(rig: RigConfig) -> OpenedCamera | None:
     except FlagtrackError:
         raise
     except Exception as exc:  # an SDK's own exception: still one line for the user
-        raise DriverError(f"cannot open the camera ({type(exc).__name__}: {exc})",
-                          device=f"camera adapter '{rig.camera.adapter}'") from exc
+        raise DriverError(
+            f"cannot open the camera ({type(exc).__name__}: {exc})", device=f"camera adapter '{rig.camera.adapter}'"
+        ) from exc
     return OpenedCamera(camera, info)
 
 
@@ -149,17 +152,27 @@ def build_services(
     elif "camera" in names and rig.camera.adapter == "simulated" and rig.tunnel is not None:
         speed_source = BusSpeedSource(bus)
     if "recorder" in names:
-        services.append(RecorderService(bus, replace(rig.recorder, camera_id=rig.camera.id), rig.snapshot(),
-                                        centreline_attrs=setup.attrs if setup else processing_attrs(rig.tracker),
-                                        exit_at_end_of_stream=exit_at_end_of_stream))
+        services.append(
+            RecorderService(
+                bus,
+                replace(rig.recorder, camera_id=rig.camera.id),
+                rig.snapshot(),
+                centreline_attrs=setup.attrs if setup else processing_attrs(rig.tracker),
+                exit_at_end_of_stream=exit_at_end_of_stream,
+            )
+        )
     if "tracker" in names:
         assert setup is not None
-        cfg = replace(rig.tracker_service, camera_id=rig.camera.id,
-                      exit_at_end_of_stream=exit_at_end_of_stream or rig.tracker_service.exit_at_end_of_stream)
+        cfg = replace(
+            rig.tracker_service,
+            camera_id=rig.camera.id,
+            exit_at_end_of_stream=exit_at_end_of_stream or rig.tracker_service.exit_at_end_of_stream,
+        )
         services.append(TrackerService(bus, cfg, setup.factory, setup.units))
     if "viewer" in names:
-        services.append(ViewerService(bus, replace(rig.viewer, camera_id=rig.camera.id),
-                                      exit_after_final=exit_at_end_of_stream))
+        services.append(
+            ViewerService(bus, replace(rig.viewer, camera_id=rig.camera.id), exit_after_final=exit_at_end_of_stream)
+        )
     if "camera" not in names:
         camera = None
     elif camera is None:
@@ -191,6 +204,10 @@ def sensor_service(rig: RigConfig, bus: Bus, camera: Camera | None) -> Service:
     if cfg is None:
         raise ConfigError("the sensor service needs a 'sensor:' section", key="sensor", path=rig.path)
     if cfg.driver == "simulated" and not hasattr(camera, "truth"):
-        raise ConfigError("the simulated sensor reads the simulated camera's flag: run the camera (adapter "
-                          "'simulated') in the same process", key="sensor.driver", path=rig.path)
+        raise ConfigError(
+            "the simulated sensor reads the simulated camera's flag: run the camera (adapter "
+            "'simulated') in the same process",
+            key="sensor.driver",
+            path=rig.path,
+        )
     return SensorService(bus, cfg, lambda: open_sensor(cfg, camera, rig.path))

@@ -156,8 +156,9 @@ def check_rig(rig: RigConfig, services: Sequence[str]) -> None:
     if "recorder" in services:
         require_folder(rig.recorder.directory, key="recorder.directory", path=where)
         if rig.recorder.path:
-            require_folder(recording_base(rig.recorder.directory, rig.recorder.path).parent, key="recorder.path",
-                           path=where)
+            require_folder(
+                recording_base(rig.recorder.directory, rig.recorder.path).parent, key="recorder.path", path=where
+            )
     if "viewer" in services and viewer_writes_file(rig.viewer):
         require_output_file(rig.viewer.rrd_path, key="viewer.rrd_path", path=where)
     if "supervisor" in services:

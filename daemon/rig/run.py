@@ -22,9 +22,17 @@ from flagtrack.daemon.typed_yaml import require_output_file
 from flagtrack.drivers.camera.simulated import fast_forward
 
 
-def run_rig(rig: RigConfig, names: list[str], *, exit_at_end_of_stream: bool = False,
-            centrelines: Path | None = None, shutdown_timeout_s: float = 10.0, resume_dir: Path | None = None,
-            quiet: bool = False, prepared: bool = False) -> RigRun:
+def run_rig(
+    rig: RigConfig,
+    names: list[str],
+    *,
+    exit_at_end_of_stream: bool = False,
+    centrelines: Path | None = None,
+    shutdown_timeout_s: float = 10.0,
+    resume_dir: Path | None = None,
+    quiet: bool = False,
+    prepared: bool = False,
+) -> RigRun:
     """Open the bus, build and run the services until a signal, a failure or the end of the work.
 
     ``prepared``: the caller already ran :func:`prepare_services` (to time the run without it).
@@ -32,6 +40,7 @@ def run_rig(rig: RigConfig, names: list[str], *, exit_at_end_of_stream: bool = F
     Returns:
         A :class:`RigRun` (exit code, the services, the runner's report).
     """
+
     def say(text: str) -> None:
         if not quiet:
             print(f"flagtrack up: {text}", file=sys.stderr)
@@ -56,16 +65,28 @@ def run_rig(rig: RigConfig, names: list[str], *, exit_at_end_of_stream: bool = F
     camera = open_hardware_camera(rig) if "camera" in names else None
     try:
         with Bus(rig.bus_config) as bus:
-            services = build_services(rig, bus, names, exit_at_end_of_stream=exit_at_end_of_stream,
-                                      resume_dir=resume_dir, tracker=setup, camera=camera)
+            services = build_services(
+                rig,
+                bus,
+                names,
+                exit_at_end_of_stream=exit_at_end_of_stream,
+                resume_dir=resume_dir,
+                tracker=setup,
+                camera=camera,
+            )
             if centrelines is not None:
                 made_by = setup.attrs if setup is not None else processing_attrs(rig.tracker)
                 attrs = {**made_by, "input_file": str(rig.camera.replay.path) if rig.camera.replay else ""}
-                services.insert(0, CentrelineFileService(bus, centrelines, attrs,
-                                                         exit_after_final=exit_at_end_of_stream))
+                services.insert(
+                    0, CentrelineFileService(bus, centrelines, attrs, exit_after_final=exit_at_end_of_stream)
+                )
             say(f"{', '.join(s.name for s in services)} on {rig.bus_config.namespace}")
-            report = run_services(services, shutdown_timeout_s=shutdown_timeout_s, stop_when_any_finishes=finishers,
-                                  on_service_end=bus.undeclare_alive)
+            report = run_services(
+                services,
+                shutdown_timeout_s=shutdown_timeout_s,
+                stop_when_any_finishes=finishers,
+                on_service_end=bus.undeclare_alive,
+            )
     finally:
         if camera is not None and not camera.handed_over:
             camera.close()  # the rig failed before the camera service took it
@@ -74,8 +95,9 @@ def run_rig(rig: RigConfig, names: list[str], *, exit_at_end_of_stream: bool = F
     return RigRun(code, services, report)
 
 
-def _report_end(report: RunReport, services: list[Service], centrelines: Path | None,
-                say: Callable[[str], None]) -> None:
+def _report_end(
+    report: RunReport, services: list[Service], centrelines: Path | None, say: Callable[[str], None]
+) -> None:
     """Failures and stragglers always, on stderr; where the outputs are unless quiet (``say``)."""
     for name, exc in report.errors.items():
         print(f"flagtrack up: {name} failed: {exc}", file=sys.stderr)
@@ -88,8 +110,13 @@ def _report_end(report: RunReport, services: list[Service], centrelines: Path | 
             say(f"viewer {service.description}")
 
 
-def prepare_services(rig: RigConfig, names: list[str], say: Callable[[str], None] = lambda text: None,
-                     *, tracker: TrackingSetup | None = None) -> None:
+def prepare_services(
+    rig: RigConfig,
+    names: list[str],
+    say: Callable[[str], None] = lambda text: None,
+    *,
+    tracker: TrackingSetup | None = None,
+) -> None:
     """Do the slow one-off work of the services before they start, while nothing runs in real time
     (``say`` tells the user when that includes loading or compiling kernels; ``tracker``: the rig's
     tracker setup, if the caller already made it).

@@ -20,7 +20,23 @@ from flagtrack.daemon.schema.messages import (
 )
 
 __all__ = [
-    "MAGIC", "MESSAGE_TYPES", "READABLE_VERSIONS", "VERSION", "CameraStatus", "CentrelineMessage", "EventPacket",
-    "EventRate", "Keys", "MessageType", "RecorderCommand", "RecorderStatus", "SensorSamples", "SupervisorState",
-    "TrackerStatus", "TunnelCommand", "TunnelState", "decode", "encode",
+    "MAGIC",
+    "MESSAGE_TYPES",
+    "READABLE_VERSIONS",
+    "VERSION",
+    "CameraStatus",
+    "CentrelineMessage",
+    "EventPacket",
+    "EventRate",
+    "Keys",
+    "MessageType",
+    "RecorderCommand",
+    "RecorderStatus",
+    "SensorSamples",
+    "SupervisorState",
+    "TrackerStatus",
+    "TunnelCommand",
+    "TunnelState",
+    "decode",
+    "encode",
 ]

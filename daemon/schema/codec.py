@@ -105,8 +105,10 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     if magic != MAGIC:
         raise SchemaError(f"bad magic {bytes(magic)!r}, not a flagtrack message", key=key)
     if version not in READABLE_VERSIONS:
-        raise SchemaError(f"unsupported schema version {version} (this build reads "
-                          f"{', '.join(map(str, sorted(READABLE_VERSIONS)))})", key=key)
+        raise SchemaError(
+            f"unsupported schema version {version} (this build reads {', '.join(map(str, sorted(READABLE_VERSIONS)))})",
+            key=key,
+        )
     try:
         cls = MESSAGE_TYPES[MessageType(type_id)]
     except ValueError:
@@ -117,7 +119,7 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     if end > len(view):
         raise SchemaError(f"meta length {meta_len} runs past the end ({len(view)} bytes)", key=key)
     try:
-        meta = json.loads(bytes(view[_HEADER.size:end]))
+        meta = json.loads(bytes(view[_HEADER.size : end]))
     except ValueError as exc:
         raise SchemaError(f"{cls.__name__}: meta is not valid JSON ({exc})", key=key) from None
     if not isinstance(meta, dict):
@@ -160,7 +162,7 @@ def _read_blobs(cls: type, blobs: Any, payload: memoryview, key: str | None) -> 
             raise SchemaError(f"{cls.__name__}: payload '{name}' truncated", key=key)
         try:
             if np_dtype is None:
-                value: Any = bytes(payload[offset:offset + size])
+                value: Any = bytes(payload[offset : offset + size])
             else:  # a read-only view of the message, as np.frombuffer gives, in one call
                 value = np.ndarray(shape, dtype=np_dtype, buffer=payload, offset=offset)
         except (ValueError, TypeError) as exc:  # e.g. more than 64 dimensions, or one too large for numpy
@@ -177,9 +179,16 @@ def _read_blobs(cls: type, blobs: Any, payload: memoryview, key: str | None) -> 
 _REAL, _INT = "fiu", "iu"
 _SHAPES: dict[type, tuple[tuple[str, tuple[str, ...], str], ...]] = {
     CentrelineMessage: (
-        ("t_s", ("n",), _REAL), ("s", ("n_s",), _REAL), ("x", ("n", "n_s"), _REAL), ("y", ("n", "n_s"), _REAL),
-        ("joints_x", ("n", "N_j+1"), _REAL), ("joints_y", ("n", "N_j+1"), _REAL), ("tip_x", ("n",), _REAL),
-        ("tip_y", ("n",), _REAL), ("delta_rms", ("n",), _REAL), ("n_events", ("n",), _INT),
+        ("t_s", ("n",), _REAL),
+        ("s", ("n_s",), _REAL),
+        ("x", ("n", "n_s"), _REAL),
+        ("y", ("n", "n_s"), _REAL),
+        ("joints_x", ("n", "N_j+1"), _REAL),
+        ("joints_y", ("n", "N_j+1"), _REAL),
+        ("tip_x", ("n",), _REAL),
+        ("tip_y", ("n",), _REAL),
+        ("delta_rms", ("n",), _REAL),
+        ("n_events", ("n",), _INT),
         ("source_ns", ("n",), _INT),
     ),
     SensorSamples: (("t_us", ("n",), _INT), ("value", ("n",), _REAL), ("trigger_t_us", ("m",), _INT)),
@@ -188,8 +197,9 @@ _MIN_SIZE = {"n_s": 1, "N_j+1": 2}
 _KIND_NAMES = {_REAL: "real numbers", _INT: "integers"}
 
 
-def _check_shapes(cls: type, spec: tuple[tuple[str, tuple[str, ...], str], ...], values: dict[str, Any],
-                  key: str | None) -> None:
+def _check_shapes(
+    cls: type, spec: tuple[tuple[str, tuple[str, ...], str], ...], values: dict[str, Any], key: str | None
+) -> None:
     """Raise SchemaError naming the first field whose shape or type disagrees with ``spec`` (O(fields))."""
     sizes: dict[str, int] = {}
     for name, dims, kinds in spec:
@@ -206,14 +216,20 @@ def _check_shapes(cls: type, spec: tuple[tuple[str, tuple[str, ...], str], ...],
                 ok = False
                 break
         if not ok:
-            said = [f"{d} = {sizes[d]}" if d in sizes else f"{d} >= {_MIN_SIZE[d]}"
-                    for d in dims if d in sizes or d in _MIN_SIZE]
-            raise SchemaError(f"{cls.__name__}: field '{name}' has shape {shape}, expected ({', '.join(dims)}"
-                              f"{',' if len(dims) == 1 else ''}){' with ' + ', '.join(said) if said else ''}",
-                              key=key)
+            said = [
+                f"{d} = {sizes[d]}" if d in sizes else f"{d} >= {_MIN_SIZE[d]}"
+                for d in dims
+                if d in sizes or d in _MIN_SIZE
+            ]
+            raise SchemaError(
+                f"{cls.__name__}: field '{name}' has shape {shape}, expected ({', '.join(dims)}"
+                f"{',' if len(dims) == 1 else ''}){' with ' + ', '.join(said) if said else ''}",
+                key=key,
+            )
         if array.dtype.kind not in kinds:
-            raise SchemaError(f"{cls.__name__}: field '{name}' holds {array.dtype}, expected {_KIND_NAMES[kinds]}",
-                              key=key)
+            raise SchemaError(
+                f"{cls.__name__}: field '{name}' holds {array.dtype}, expected {_KIND_NAMES[kinds]}", key=key
+            )
 
 
 _CACHED_DIMS = 8  # descriptors with more dimensions are checked without the cache (bounds its memory)
@@ -338,8 +354,11 @@ def _scalar(cls: type, name: str, annotation: Any, value: Any, key: str | None) 
     if kind is int or kind is float:
         ok = isinstance(value, int | float if kind is float else int) and not isinstance(value, bool)
     if not ok:
-        raise SchemaError(f"{cls.__name__}: field '{name}' expects {getattr(kind, '__name__', annotation)}, "
-                          f"got {type(value).__name__} {str(value)[:40]!r}", key=key)
+        raise SchemaError(
+            f"{cls.__name__}: field '{name}' expects {getattr(kind, '__name__', annotation)}, "
+            f"got {type(value).__name__} {str(value)[:40]!r}",
+            key=key,
+        )
     if kind is float:
         try:
             return float(value)

@@ -184,23 +184,49 @@ class CentrelineMessage:
 
     @classmethod
     def from_batch(
-        cls, batch: CentrelineBatch, *, source: str, seq: int, units: str, source_ns: np.ndarray, final: bool = False,
-        published_ns: int = 0, stream: int = 0,
+        cls,
+        batch: CentrelineBatch,
+        *,
+        source: str,
+        seq: int,
+        units: str,
+        source_ns: np.ndarray,
+        final: bool = False,
+        published_ns: int = 0,
+        stream: int = 0,
     ) -> CentrelineMessage:
         """Wrap a tracker batch for the wire."""
         return cls(
-            final=final, published_ns=published_ns, stream=stream, source=source, seq=seq, units=units, t_s=batch.t_s,
+            final=final,
+            published_ns=published_ns,
+            stream=stream,
+            source=source,
+            seq=seq,
+            units=units,
+            t_s=batch.t_s,
             s=batch.s,
-            x=batch.x, y=batch.y, joints_x=batch.joints_x, joints_y=batch.joints_y, tip_x=batch.tip_x,
+            x=batch.x,
+            y=batch.y,
+            joints_x=batch.joints_x,
+            joints_y=batch.joints_y,
+            tip_x=batch.tip_x,
             tip_y=batch.tip_y,
-            delta_rms=batch.delta_rms, n_events=batch.n_events, source_ns=np.asarray(source_ns, np.int64),
+            delta_rms=batch.delta_rms,
+            n_events=batch.n_events,
+            source_ns=np.asarray(source_ns, np.int64),
         )
 
     def batch(self) -> CentrelineBatch:
         """The updates as a :class:`CentrelineBatch`."""
         return CentrelineBatch(
-            t_s=self.t_s, s=self.s, x=self.x, y=self.y, joints_x=self.joints_x, joints_y=self.joints_y,
-            delta_rms=self.delta_rms, n_events=self.n_events,
+            t_s=self.t_s,
+            s=self.s,
+            x=self.x,
+            y=self.y,
+            joints_x=self.joints_x,
+            joints_y=self.joints_y,
+            delta_rms=self.delta_rms,
+            n_events=self.n_events,
         )
 
 
@@ -324,7 +350,16 @@ class SensorSamples:
 MESSAGE_TYPES: dict[MessageType, type] = {
     cls.TYPE: cls
     for cls in (
-        EventPacket, CameraStatus, EventRate, CentrelineMessage, TrackerStatus, TunnelState,
-        TunnelCommand, SupervisorState, RecorderCommand, RecorderStatus, SensorSamples,
+        EventPacket,
+        CameraStatus,
+        EventRate,
+        CentrelineMessage,
+        TrackerStatus,
+        TunnelState,
+        TunnelCommand,
+        SupervisorState,
+        RecorderCommand,
+        RecorderStatus,
+        SensorSamples,
     )
 }

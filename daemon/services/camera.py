@@ -107,9 +107,12 @@ class CameraService:
 
     def _stream(self, info: CameraInfo, stop: threading.Event, events_pub: Any, rate_pub: Any) -> None:
         """Read, packetize and publish until stopped or the end of the recording (``reached_eof``)."""
-        packetizer = Packetizer(info.encoding, info.width, info.height,
-                                PacketParams(self.cfg.packet_us, self.cfg.max_packet_events))
-        Packetizer(info.encoding, 1, 1).push(make_events([0, 1], [0, 0], [0, 0], [1, 0]), t_until_us=5000)  # load the encoder
+        packetizer = Packetizer(
+            info.encoding, info.width, info.height, PacketParams(self.cfg.packet_us, self.cfg.max_packet_events)
+        )
+        Packetizer(info.encoding, 1, 1).push(
+            make_events([0, 1], [0, 0], [0, 0], [1, 0]), t_until_us=5000
+        )  # load the encoder
         rates = RateCounter(int(self.cfg.rate_interval_s * 1e6))
         while not stop.is_set():
             try:
@@ -123,22 +126,53 @@ class CameraService:
                 packets = packetizer.push(data.events, data.triggers, data.t_until_us)
                 self._publish(packets, data.arrival_ns, info, events_pub, rate_pub, rates)
 
-    def _publish(self, packets: list[Packet], arrival_ns: int, info: CameraInfo, events_pub: Publisher, rate_pub: Publisher,
-                 rates: RateCounter, end_of_stream: bool = False) -> None:
+    def _publish(
+        self,
+        packets: list[Packet],
+        arrival_ns: int,
+        info: CameraInfo,
+        events_pub: Publisher,
+        rate_pub: Publisher,
+        rates: RateCounter,
+        end_of_stream: bool = False,
+    ) -> None:
         for i, packet in enumerate(packets):
-            events_pub.put(EventPacket(
-                camera_id=self.cfg.id, seq=self.packets, t_first_us=packet.t_first_us, t_last_us=packet.t_last_us,
-                n_events=packet.n_events, width=info.width, height=info.height, encoding=info.encoding,
-                sent_ns=arrival_ns or time.time_ns(), t_offset_us=packet.t_offset_us, n_triggers=packet.n_triggers,
-                end_of_stream=end_of_stream and i == len(packets) - 1, stream_id=self.stream_id, data=packet.data,
-            ))
+            events_pub.put(
+                EventPacket(
+                    camera_id=self.cfg.id,
+                    seq=self.packets,
+                    t_first_us=packet.t_first_us,
+                    t_last_us=packet.t_last_us,
+                    n_events=packet.n_events,
+                    width=info.width,
+                    height=info.height,
+                    encoding=info.encoding,
+                    sent_ns=arrival_ns or time.time_ns(),
+                    t_offset_us=packet.t_offset_us,
+                    n_triggers=packet.n_triggers,
+                    end_of_stream=end_of_stream and i == len(packets) - 1,
+                    stream_id=self.stream_id,
+                    data=packet.data,
+                )
+            )
             self.packets += 1
             self.events += packet.n_events
             for t_end_us, n, n_on, n_bytes in rates.add(packet):
                 interval_s = rates.interval_us * 1e-6
-                rate_pub.put(EventRate(self.cfg.id, t_end_us, interval_s, n, n / interval_s,
-                                       n_on / n if n else 0.0, n_bytes))
+                rate_pub.put(
+                    EventRate(self.cfg.id, t_end_us, interval_s, n, n / interval_s, n_on / n if n else 0.0, n_bytes)
+                )
 
     def _status(self, info: CameraInfo, state: str, message: str = "") -> CameraStatus:
-        return CameraStatus(self.cfg.id, state, info.adapter, info.width, info.height, info.encoding,
-                            dict(info.settings), message, self.packets, self.events)
+        return CameraStatus(
+            self.cfg.id,
+            state,
+            info.adapter,
+            info.width,
+            info.height,
+            info.encoding,
+            dict(info.settings),
+            message,
+            self.packets,
+            self.events,
+        )

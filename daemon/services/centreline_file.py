@@ -41,8 +41,9 @@ class CentrelineFileService:
         self.updates = 0
         self.rejected = 0
         self.problems = ProblemLog(log, "centrelines")
-        self.subscription = bus.subscribe(bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000,
-                                          max_bytes=512 << 20)  # a few minutes of kHz updates behind the disk
+        self.subscription = bus.subscribe(
+            bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000, max_bytes=512 << 20
+        )  # a few minutes of kHz updates behind the disk
 
     def run(self, stop: threading.Event) -> None:
         sink = CentrelineSink(self.path, self.attrs, flush_interval_s=self.write_interval_s)
@@ -55,8 +56,11 @@ class CentrelineFileService:
                         self.updates += len(msg.t_s)
                     except CentrelineShapeError as exc:
                         self.rejected += 1
-                        self.problems.add("messages not written", f"message {msg.seq} has {exc.got[0]} samples and "
-                                          f"{exc.got[1]} joints, the file {exc.want[0]} and {exc.want[1]}")
+                        self.problems.add(
+                            "messages not written",
+                            f"message {msg.seq} has {exc.got[0]} samples and "
+                            f"{exc.got[1]} joints, the file {exc.want[0]} and {exc.want[1]}",
+                        )
                     if msg.final:
                         sink.flush()
                         if self.exit_after_final:

@@ -127,8 +127,9 @@ class RecordingPart:
 
     def __post_init__(self) -> None:
         if self.want_centrelines:  # the file is created at the first update
-            self.centrelines = CentrelineSink(self.centrelines_path,
-                                              {**self.centreline_attrs, "input_file": str(self.raw_path)})
+            self.centrelines = CentrelineSink(
+                self.centrelines_path, {**self.centreline_attrs, "input_file": str(self.raw_path)}
+            )
 
     @property
     def raw_path(self) -> Path:
@@ -150,11 +151,15 @@ class RecordingPart:
         if self.ended:
             return f"packet {packet.seq} after the end of stream"
         if arrival is Arrival.NEW_STREAM:
-            return f"packet {packet.seq} of another stream after packet {(self.sequence.next_seq or 0) - 1} " \
-                   "(camera restarted)"
+            return (
+                f"packet {packet.seq} of another stream after packet {(self.sequence.next_seq or 0) - 1} "
+                "(camera restarted)"
+            )
         if (packet.encoding, packet.width, packet.height) != self._stream_key:
-            return f"packet {packet.seq} is {packet.encoding} {packet.width}x{packet.height}, the file " \
-                   f"{self._stream_key[0]} {self._stream_key[1]}x{self._stream_key[2]}"
+            return (
+                f"packet {packet.seq} is {packet.encoding} {packet.width}x{packet.height}, the file "
+                f"{self._stream_key[0]} {self._stream_key[1]}x{self._stream_key[2]}"
+            )
         return None
 
     def write_packet(self, packet: EventPacket) -> None:
@@ -165,9 +170,12 @@ class RecordingPart:
                 the header); nothing is written then.
         """
         if self.raw is None:
-            start = raw_header(packet.encoding, packet.width, packet.height,
-                               {"camera_id": packet.camera_id, "recorder": f"flagtrack-{__version__}"}) \
-                + stream_preamble(packet.encoding, packet.t_offset_us)
+            start = raw_header(
+                packet.encoding,
+                packet.width,
+                packet.height,
+                {"camera_id": packet.camera_id, "recorder": f"flagtrack-{__version__}"},
+            ) + stream_preamble(packet.encoding, packet.t_offset_us)
             self.raw_path.parent.mkdir(parents=True, exist_ok=True)
             self.raw = open(self.raw_path, "wb")  # noqa: SIM115 - closed in close()
             self.geometry = {"width": packet.width, "height": packet.height, "encoding": packet.encoding}
@@ -198,8 +206,10 @@ class RecordingPart:
         try:
             self.centrelines.add(msg.batch(), units=msg.units, source=msg.source)
         except CentrelineShapeError as exc:
-            raise SchemaError(f"centreline message {msg.seq} has {exc.got[0]} samples and {exc.got[1]} joints, the "
-                              f"file {exc.want[0]} and {exc.want[1]}: not recorded") from exc
+            raise SchemaError(
+                f"centreline message {msg.seq} has {exc.got[0]} samples and {exc.got[1]} joints, the "
+                f"file {exc.want[0]} and {exc.want[1]}: not recorded"
+            ) from exc
 
     def sync(self, cfg: RecorderConfig, force: bool = False) -> None:
         """Flush (and fsync) when due."""
@@ -217,13 +227,25 @@ class RecordingPart:
     def write_sidecar(self, stopped: bool = False) -> None:
         """Rewrite the JSON sidecar atomically (temporary file then rename)."""
         doc = {
-            "raw_file": self.raw_path.name, "started_unix_s": self.started_wall, "stopped": stopped,
-            "flagtrack_version": __version__, **self.geometry, "packets": self.packets, "events": self.events,
-            "bytes": self.bytes, "t_first_us": self.first_t_us, "t_last_us": self.last_t_us,
-            "sequence_gaps": self.gaps, "missing_packets": sum(b - a for a, b in self.gaps),
-            "malformed_packets": self.malformed, "late_packets": self.late, "dropped_packets": self.dropped,
+            "raw_file": self.raw_path.name,
+            "started_unix_s": self.started_wall,
+            "stopped": stopped,
+            "flagtrack_version": __version__,
+            **self.geometry,
+            "packets": self.packets,
+            "events": self.events,
+            "bytes": self.bytes,
+            "t_first_us": self.first_t_us,
+            "t_last_us": self.last_t_us,
+            "sequence_gaps": self.gaps,
+            "missing_packets": sum(b - a for a, b in self.gaps),
+            "malformed_packets": self.malformed,
+            "late_packets": self.late,
+            "dropped_packets": self.dropped,
             "part": self.part,
-            "continues": self.continues, "continued_in": self.continued_in, "config": self.config,
+            "continues": self.continues,
+            "continued_in": self.continued_in,
+            "config": self.config,
             "centrelines_file": self.centrelines_path.name if self.centrelines and self.centrelines.opened else None,
         }
         self.sidecar_path.parent.mkdir(parents=True, exist_ok=True)
@@ -248,9 +270,15 @@ class RecordingPart:
     def next_part(self) -> RecordingPart:
         """The recording of the next camera stream: ``<first base>_stream<part + 1>``, linked to this one."""
         first = self.first_base or self.base
-        part = RecordingPart(base=first.with_name(f"{first.name}_stream{self.part + 1}"), config=self.config,
-                         want_centrelines=self.want_centrelines, centreline_attrs=self.centreline_attrs,
-                         part=self.part + 1, first_base=first, continues=self.raw_path.name)
+        part = RecordingPart(
+            base=first.with_name(f"{first.name}_stream{self.part + 1}"),
+            config=self.config,
+            want_centrelines=self.want_centrelines,
+            centreline_attrs=self.centreline_attrs,
+            part=self.part + 1,
+            first_base=first,
+            continues=self.raw_path.name,
+        )
         self.continued_in = part.raw_path.name
         return part
 
@@ -260,8 +288,14 @@ class RecorderService:
 
     name = "recorder"
 
-    def __init__(self, bus: Bus, cfg: RecorderConfig, config_snapshot: dict[str, Any] | None = None,
-                 exit_at_end_of_stream: bool = False, centreline_attrs: dict[str, Any] | None = None) -> None:
+    def __init__(
+        self,
+        bus: Bus,
+        cfg: RecorderConfig,
+        config_snapshot: dict[str, Any] | None = None,
+        exit_at_end_of_stream: bool = False,
+        centreline_attrs: dict[str, Any] | None = None,
+    ) -> None:
         self.bus = bus
         self.exit_at_end_of_stream = exit_at_end_of_stream
         self._stream_ended = False
@@ -281,8 +315,13 @@ class RecorderService:
         self._dropped_before = 0  # the queue's drop count when the current part began
 
         keys = bus.keys
-        self._packets = bus.subscribe(keys.camera_events(cfg.camera_id), EventPacket, capacity=cfg.max_queue_packets,
-                                      max_bytes=cfg.max_queue_bytes, ring=True)
+        self._packets = bus.subscribe(
+            keys.camera_events(cfg.camera_id),
+            EventPacket,
+            capacity=cfg.max_queue_packets,
+            max_bytes=cfg.max_queue_bytes,
+            ring=True,
+        )
         self._lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000, max_bytes=256 << 20)
         self._commands = bus.subscribe(keys.recorder_command(), RecorderCommand, capacity=1000)
 
@@ -309,9 +348,11 @@ class RecorderService:
                 if self._stream_ended and self.exit_at_end_of_stream and self._lines_done(now):
                     break
                 if packets.channel.dropped > self.lost_packets:
-                    self.problems.add("packets dropped by the full queue", "the queue dropped "
-                                      f"{packets.channel.dropped} packet(s) in all (the disk falls behind)",
-                                      packets.channel.dropped - self.lost_packets)
+                    self.problems.add(
+                        "packets dropped by the full queue",
+                        f"the queue dropped {packets.channel.dropped} packet(s) in all (the disk falls behind)",
+                        packets.channel.dropped - self.lost_packets,
+                    )
                     self.lost_packets = packets.channel.dropped
                 if self.current is not None:
                     self.current.dropped = self.lost_packets - self._dropped_before
@@ -346,9 +387,15 @@ class RecorderService:
 
     def start(self, path: str, centrelines: bool, request_id: str = "") -> None:
         """Begin a recording at ``path`` (no extension; relative to the configured directory)."""
-        self._begin(RecordingPart(base=recording_base(self.cfg.directory, path), config=self.config_snapshot,
-                              want_centrelines=centrelines or self.cfg.centrelines,
-                              centreline_attrs=self.centreline_attrs), request_id)
+        self._begin(
+            RecordingPart(
+                base=recording_base(self.cfg.directory, path),
+                config=self.config_snapshot,
+                want_centrelines=centrelines or self.cfg.centrelines,
+                centreline_attrs=self.centreline_attrs,
+            ),
+            request_id,
+        )
 
     def _begin(self, recording: RecordingPart, request_id: str = "", message: str = "") -> None:
         recording.write_sidecar()
@@ -371,8 +418,13 @@ class RecorderService:
     def _close(self, recording: RecordingPart) -> None:
         recording.close()
         self.finished.append(recording.raw_path)
-        log.info("recorder: closed %s (%d packets, %d bytes, %d gaps)", recording.raw_path, recording.packets,
-                 recording.bytes, len(recording.gaps))
+        log.info(
+            "recorder: closed %s (%d packets, %d bytes, %d gaps)",
+            recording.raw_path,
+            recording.packets,
+            recording.bytes,
+            len(recording.gaps),
+        )
 
     def _close_draining(self) -> None:
         if self._draining is not None:
@@ -476,18 +528,29 @@ class RecorderService:
         if self._final_seen:
             return True
         if now - self._last_line_s >= self.cfg.drain_timeout_s:
-            log.warning("recorder: no final centreline message within %.1f s after the end of stream; closing",
-                        self.cfg.drain_timeout_s)
+            log.warning(
+                "recorder: no final centreline message within %.1f s after the end of stream; closing",
+                self.cfg.drain_timeout_s,
+            )
             return True
         return False
 
-    def _status(self, state: str, *, recording: RecordingPart | None = None, message: str = "", request_id: str = "") -> None:
+    def _status(
+        self, state: str, *, recording: RecordingPart | None = None, message: str = "", request_id: str = ""
+    ) -> None:
         rec = recording or self.current
         if not hasattr(self, "status_pub"):
             return
-        self.status_pub.put(RecorderStatus(
-            state=state, path=str(rec.raw_path) if rec else "", bytes=rec.bytes if rec else 0,
-            packets=rec.packets if rec else 0, missing_packets=sum(b - a for a, b in rec.gaps) if rec else 0,
-            request_id=request_id, message=message, malformed_packets=rec.malformed if rec else 0,
-            dropped_packets=self._packets.channel.dropped,
-        ))
+        self.status_pub.put(
+            RecorderStatus(
+                state=state,
+                path=str(rec.raw_path) if rec else "",
+                bytes=rec.bytes if rec else 0,
+                packets=rec.packets if rec else 0,
+                missing_packets=sum(b - a for a, b in rec.gaps) if rec else 0,
+                request_id=request_id,
+                message=message,
+                malformed_packets=rec.malformed if rec else 0,
+                dropped_packets=self._packets.channel.dropped,
+            )
+        )

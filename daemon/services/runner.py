@@ -21,6 +21,7 @@ from typing import Protocol
 
 log = logging.getLogger(__name__)
 
+
 class Service(Protocol):
     """A long-running part of the daemon."""
 
@@ -67,8 +68,12 @@ class ServiceGroup:
             seen gone at once, not when the process's session closes).
     """
 
-    def __init__(self, services: Sequence[Service], stop_when_any_finishes: Sequence[str] = (),
-                 on_service_end: Callable[[str], object] | None = None) -> None:
+    def __init__(
+        self,
+        services: Sequence[Service],
+        stop_when_any_finishes: Sequence[str] = (),
+        on_service_end: Callable[[str], object] | None = None,
+    ) -> None:
         self.services = list(services)
         self.stop = StopEvent()
         self.report = RunReport()

@@ -84,8 +84,9 @@ class SensorService:
             if sensor is not None:
                 self._close(sensor)
             self._publish(publisher)
-            log.info("sensor %s: %d samples, %d missing, %d failures", self.cfg.id, self.samples, self.missing,
-                     self.failures)
+            log.info(
+                "sensor %s: %d samples, %d missing, %d failures", self.cfg.id, self.samples, self.missing, self.failures
+            )
 
     def _open(self) -> PointSensor | None:
         sensor = None
@@ -118,8 +119,9 @@ class SensorService:
         self.failures += 1
         now = time.monotonic()
         if now - self._last_log_s > 5.0:  # count repeated problems, log them rarely
-            log.warning("sensor %s: %s (%d failures so far; samples marked missing)", self.cfg.id, message,
-                        self.failures)
+            log.warning(
+                "sensor %s: %s (%d failures so far; samples marked missing)", self.cfg.id, message, self.failures
+            )
             self._last_log_s = now
 
     @staticmethod
@@ -139,8 +141,19 @@ class SensorService:
         value = np.concatenate([r.value for r in readings]) if readings else np.zeros(0)
         pulses = np.concatenate([r.trigger_t_us for r in readings]) if readings else np.zeros(0, np.int64)
         wall_ns = max((r.wall_ns for r in readings if len(r)), default=0)
-        publisher.put(SensorSamples(self.cfg.id, self._seq, self.units, t_us.astype(np.int64), value.astype(np.float64),
-                                    pulses.astype(np.int64), int(missing), self.clock, int(wall_ns)))
+        publisher.put(
+            SensorSamples(
+                self.cfg.id,
+                self._seq,
+                self.units,
+                t_us.astype(np.int64),
+                value.astype(np.float64),
+                pulses.astype(np.int64),
+                int(missing),
+                self.clock,
+                int(wall_ns),
+            )
+        )
         self._seq += 1
         self.samples += len(t_us)
         self.missing += missing

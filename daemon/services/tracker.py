@@ -127,8 +127,13 @@ class TrackerService:
         self._pending_ns: list[np.ndarray] = []
         self._pending_since = 0.0
         self._seq_out = 0
-        self.packets_sub = bus.subscribe(bus.keys.camera_events(cfg.camera_id), EventPacket,
-                                         capacity=cfg.queue_packets, max_bytes=cfg.queue_bytes, ring=True)
+        self.packets_sub = bus.subscribe(
+            bus.keys.camera_events(cfg.camera_id),
+            EventPacket,
+            capacity=cfg.queue_packets,
+            max_bytes=cfg.queue_bytes,
+            ring=True,
+        )
 
     def warm_up(self) -> None:
         """Load the compiled kernels before the first packet (see :func:`warm_up_kernels`)."""
@@ -151,8 +156,11 @@ class TrackerService:
                 packet = packets.recv(timeout_s=self.cfg.max_batch_delay_s if self._pending else idle_wait_s)
                 if packet is not None:
                     batch = [packet]
-                    while len(batch) < self.cfg.max_coalesce and not batch[-1].end_of_stream \
-                            and (more := packets.recv(timeout_s=0)) is not None:
+                    while (
+                        len(batch) < self.cfg.max_coalesce
+                        and not batch[-1].end_of_stream
+                        and (more := packets.recv(timeout_s=0)) is not None
+                    ):
                         batch.append(more)
                     lag_s = self.handle(batch)
                     if batch[-1].end_of_stream and self.cfg.exit_at_end_of_stream:
@@ -185,8 +193,9 @@ class TrackerService:
             arrival, missing = self._sequence.arrive(packet.seq, packet.stream_id)
             if arrival is Arrival.LATE:  # a duplicate, or a packet of this stream already passed
                 self.late_packets += 1
-                self.problems.add("late or duplicate packets", f"packet {packet.seq} came after {previous - 1}: "
-                                  "dropped", 1)
+                self.problems.add(
+                    "late or duplicate packets", f"packet {packet.seq} came after {previous - 1}: dropped", 1
+                )
                 continue
             problem = packet_problem(packet)
             if arrival is not Arrival.NEXT or problem is not None:
@@ -196,8 +205,9 @@ class TrackerService:
                     self._new_stream(packet, previous)
                 elif arrival is Arrival.GAP:
                     self.missing_packets += missing
-                    self.problems.add("packets missing", f"{missing} packet(s) missing before seq {packet.seq}",
-                                      missing)
+                    self.problems.add(
+                        "packets missing", f"{missing} packet(s) missing before seq {packet.seq}", missing
+                    )
             if problem is not None:  # its times cannot be placed: it would throw the chain hours off
                 self.undecodable_packets += 1
                 self.problems.add("packets whose times cannot be placed", problem)
@@ -221,9 +231,13 @@ class TrackerService:
         cut short by the restart, are dropped)."""
         self._publish_if_due(force=True)
         self.restarts += 1
-        self.problems.add("camera restarts", f"packet {packet.seq} of stream {packet.stream_id} after packet "
-                          f"{(previous_next_seq or 0) - 1}: a new stream of camera {packet.camera_id}, "
-                          "tracked afresh", 1)
+        self.problems.add(
+            "camera restarts",
+            f"packet {packet.seq} of stream {packet.stream_id} after packet "
+            f"{(previous_next_seq or 0) - 1}: a new stream of camera {packet.camera_id}, "
+            "tracked afresh",
+            1,
+        )
         self.tracker = self.tracker_factory()
         self.stream += 1
 
@@ -244,15 +258,25 @@ class TrackerService:
         bytes do not decode are counted and left out)."""
         first = run[0]
         try:
-            events, _ = decode_packet(first.encoding, b"".join(p.data for p in run), first.t_offset_us,
-                                      source=f"packets {first.seq}-{run[-1].seq} of camera {first.camera_id}")
+            events, _ = decode_packet(
+                first.encoding,
+                b"".join(p.data for p in run),
+                first.t_offset_us,
+                source=f"packets {first.seq}-{run[-1].seq} of camera {first.camera_id}",
+            )
             return [events]
         except FormatError:
             chunks = []
             for packet in run:
                 try:
-                    chunks.append(decode_packet(packet.encoding, packet.data, packet.t_offset_us,
-                                                source=f"packet {packet.seq} of camera {packet.camera_id}")[0])
+                    chunks.append(
+                        decode_packet(
+                            packet.encoding,
+                            packet.data,
+                            packet.t_offset_us,
+                            source=f"packet {packet.seq} of camera {packet.camera_id}",
+                        )[0]
+                    )
                 except FormatError as exc:
                     self.undecodable_packets += 1
                     self.problems.add("undecodable packets", exc)
@@ -265,8 +289,10 @@ class TrackerService:
         batch: CentrelineBatch | None = None
         source_ns = _NO_NS
         try:
-            batches = [tracker.feed(events, run[-1].t_last_us if i == len(chunks) - 1 else None)
-                       for i, events in enumerate(chunks)]
+            batches = [
+                tracker.feed(events, run[-1].t_last_us if i == len(chunks) - 1 else None)
+                for i, events in enumerate(chunks)
+            ]
             if end_of_stream:
                 batches.append(tracker.finish())
             if batches:
@@ -291,16 +317,20 @@ class TrackerService:
         cannot take); the first such error is logged with its traceback at DEBUG."""
         self.undecodable_packets += len(run)
         log.debug("tracker: packets %d-%d failed", run[0].seq, run[-1].seq, exc_info=exc)
-        self.problems.add("packets that failed to track", f"packets {run[0].seq}-{run[-1].seq}: "
-                          f"{type(exc).__name__}: {exc}", len(run))
+        self.problems.add(
+            "packets that failed to track", f"packets {run[0].seq}-{run[-1].seq}: {type(exc).__name__}: {exc}", len(run)
+        )
 
     @staticmethod
     def _source_ns(batch: CentrelineBatch, run: list[EventPacket], tracker: Any) -> np.ndarray:
         """(n_t,) ``sent_ns`` of the packet that brought each update's newest events."""
         if len(run) == 1 or len(batch) == 0:
             return np.full(len(batch), run[-1].sent_ns, dtype=np.int64)
-        return newest_packet_ns(tracker.params.schedule.window_ends_us(batch.t_s),
-                                np.array([p.t_last_us for p in run]), np.array([p.sent_ns for p in run]))
+        return newest_packet_ns(
+            tracker.params.schedule.window_ends_us(batch.t_s),
+            np.array([p.t_last_us for p in run]),
+            np.array([p.sent_ns for p in run]),
+        )
 
     def _add(self, batch: CentrelineBatch, source_ns: np.ndarray) -> None:
         if len(batch) == 0:
@@ -331,9 +361,18 @@ class TrackerService:
         for start in starts:
             part = slice(start, start + self.cfg.batch_updates)
             lines = batch if len(starts) == 1 else batch.select(part)
-            self._lines_pub.put(CentrelineMessage.from_batch(
-                lines, source=self.name, seq=self._seq_out, units=self.units, source_ns=source_ns[part],
-                final=final and start == starts[-1], published_ns=time.time_ns(), stream=self.stream))
+            self._lines_pub.put(
+                CentrelineMessage.from_batch(
+                    lines,
+                    source=self.name,
+                    seq=self._seq_out,
+                    units=self.units,
+                    source_ns=source_ns[part],
+                    final=final and start == starts[-1],
+                    published_ns=time.time_ns(),
+                    stream=self.stream,
+                )
+            )
             self._seq_out += 1
 
     @property
@@ -350,15 +389,25 @@ class TrackerService:
         """Log the packets the queue dropped since the last call (a rate-limited summary)."""
         dropped = self.dropped_packets
         if dropped > self._drops_logged:
-            self.problems.add("packets dropped by the full queue", f"the queue dropped {dropped} packet(s) in all "
-                              "(the tracker falls behind the camera)", dropped - self._drops_logged)
+            self.problems.add(
+                "packets dropped by the full queue",
+                f"the queue dropped {dropped} packet(s) in all (the tracker falls behind the camera)",
+                dropped - self._drops_logged,
+            )
             self._drops_logged = dropped
 
     def _status(self, state: str, window: dict[str, float], now: float, lag_s: float) -> TrackerStatus:
         elapsed = max(now - window["t"], 1e-9)
         return TrackerStatus(
-            source=self.name, state=state, events_per_s=(self.events - window["events"]) / elapsed,
-            updates_per_s=(self.updates - window["updates"]) / elapsed, lag_s=lag_s, packets=self.packets,
-            missing_packets=self.missing_packets, malformed_packets=self.malformed_packets,
-            dropped_packets=self.dropped_packets, restarts=self.restarts, late_packets=self.late_packets,
+            source=self.name,
+            state=state,
+            events_per_s=(self.events - window["events"]) / elapsed,
+            updates_per_s=(self.updates - window["updates"]) / elapsed,
+            lag_s=lag_s,
+            packets=self.packets,
+            missing_packets=self.missing_packets,
+            malformed_packets=self.malformed_packets,
+            dropped_packets=self.dropped_packets,
+            restarts=self.restarts,
+            late_packets=self.late_packets,
         )

@@ -118,8 +118,10 @@ class RerunLogger:
         """Queue a batch of tracker updates (the queued ones are sent first if their samples or joints
         differ: they are sent as one array)."""
         if len(msg.t_s):
-            if self._lines and (msg.x.shape[1], msg.joints_x.shape[1]) != (self._lines[0].x.shape[1],
-                                                                          self._lines[0].joints_x.shape[1]):
+            if self._lines and (msg.x.shape[1], msg.joints_x.shape[1]) != (
+                self._lines[0].x.shape[1],
+                self._lines[0].joints_x.shape[1],
+            ):
                 self._send_lines()
             self._lines.append(msg)
 
@@ -158,12 +160,23 @@ class RerunLogger:
         x, y = np.concatenate([m.x for m in msgs]), np.concatenate([m.y for m in msgs])
         jx, jy = np.concatenate([m.joints_x for m in msgs]), np.concatenate([m.joints_y for m in msgs])
         strips = np.stack([x, y], axis=-1)  # one (n, n_s, 2) array: Rerun converts it at once, a list strip by strip
-        self.rec.send_columns("tracker/centreline", times, rr.LineStrips2D.columns(
-            strips=strips).partition(np.ones(len(t_s), dtype=np.int32)))
-        self.rec.send_columns("tracker/joints", times, rr.Points2D.columns(
-            positions=np.stack([jx, jy], axis=-1).reshape(-1, 2)).partition(np.full(len(t_s), jx.shape[1], np.int32)))
-        for name, field_name in (("plots/delta_rms", "delta_rms"), ("plots/events_per_update", "n_events"),
-                                 ("plots/tip_y", "tip_y")):
+        self.rec.send_columns(
+            "tracker/centreline",
+            times,
+            rr.LineStrips2D.columns(strips=strips).partition(np.ones(len(t_s), dtype=np.int32)),
+        )
+        self.rec.send_columns(
+            "tracker/joints",
+            times,
+            rr.Points2D.columns(positions=np.stack([jx, jy], axis=-1).reshape(-1, 2)).partition(
+                np.full(len(t_s), jx.shape[1], np.int32)
+            ),
+        )
+        for name, field_name in (
+            ("plots/delta_rms", "delta_rms"),
+            ("plots/events_per_update", "n_events"),
+            ("plots/tip_y", "tip_y"),
+        ):
             values = np.concatenate([np.asarray(getattr(m, field_name), float) for m in msgs])
             self.rec.send_columns(name, times, rr.Scalars.columns(scalars=values))
         self._trail.append(np.stack([t_s, x[:, -1], y[:, -1]], axis=1))
@@ -188,8 +201,9 @@ class RerunLogger:
         decoded = []
         for packet in packets:
             try:
-                decoded.append(decode_packet(packet.encoding, packet.data, packet.t_offset_us,
-                                             source=f"packet {packet.seq}")[0])
+                decoded.append(
+                    decode_packet(packet.encoding, packet.data, packet.t_offset_us, source=f"packet {packet.seq}")[0]
+                )
             except FormatError as exc:
                 self.problems.add("undecodable packets", exc)
         if not decoded:
@@ -199,9 +213,14 @@ class RerunLogger:
         if len(recent) > self.cfg.max_points:
             recent = recent[:: int(np.ceil(len(recent) / self.cfg.max_points))]
         self.rec.set_time(TIMELINE, duration=t_newest * 1e-6)
-        self.rec.log("camera/events", rr.Points2D(
-            np.stack([recent["x"], recent["y"]], axis=1).astype(np.float32),
-            colors=age_colours((t_newest - recent["t"]) * 1e-6, horizon_us * 1e-6), radii=0.5))
+        self.rec.log(
+            "camera/events",
+            rr.Points2D(
+                np.stack([recent["x"], recent["y"]], axis=1).astype(np.float32),
+                colors=age_colours((t_newest - recent["t"]) * 1e-6, horizon_us * 1e-6),
+                radii=0.5,
+            ),
+        )
         return True
 
 
@@ -222,10 +241,12 @@ class ViewerService:
         keys = bus.keys
         self.subs: dict[str, Any] = {
             # a live view: when it falls behind, the oldest go (and at most this much memory waits)
-            "centrelines": bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000, ring=True,
-                                         max_bytes=256 << 20),
-            "events": bus.subscribe(keys.camera_events(cfg.camera_id), EventPacket, capacity=100_000, ring=True,
-                                    max_bytes=64 << 20),
+            "centrelines": bus.subscribe(
+                keys.centrelines(), CentrelineMessage, capacity=100_000, ring=True, max_bytes=256 << 20
+            ),
+            "events": bus.subscribe(
+                keys.camera_events(cfg.camera_id), EventPacket, capacity=100_000, ring=True, max_bytes=64 << 20
+            ),
             "rate": bus.subscribe(keys.event_rate(cfg.camera_id), EventRate, capacity=1000, ring=True),
             "tunnel": bus.subscribe(keys.tunnel_state(), TunnelState, capacity=1000, ring=True),
         }
@@ -236,8 +257,12 @@ class ViewerService:
         rec, self.description = open_recording(self.cfg)
         log.info("viewer: %s", self.description)
         logger = RerunLogger(rec, self.cfg, self.problems)
-        handlers = (("centrelines", logger.centrelines), ("events", logger.events), ("rate", logger.rate),
-                    ("tunnel", logger.tunnel))
+        handlers = (
+            ("centrelines", logger.centrelines),
+            ("events", logger.events),
+            ("rate", logger.rate),
+            ("tunnel", logger.tunnel),
+        )
         try:
             while not stop.is_set():
                 final = False

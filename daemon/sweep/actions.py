@@ -80,8 +80,9 @@ def parse_action(name: str, params: dict[str, Any]) -> CommandAction | PauseActi
             try:
                 arg.format_map({key: "" for key in PLACEHOLDERS})
             except (KeyError, ValueError, IndexError) as exc:
-                raise ValueError(f"action 'command': bad placeholder in {arg!r} ({exc}); "
-                                 f"known: {', '.join(PLACEHOLDERS)}") from None
+                raise ValueError(
+                    f"action 'command': bad placeholder in {arg!r} ({exc}); known: {', '.join(PLACEHOLDERS)}"
+                ) from None
         timeout_s = float(params.get("timeout_s", 600.0))
         if not timeout_s > 0:
             raise ValueError("action 'command': timeout_s must be > 0")
@@ -93,8 +94,14 @@ def parse_action(name: str, params: dict[str, Any]) -> CommandAction | PauseActi
     raise ValueError(f"unknown action {name!r}; built-in actions: {', '.join(BUILTIN_ACTIONS)}")
 
 
-def run_command(action: CommandAction, name: str, context: dict[str, Any], cwd: Path, log_path: Path,
-                idle: Callable[[float], None] = time.sleep) -> ActionOutcome:
+def run_command(
+    action: CommandAction,
+    name: str,
+    context: dict[str, Any],
+    cwd: Path,
+    log_path: Path,
+    idle: Callable[[float], None] = time.sleep,
+) -> ActionOutcome:
     """Run a command action for one point; the outcome says what went wrong.
 
     ``idle(seconds)`` is called while the command runs (the supervisor keeps watching the rig
@@ -129,5 +136,12 @@ def run_command(action: CommandAction, name: str, context: dict[str, Any], cwd: 
     return outcome(True)
 
 
-__all__ = ["BUILTIN_ACTIONS", "PLACEHOLDERS", "ActionOutcome", "CommandAction", "PauseAction", "parse_action",
-           "run_command"]
+__all__ = [
+    "BUILTIN_ACTIONS",
+    "PLACEHOLDERS",
+    "ActionOutcome",
+    "CommandAction",
+    "PauseAction",
+    "parse_action",
+    "run_command",
+]

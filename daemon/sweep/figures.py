@@ -30,8 +30,12 @@ def load_figure_modules() -> None:
     from matplotlib.figure import Figure  # noqa: F401
 
 
-def plot_amplitude(points: Sequence[PointResult], path: str | Path, title: str = "",
-                   transitions: tuple[float | None, float | None] = (None, None)) -> Path:
+def plot_amplitude(
+    points: Sequence[PointResult],
+    path: str | Path,
+    title: str = "",
+    transitions: tuple[float | None, float | None] = (None, None),
+) -> Path:
     """Save the A/L- and event-rate-versus-speed figure (PNG; headless Agg backend).
 
     ``transitions``: the onset and decay speeds (m/s) to mark, where detected.
@@ -47,7 +51,9 @@ def plot_amplitude(points: Sequence[PointResult], path: str | Path, title: str =
         ax_amp.errorbar(speeds, [p.amplitude_over_l for p in mine], yerr=[_zero(p.amplitude_std_over_l) for p in mine],
                         color=color, marker=marker, fillstyle=fill, capsize=3, linestyle="-", linewidth=0.8,
                         label=f"{label} ({len(mine)} points)")  # fmt: skip
-        ax_rate.plot(speeds, [p.event_rate_mev_s for p in mine], color=color, marker=marker, fillstyle=fill, linewidth=0.8)
+        ax_rate.plot(
+            speeds, [p.event_rate_mev_s for p in mine], color=color, marker=marker, fillstyle=fill, linewidth=0.8
+        )
     onset, decay = transitions
     for speed, color, name in ((onset, "C0", "onset"), (decay, "C1", "decay")):
         if speed is not None:
@@ -83,14 +89,30 @@ def plot_sweep(points: Sequence[Any], path: str | Path, title: str = "") -> Path
         mine = [p for p in points if p.branch == branch and math.isfinite(p.sensor_error_mean_over_l)]
         if mine:
             speeds = [p.speed_mps - dx for p in mine]
-            ax.errorbar(speeds, [p.sensor_error_mean_over_l for p in mine],
-                        yerr=[_zero(p.sensor_error_std_over_l) for p in mine], color="C1", marker=marker,
-                        fillstyle=fill, capsize=3, linestyle="none", label=f"|e|/L ({branch})")
+            ax.errorbar(
+                speeds,
+                [p.sensor_error_mean_over_l for p in mine],
+                yerr=[_zero(p.sensor_error_std_over_l) for p in mine],
+                color="C1",
+                marker=marker,
+                fillstyle=fill,
+                capsize=3,
+                linestyle="none",
+                label=f"|e|/L ({branch})",
+            )
         mine = [p for p in points if p.branch == branch and math.isfinite(p.delta_rms_over_l)]
         if mine:
-            ax.errorbar([p.speed_mps + dx for p in mine], [p.delta_rms_over_l for p in mine],
-                        yerr=[_zero(p.delta_rms_std_over_l) for p in mine], color="C2", marker=marker,
-                        fillstyle=fill, capsize=3, linestyle="none", label=fr"$\Delta_{{RMS}}/L$ ({branch})")
+            ax.errorbar(
+                [p.speed_mps + dx for p in mine],
+                [p.delta_rms_over_l for p in mine],
+                yerr=[_zero(p.delta_rms_std_over_l) for p in mine],
+                color="C2",
+                marker=marker,
+                fillstyle=fill,
+                capsize=3,
+                linestyle="none",
+                label=rf"$\Delta_{{RMS}}/L$ ({branch})",
+            )
     ax.axhline(0.01, color="0.6", linestyle="--", linewidth=0.8)
     ax.set_xlabel("wind speed U (m/s)")
     ax.set_ylabel("error / L")

@@ -204,7 +204,9 @@ def _decode(line: bytes, last: bool) -> dict[str, Any]:
     return record
 
 
-def _assemble(run_dir: Path, path: Path, records: list[tuple[int, dict[str, Any]]], torn: bool, valid: int) -> RunRecord:
+def _assemble(
+    run_dir: Path, path: Path, records: list[tuple[int, dict[str, Any]]], torn: bool, valid: int
+) -> RunRecord:
     if not records or records[0][1]["type"] != "start":
         raise FormatError("the run log does not begin with a start record", path=str(path), offset=0)
     points, resumes, stop = [], [], None
@@ -283,7 +285,9 @@ class RunLog:
             raise FormatError("a run log exists already; resume the run instead", path=str(run_dir / RUN_LOG)) from exc
         _fsync_dir(run_dir)
         runlog = cls(run_dir, handle)
-        plan_json = [{"point_id": p.point_id, "index": p.index, "branch": p.branch.value, "speed_mps": p.speed_mps} for p in plan]
+        plan_json = [
+            {"point_id": p.point_id, "index": p.index, "branch": p.branch.value, "speed_mps": p.speed_mps} for p in plan
+        ]
         runlog._append({"type": "start", "run_id": run_id, "t_unix": _now(t_unix), "flagtrack_version": __version__,
                         "config": to_mapping(dict(config)), "plan": plan_json})  # fmt: skip
         return runlog
@@ -309,7 +313,9 @@ class RunLog:
 
     def point(self, result: PointResult) -> None:
         """Append one point record."""
-        record = {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in dataclasses.asdict(result).items()}
+        record = {
+            k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in dataclasses.asdict(result).items()
+        }
         self._append({"type": "point", **record})
 
     def stop(self, reason: str, *, error: str | None = None, t_unix: float | None = None) -> None:

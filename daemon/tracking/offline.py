@@ -13,6 +13,7 @@ from flagtrack.drivers.formats.centreline import CentrelineSink
 
 log = logging.getLogger(__name__)
 
+
 @dataclass(frozen=True)
 class ReconstructSummary:
     """What one reconstruction did."""
@@ -25,12 +26,18 @@ class ReconstructSummary:
 
     def as_dict(self) -> dict[str, int | None]:
         """The summary as plain values (``--json`` outputs, batch rows)."""
-        return {"updates": self.updates, "events_in": self.events_in, "events_kept": self.events_kept,
-                "first_t_us": self.first_t_us, "last_t_us": self.last_t_us}
+        return {
+            "updates": self.updates,
+            "events_in": self.events_in,
+            "events_kept": self.events_kept,
+            "first_t_us": self.first_t_us,
+            "last_t_us": self.last_t_us,
+        }
 
 
-def reconstruct_file(path: Path, output: Path, setup: TrackingSetup, *,
-                     progress: Callable[[int], None] | None = None) -> ReconstructSummary:
+def reconstruct_file(
+    path: Path, output: Path, setup: TrackingSetup, *, progress: Callable[[int], None] | None = None
+) -> ReconstructSummary:
     """Stream the recording ``path`` through a fresh tracker of ``setup`` into ``output``.
 
     Memory is bounded by the reader's chunk and the tracker's pending windows, not by the recording.

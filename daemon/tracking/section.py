@@ -105,17 +105,30 @@ class TrackingConfig:
 
         for name in ("root", "length"):
             if getattr(self, name) is None:
-                raise ConfigError("required (give it in the config or on the command line)",
-                                  key=f"{SECTION}.{name}", path=path)
+                raise ConfigError(
+                    "required (give it in the config or on the command line)", key=f"{SECTION}.{name}", path=path
+                )
         paper = self.method is Method.PAPER
-        chain = _build(ChainParams, path, "", root=self.root, length=self.length, n_joints=self.joints,
-                       direction_deg=self.direction_deg, link_lengths=self.link_lengths, alpha=self.alpha,
-                       angle_limit_deg=self.angle_limit_deg, min_events=1 if paper else self.min_events,
-                       refine_deg=None if paper else self.refine_deg)
-        segments = self.schedule or (_build(WindowSegment, path, "schedule[0]", t_from_s=0.0,
-                                            dt_s=self.dt_s or self.tau_s, tau_s=self.tau_s),)
-        schedule = _build(WindowSchedule, path, "schedule", segments=tuple(segments), t_start_s=self.t_start_s,
-                          t_stop_s=self.t_stop_s)
+        chain = _build(
+            ChainParams,
+            path,
+            "",
+            root=self.root,
+            length=self.length,
+            n_joints=self.joints,
+            direction_deg=self.direction_deg,
+            link_lengths=self.link_lengths,
+            alpha=self.alpha,
+            angle_limit_deg=self.angle_limit_deg,
+            min_events=1 if paper else self.min_events,
+            refine_deg=None if paper else self.refine_deg,
+        )
+        segments = self.schedule or (
+            _build(WindowSegment, path, "schedule[0]", t_from_s=0.0, dt_s=self.dt_s or self.tau_s, tau_s=self.tau_s),
+        )
+        schedule = _build(
+            WindowSchedule, path, "schedule", segments=tuple(segments), t_start_s=self.t_start_s, t_stop_s=self.t_stop_s
+        )
         denoise = self.denoise if not paper and self.denoise.enabled else None
         if self.ds is not None and not self.ds > 0:
             raise ConfigError(f"must be positive, got {self.ds}", key=f"{SECTION}.ds", path=path)

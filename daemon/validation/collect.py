@@ -16,8 +16,9 @@ from flagtrack.drivers.sensor.record import SensorRecord
 log = logging.getLogger(__name__)
 
 
-def record_from_messages(messages: Sequence[SensorSamples], camera_wall: Sequence[tuple[int, int]] = (),
-                         config: dict[str, Any] | None = None) -> SensorRecord:
+def record_from_messages(
+    messages: Sequence[SensorSamples], camera_wall: Sequence[tuple[int, int]] = (), config: dict[str, Any] | None = None
+) -> SensorRecord:
     """One :class:`SensorRecord` of the messages received during a point.
 
     Args:
@@ -30,7 +31,8 @@ def record_from_messages(messages: Sequence[SensorSamples], camera_wall: Sequenc
     stamped = [m for m in messages if len(m.t_us) and m.wall_ns]
     pairs = np.asarray(camera_wall, dtype=np.int64).reshape(-1, 2)
     return SensorRecord(
-        sensor_id=first.sensor_id if first else "", units=first.units if first else "",
+        sensor_id=first.sensor_id if first else "",
+        units=first.units if first else "",
         clock=first.clock if first else "sensor",
         t_us=np.concatenate([ints, *[m.t_us.astype(np.int64) for m in messages]]),
         value=np.concatenate([np.zeros(0), *[m.value.astype(np.float64) for m in messages]]),
@@ -38,7 +40,9 @@ def record_from_messages(messages: Sequence[SensorSamples], camera_wall: Sequenc
         missing=int(sum(m.missing for m in messages)),
         wall_t_us=np.array([int(m.t_us[-1]) for m in stamped], dtype=np.int64),
         wall_ns=np.array([m.wall_ns for m in stamped], dtype=np.int64),
-        camera_t_us=pairs[:, 0].copy(), camera_wall_ns=pairs[:, 1].copy(), config=dict(config or {}),
+        camera_t_us=pairs[:, 0].copy(),
+        camera_wall_ns=pairs[:, 1].copy(),
+        config=dict(config or {}),
     )
 
 

@@ -49,15 +49,21 @@ def plot_point(v: PointValidation, path: str | Path, title: str = "", window_s: 
         lo, hi = _window(span, window_s)
         rec = (v.t_recon_s >= lo) & (v.t_recon_s <= hi)
         if v.n_stale:  # updates without events (lost camera data), drawn but not compared
-            ax_y.plot(v.t_recon_s[rec], v.y_recon[rec] / length, color="0.7", linewidth=0.8,
-                      label="camera, updates without events")
+            ax_y.plot(
+                v.t_recon_s[rec],
+                v.y_recon[rec] / length,
+                color="0.7",
+                linewidth=0.8,
+                label="camera, updates without events",
+            )
         y_used = np.where(v.stale, np.nan, v.y_recon)
         ax_y.plot(v.t_recon_s[rec], y_used[rec] / length, color="C0", linewidth=1.0, label="event-based camera")
         ax_d.plot(v.t_recon_s[rec], v.delta_rms[rec] / length, color="C2", linewidth=0.8)
         if c is not None:
             sen = (c.t_s >= lo) & (c.t_s <= hi)
-            ax_y.plot(c.t_s[sen], (c.y_sensor[sen] + c.bias) / length, ".", color="C3", markersize=2.0,
-                      label="point sensor")
+            ax_y.plot(
+                c.t_s[sen], (c.y_sensor[sen] + c.bias) / length, ".", color="C3", markersize=2.0, label="point sensor"
+            )
             ax_e.plot(c.t_s[sen], c.error[sen] / length, color="C1", linewidth=0.8)
         ax_y.legend(loc="upper right", fontsize=8)
     ax_y.set_ylabel(f"y/L at x/L = {v.x_over_l:.2f}")
@@ -74,14 +80,17 @@ def _stats(v: PointValidation) -> str:
     f = v.fields()
     d_mean, d_std = v.delta_rms_over_l
     sync = v.sync
-    sync_text = (f"sync {sync.method} {sync.offset_us / 1e3:+.3f} ms ± {sync.uncertainty_us:.1f} µs"
-                 if sync.ok and math.isfinite(sync.uncertainty_us) else f"sync {sync.method}")
-    return (f"{v.status}; e/L RMS {_pct(f['sensor_error_rms_over_l'])}, max {_pct(f['sensor_error_max_over_l'])}; "
-            f"ΔRMS/L {_pct(d_mean)} ± {_pct(d_std)}\n{sync_text}; {v.n_samples} samples, {v.n_missing} missing"
-            + (f"\n{v.n_stale} updates without events (lost camera data) not compared" if v.n_stale else ""))
+    sync_text = (
+        f"sync {sync.method} {sync.offset_us / 1e3:+.3f} ms ± {sync.uncertainty_us:.1f} µs"
+        if sync.ok and math.isfinite(sync.uncertainty_us)
+        else f"sync {sync.method}"
+    )
+    return (
+        f"{v.status}; e/L RMS {_pct(f['sensor_error_rms_over_l'])}, max {_pct(f['sensor_error_max_over_l'])}; "
+        f"ΔRMS/L {_pct(d_mean)} ± {_pct(d_std)}\n{sync_text}; {v.n_samples} samples, {v.n_missing} missing"
+        + (f"\n{v.n_stale} updates without events (lost camera data) not compared" if v.n_stale else "")
+    )
 
 
 def _pct(value: Any) -> str:
     return "n/a" if value is None or not math.isfinite(float(value)) else f"{100 * float(value):.2f} %"
-
-

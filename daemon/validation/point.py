@@ -108,28 +108,54 @@ def camera_pulses(triggers: np.ndarray, params: SyncParams) -> np.ndarray:
     return np.sort(triggers["t"][keep].astype(np.int64))
 
 
-def synchronise(t_recon_s: np.ndarray, y_recon: np.ndarray, record: SensorRecord, y_sensor: np.ndarray,
-                camera_pulses_us: np.ndarray, params: SyncParams) -> tuple[ClockSync, ClockSync, ClockSync, ClockSync]:
+def synchronise(
+    t_recon_s: np.ndarray,
+    y_recon: np.ndarray,
+    record: SensorRecord,
+    y_sensor: np.ndarray,
+    camera_pulses_us: np.ndarray,
+    params: SyncParams,
+) -> tuple[ClockSync, ClockSync, ClockSync, ClockSync]:
     """(used, trigger, xcorr, coarse) clock estimates for ``params.mode`` (see :mod:`~flagtrack.daemon.core.sync`)."""
     none = ClockSync("none", note="not attempted")
     coarse = coarse_offset_us(record.wall_t_us, record.wall_ns, record.camera_t_us, record.camera_wall_ns)
     if params.mode == "none":
         return ClockSync("none", 0.0, math.nan, note="sync mode 'none': one clock assumed"), none, none, coarse
     prior = coarse.offset_us if coarse.ok else 0.0
-    xcorr = xcorr_sync(t_recon_s, y_recon, record.t_us, y_sensor, prior_offset_us=prior,
-                       max_lag_us=params.max_lag_ms * 1e3, min_correlation=params.min_correlation, blocks=params.blocks)
+    xcorr = xcorr_sync(
+        t_recon_s,
+        y_recon,
+        record.t_us,
+        y_sensor,
+        prior_offset_us=prior,
+        max_lag_us=params.max_lag_ms * 1e3,
+        min_correlation=params.min_correlation,
+        blocks=params.blocks,
+    )
     trigger = none
     if params.mode in ("auto", "trigger"):
-        trigger = trigger_sync(camera_pulses_us, record.trigger_t_us, tolerance_us=params.tolerance_us,
-                               prior_offset_us=xcorr.offset_us if xcorr.ok else prior)
+        trigger = trigger_sync(
+            camera_pulses_us,
+            record.trigger_t_us,
+            tolerance_us=params.tolerance_us,
+            prior_offset_us=xcorr.offset_us if xcorr.ok else prior,
+        )
     order = {"auto": (trigger, xcorr, coarse), "trigger": (trigger, coarse), "xcorr": (xcorr, coarse)}[params.mode]
     used = next((s for s in order if s.ok), ClockSync("none", note="no clock estimate: one clock assumed"))
     return used, trigger, xcorr, coarse
 
 
-def validate_point(lines: CentrelineBatch | None, record: SensorRecord, triggers: np.ndarray, frame: FlagFrame,
-                   beam: BeamParams, params: SyncParams, units: str = "px", *,
-                   compare_without_events: bool = True) -> PointValidation:
+def validate_point(
+    lines: CentrelineBatch | None,
+    record: SensorRecord,
+    triggers: np.ndarray,
+    frame: FlagFrame,
+    beam: BeamParams,
+    params: SyncParams,
+    units: str = "px",
+    *,
+    compare_without_events: bool = True,
+) -> PointValidation:
     """Synchronise the sensor with the camera and compare it with the reconstruction at the beam.
 
     An update made without events carries the previous shape: right for a still flag, but during
@@ -151,8 +177,23 @@ def validate_point(lines: CentrelineBatch | None, record: SensorRecord, triggers
     none = ClockSync("none", note="not attempted")
     n_missing = int(max(record.missing, np.isnan(record.value).sum()))
     if lines is None or len(lines) == 0:
-        return PointValidation("no centrelines", none, none, none, none, None, empty, empty, empty, frame, units,
-                               beam.x_over_l, len(record.t_us), n_missing, np.zeros(0, dtype=bool))
+        return PointValidation(
+            "no centrelines",
+            none,
+            none,
+            none,
+            none,
+            None,
+            empty,
+            empty,
+            empty,
+            frame,
+            units,
+            beam.x_over_l,
+            len(record.t_us),
+            n_missing,
+            np.zeros(0, dtype=bool),
+        )
     y_recon = beam_lateral(lines.x, lines.y, frame.root, frame.direction_deg, beam.x_over_l * frame.length, beam.side)
     stale = np.zeros(len(lines), dtype=bool) if compare_without_events else (lines.n_events == 0)
     y_used = np.where(stale, np.nan, y_recon)
@@ -161,11 +202,13 @@ def validate_point(lines: CentrelineBatch | None, record: SensorRecord, triggers
         status = "no sensor samples" if len(record.t_us) == 0 and n_missing == 0 else "sensor samples all missing"
         return PointValidation(status, none, none, none, none, None, *base)
     y_sensor = reading_to_lateral(record.value, beam)
-    used, trigger, xcorr, coarse = synchronise(lines.t_s, y_used, record, y_sensor, camera_pulses(triggers, params),
-                                               params)
+    used, trigger, xcorr, coarse = synchronise(
+        lines.t_s, y_used, record, y_sensor, camera_pulses(triggers, params), params
+    )
     t_cam_s = used.to_camera_us(record.t_us) * 1e-6
-    comparison = compare_signals(lines.t_s, y_used, t_cam_s, y_sensor, frame.length,
-                                 match_means=beam.zero_reading is None)
+    comparison = compare_signals(
+        lines.t_s, y_used, t_cam_s, y_sensor, frame.length, match_means=beam.zero_reading is None
+    )
     if comparison.n_compared == 0:
         status = "no overlap" if np.any(np.isfinite(y_recon)) else "the centrelines do not reach the beam"
     else:

@@ -64,12 +64,22 @@ def run_frame(record: Any) -> FlagFrame:
     """The flag's rest frame and length from the run's ``tracker:`` section (as the supervisor takes it)."""
     tracker = record.start.get("config", {}).get("tracker", {}) or {}
     root = tracker.get("root") or (0.0, 0.0)
-    return FlagFrame(float(tracker.get("length") or 1.0), (float(root[0]), float(root[1])),
-                     float(tracker.get("direction_deg") or 0.0))
+    return FlagFrame(
+        float(tracker.get("length") or 1.0),
+        (float(root[0]), float(root[1])),
+        float(tracker.get("direction_deg") or 0.0),
+    )
 
 
-def validate_run(run_dir: str | Path, *, out_dir: str | Path | None = None, centrelines_dir: str | Path | None = None,
-                 sensor: SensorConfig | None = None, reconstruct: TrackingSetup | None = None, window_s: float = 0.3) -> RunValidation:
+def validate_run(
+    run_dir: str | Path,
+    *,
+    out_dir: str | Path | None = None,
+    centrelines_dir: str | Path | None = None,
+    sensor: SensorConfig | None = None,
+    reconstruct: TrackingSetup | None = None,
+    window_s: float = 0.3,
+) -> RunValidation:
     """Recompute every point's sensor comparison (see the module docstring).
 
     Args:
@@ -102,9 +112,16 @@ def validate_run(run_dir: str | Path, *, out_dir: str | Path | None = None, cent
     return RunValidation(points, csv, figure, figures)
 
 
-def _validate_one(run_dir: Path, point: PointResult, out: Path, frame: FlagFrame, sensor: SensorConfig,
-                  centrelines_dir: str | Path | None, reconstruct: TrackingSetup | None, window_s: float
-                  ) -> tuple[PointResult, Path | None]:
+def _validate_one(
+    run_dir: Path,
+    point: PointResult,
+    out: Path,
+    frame: FlagFrame,
+    sensor: SensorConfig,
+    centrelines_dir: str | Path | None,
+    reconstruct: TrackingSetup | None,
+    window_s: float,
+) -> tuple[PointResult, Path | None]:
     from flagtrack.drivers.formats.centreline import read_centrelines
 
     raw = run_dir / point.raw_file if point.raw_file else None
@@ -116,18 +133,41 @@ def _validate_one(run_dir: Path, point: PointResult, out: Path, frame: FlagFrame
     triggers = empty_triggers()
     if sensor.sync.mode in ("auto", "trigger") and raw is not None and raw.exists() and len(record.trigger_t_us):
         triggers = raw_triggers(raw)
-    validation = validate_point(lines if len(lines) else None, record, triggers, frame, sensor.beam, sensor.sync,
-                                str(attrs.get("units", "px")), compare_without_events=point.state != "flapping")
-    figure = plot_point(validation, out / f"{point.point_id}.png",
-                        f"{point.point_id}: {point.speed_mps:.2f} m/s, {point.state} (recomputed)", window_s)
+    validation = validate_point(
+        lines if len(lines) else None,
+        record,
+        triggers,
+        frame,
+        sensor.beam,
+        sensor.sync,
+        str(attrs.get("units", "px")),
+        compare_without_events=point.state != "flapping",
+    )
+    figure = plot_point(
+        validation,
+        out / f"{point.point_id}.png",
+        f"{point.point_id}: {point.speed_mps:.2f} m/s, {point.state} (recomputed)",
+        window_s,
+    )
     d_mean, d_std = validation.delta_rms_over_l
-    fields = {**validation.fields(), "delta_rms_over_l": d_mean, "delta_rms_std_over_l": d_std,
-              "centreline_file": _relative(lines_path, run_dir), "sensor_figure": _relative(figure, run_dir)}
+    fields = {
+        **validation.fields(),
+        "delta_rms_over_l": d_mean,
+        "delta_rms_std_over_l": d_std,
+        "centreline_file": _relative(lines_path, run_dir),
+        "sensor_figure": _relative(figure, run_dir),
+    }
     return dataclasses.replace(point, **fields), figure
 
 
-def _centrelines_path(run_dir: Path, point: PointResult, out: Path, centrelines_dir: str | Path | None,
-                      reconstruct: TrackingSetup | None, raw: Path | None) -> Path | None:
+def _centrelines_path(
+    run_dir: Path,
+    point: PointResult,
+    out: Path,
+    centrelines_dir: str | Path | None,
+    reconstruct: TrackingSetup | None,
+    raw: Path | None,
+) -> Path | None:
     if reconstruct is not None:
         if raw is None or not raw.exists():
             return None

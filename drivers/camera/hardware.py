@@ -65,8 +65,9 @@ class Roi:
 def check_serial(serial: object) -> None:
     """A serial YAML read as a number (``serial: 00050423`` unquoted) is an error that says to quote it."""
     if isinstance(serial, int) and not isinstance(serial, bool):
-        raise ConfigError(f'write the serial in quotes (serial: "..."): YAML read it as the number {serial}',
-                          key=f"{KEY}.serial")
+        raise ConfigError(
+            f'write the serial in quotes (serial: "..."): YAML read it as the number {serial}', key=f"{KEY}.serial"
+        )
 
 
 def device_label(serial: str | None) -> str:
@@ -85,8 +86,10 @@ def import_sdk(module: str, adapter: str, hint: str) -> ModuleType:
     try:
         return importlib.import_module(module)
     except ImportError as exc:
-        raise DriverError(f"the '{adapter}' camera adapter needs the {module} module, which cannot be imported "
-                          f"({exc}): {hint}", device=f"camera adapter '{adapter}'") from exc
+        raise DriverError(
+            f"the '{adapter}' camera adapter needs the {module} module, which cannot be imported ({exc}): {hint}",
+            device=f"camera adapter '{adapter}'",
+        ) from exc
 
 
 def sdk_version(distribution: str, module: ModuleType) -> str:
@@ -120,8 +123,9 @@ class RawStream:
             raise DriverError(f"unsupported device encoding {encoding!r} (known: evt3, evt2, evt21)", device=device)
         self.encoding = encoding
         self.published = PUBLISHED_ENCODING[encoding]
-        self.decoder = make_decoder(encoding, width=width, height=height, strict=False, endianness=endianness,
-                                    source=device)
+        self.decoder = make_decoder(
+            encoding, width=width, height=height, strict=False, endianness=endianness, source=device
+        )
         self.bytes = 0
 
     @property
@@ -158,8 +162,10 @@ class StallWatch:
         """Raise DriverError if the silence has lasted longer than the timeout."""
         silent_s = time.monotonic() - self._last
         if self.timeout_s and silent_s > self.timeout_s:
-            raise DriverError(f"camera stopped delivering data (nothing for {silent_s:.1f} s, "
-                              f"stall_timeout_s = {self.timeout_s:g})", device=self.device)
+            raise DriverError(
+                f"camera stopped delivering data (nothing for {silent_s:.1f} s, stall_timeout_s = {self.timeout_s:g})",
+                device=self.device,
+            )
 
 
 def parse_encoding(name: str) -> tuple[str, str]:

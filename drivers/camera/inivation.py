@@ -37,9 +37,13 @@ log = logging.getLogger(__name__)
 
 INSTALL_HINT = "pip install 'flagtrack[inivation]' (installs dv-processing from PyPI)"
 POLL_INTERVAL_S = 0.001
-TRIGGERS = {"EXTERNAL_SIGNAL_RISING_EDGE": (0, 1), "EXTERNAL_SIGNAL_FALLING_EDGE": (0, 0),
-            "EXTERNAL_SIGNAL_PULSE": (0, 1), "EXTERNAL_GENERATOR_RISING_EDGE": (1, 1),
-            "EXTERNAL_GENERATOR_FALLING_EDGE": (1, 0)}
+TRIGGERS = {
+    "EXTERNAL_SIGNAL_RISING_EDGE": (0, 1),
+    "EXTERNAL_SIGNAL_FALLING_EDGE": (0, 0),
+    "EXTERNAL_SIGNAL_PULSE": (0, 1),
+    "EXTERNAL_GENERATOR_RISING_EDGE": (1, 1),
+    "EXTERNAL_GENERATOR_FALLING_EDGE": (1, 0),
+}
 """dv TriggerType name -> (channel, edge), as the AEDAT4 reader maps them."""
 YAML_BOOLEANS = {True: "On", False: "Off"}
 """DAVIS346 bias names that YAML 1.1 turns into booleans when unquoted."""
@@ -94,8 +98,11 @@ def check_config(hardware: dict[str, Any], path: str | None = None) -> Inivation
     cfg = from_mapping(InivationConfig, hardware, path=path, key=KEY)
     for name, (coarse, fine) in cfg.davis_biases.items():
         if not (0 <= coarse <= 7 and 0 <= fine <= 255):
-            raise ConfigError(f"[coarse, fine] must be in [0..7, 0..255], got [{coarse}, {fine}]",
-                              key=f"{KEY}.davis_biases.{name}", path=path)
+            raise ConfigError(
+                f"[coarse, fine] must be in [0..7, 0..255], got [{coarse}, {fine}]",
+                key=f"{KEY}.davis_biases.{name}",
+                path=path,
+            )
     return cfg
 
 
@@ -123,14 +130,18 @@ class InivationCamera:
         dv = import_sdk("dv_processing", "inivation", INSTALL_HINT)
         cameras = getattr(getattr(dv, "io", None), "camera", None)
         if cameras is None or not hasattr(cameras, "open"):
-            raise DriverError(f"this dv-processing has no dv.io.camera.open (2.0 or newer is needed): {INSTALL_HINT}",
-                              device=self.label)
+            raise DriverError(
+                f"this dv-processing has no dv.io.camera.open (2.0 or newer is needed): {INSTALL_HINT}",
+                device=self.label,
+            )
         try:
             camera = cameras.open(self.cfg.serial) if self.cfg.serial else cameras.open()
         except Exception as exc:
             seen = ", ".join(str(getattr(d, "serialNumber", d)) for d in (call_or_none(cameras, "discover") or []))
-            raise DriverError(f"cannot open the camera: {exc} (connected: {seen or 'none'}; check the USB cable "
-                              "and the udev rules)", device=self.label) from exc
+            raise DriverError(
+                f"cannot open the camera: {exc} (connected: {seen or 'none'}; check the USB cable and the udev rules)",
+                device=self.label,
+            ) from exc
         serial = str(call_or_none(camera, "getSerialNumber") or self.cfg.serial)
         self.label = device_label(serial)
         resolution = call_or_none(camera, "getEventResolution")
@@ -140,11 +151,17 @@ class InivationCamera:
         settings = self._apply(camera, width, height)
         offset = call_or_none(camera, "getTimestampOffset")
         self._offset_us = offset // timedelta(microseconds=1) if isinstance(offset, timedelta) else int(offset or 0)
-        settings.update({"driver": "dv-processing", "serial": serial, "camera": call_or_none(camera, "getCameraName"),
-                         "firmware": call_or_none(camera, "getFirmwareVersion"),
-                         "logic_version": call_or_none(camera, "getLogicVersion"),
-                         "connection": call_or_none(camera, "getConnectionSpeed"),
-                         "timestamp_offset_us": self._offset_us})
+        settings.update(
+            {
+                "driver": "dv-processing",
+                "serial": serial,
+                "camera": call_or_none(camera, "getCameraName"),
+                "firmware": call_or_none(camera, "getFirmwareVersion"),
+                "logic_version": call_or_none(camera, "getLogicVersion"),
+                "connection": call_or_none(camera, "getConnectionSpeed"),
+                "timestamp_offset_us": self._offset_us,
+            }
+        )
         self._triggers_on = bool(call_or_none(camera, "isTriggerStreamAvailable"))
         self._camera = camera
         self._stall = StallWatch(self.cfg.stall_timeout_s, self.label)
@@ -190,8 +207,11 @@ class InivationCamera:
         return events
 
     def _triggers(self, batch: Any) -> np.ndarray:
-        kept = [(int(tr.timestamp) - self._offset_us, *TRIGGERS[tr.type.name]) for tr in batch
-                if getattr(tr.type, "name", "") in TRIGGERS]
+        kept = [
+            (int(tr.timestamp) - self._offset_us, *TRIGGERS[tr.type.name])
+            for tr in batch
+            if getattr(tr.type, "name", "") in TRIGGERS
+        ]
         return np.array(kept, dtype=TRIGGER_DTYPE) if kept else empty_triggers()
 
     def _apply(self, camera: Any, width: int, height: int) -> dict[str, Any]:
@@ -216,8 +236,10 @@ class InivationCamera:
             bias = _member(camera, "Davis346BiasCF", name, f"davis_biases.{name}")
             _set(camera, "setDavis346BiasCoarseFine", f"davis_biases.{name}", bias, coarse, fine)
         if cfg.davis_biases:
-            out["davis_biases"] = {name: list(camera.getDavis346BiasCoarseFine(camera.Davis346BiasCF.__members__[name]))
-                                   for name in cfg.davis_biases}
+            out["davis_biases"] = {
+                name: list(camera.getDavis346BiasCoarseFine(camera.Davis346BiasCF.__members__[name]))
+                for name in cfg.davis_biases
+            }
         if cfg.trigger_in is not None:
             if cfg.trigger_in:
                 _set(camera, "setDetectorRisingEdges", "trigger_in", True)

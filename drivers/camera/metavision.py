@@ -37,9 +37,11 @@ from flagtrack.drivers.camera.hardware import (
 
 log = logging.getLogger(__name__)
 
-INSTALL_HINT = ("install OpenEB (or the Metavision SDK) with its Python bindings and make metavision_hal "
-                "importable from this Python (see docs/cameras.md), or use adapter: prophesee "
-                "(pip install 'flagtrack[prophesee]')")
+INSTALL_HINT = (
+    "install OpenEB (or the Metavision SDK) with its Python bindings and make metavision_hal "
+    "importable from this Python (see docs/cameras.md), or use adapter: prophesee "
+    "(pip install 'flagtrack[prophesee]')"
+)
 POLL_INTERVAL_S = 0.001
 
 
@@ -92,8 +94,9 @@ def check_config(hardware: dict[str, Any], path: str | None = None) -> Metavisio
     cfg = from_mapping(MetavisionConfig, hardware, path=path, key=KEY)
     for name in cfg.biases:
         if name not in KNOWN_BIASES:
-            raise ConfigError(f"not a HAL bias name (known: {', '.join(KNOWN_BIASES)})", key=f"{KEY}.biases.{name}",
-                              path=path)
+            raise ConfigError(
+                f"not a HAL bias name (known: {', '.join(KNOWN_BIASES)})", key=f"{KEY}.biases.{name}", path=path
+            )
     return cfg
 
 
@@ -127,8 +130,12 @@ class MetavisionCamera:
             serial = str(call_or_none(hw, "get_serial") or self.cfg.serial)
             self.label = device_label(serial)
             encoding, endianness, native = self._encoding(hw)
-            settings = {"driver": "openeb", "driver_version": sdk_version("metavision-hal", hal),
-                        "serial": serial, "device_encoding": native}
+            settings = {
+                "driver": "openeb",
+                "driver_version": sdk_version("metavision-hal", hal),
+                "serial": serial,
+                "device_encoding": native,
+            }
             settings.update(self._identification(hw))
             settings["biases"] = self._apply_biases(device)
             settings["roi"] = self._apply_roi(hal, device, width, height)
@@ -187,8 +194,11 @@ class MetavisionCamera:
             raise DriverError(f"cannot open the camera: {exc}", device=self.label) from exc
         if device is None:
             seen = call_or_none(hal.DeviceDiscovery, "list")
-            raise DriverError(f"camera not found (connected: {', '.join(seen) if seen else 'none'}; "
-                              "check the USB cable, the udev rules and the OpenEB plugins)", device=self.label)
+            raise DriverError(
+                f"camera not found (connected: {', '.join(seen) if seen else 'none'}; "
+                "check the USB cable, the udev rules and the OpenEB plugins)",
+                device=self.label,
+            )
         return device
 
     def _encoding(self, hw: Any) -> tuple[str, str, str]:
@@ -210,10 +220,13 @@ class MetavisionCamera:
 
     def _identification(self, hw: Any) -> dict[str, Any]:
         sensor = call_or_none(hw, "get_sensor_info")
-        return {"integrator": call_or_none(hw, "get_integrator"), "system_id": call_or_none(hw, "get_system_id"),
-                "sensor": getattr(sensor, "name", None),
-                "available_formats": call_or_none(hw, "get_available_data_encoding_formats"),
-                "system_info": call_or_none(hw, "get_system_info")}
+        return {
+            "integrator": call_or_none(hw, "get_integrator"),
+            "system_id": call_or_none(hw, "get_system_id"),
+            "sensor": getattr(sensor, "name", None),
+            "available_formats": call_or_none(hw, "get_available_data_encoding_formats"),
+            "system_info": call_or_none(hw, "get_system_info"),
+        }
 
     def _apply_biases(self, device: Any) -> dict[str, int] | None:
         facility = call_or_none(device, "get_i_ll_biases")
@@ -268,8 +281,10 @@ class MetavisionCamera:
                 raise ConfigError(f"the camera refused it: {exc} (supported: {low}..{high})", key=key) from exc
         if facility is None:
             return None
-        return {"enabled": call_or_none(facility, "is_enabled"),
-                "events_per_s": call_or_none(facility, "get_cd_event_rate")}
+        return {
+            "enabled": call_or_none(facility, "is_enabled"),
+            "events_per_s": call_or_none(facility, "get_cd_event_rate"),
+        }
 
     def _apply_trigger(self, hal: Any, device: Any) -> bool | None:
         facility = call_or_none(device, "get_i_trigger_in")

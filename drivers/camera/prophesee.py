@@ -88,8 +88,21 @@ class PropheseeConfig:
 
 
 MODEL_BIASES = {
-    "Prophesee EVK4": ("pr", "fo", "hpf", "diff_on", "diff", "diff_off", "inv", "refr", "reqpuy", "reqpux",
-                       "sendreqpdy", "unknown_1", "unknown_2"),
+    "Prophesee EVK4": (
+        "pr",
+        "fo",
+        "hpf",
+        "diff_on",
+        "diff",
+        "diff_off",
+        "inv",
+        "refr",
+        "reqpuy",
+        "reqpux",
+        "sendreqpdy",
+        "unknown_1",
+        "unknown_2",
+    ),
     "Prophesee EVK3 HD": ("pr", "fo_p", "fo_n", "hpf", "diff_on", "diff", "diff_off", "refr", "reqpuy", "blk"),
     "CenturyArks VGA": ("diff_on", "diff", "diff_off", "fo", "hpf", "pr", "refr"),
 }
@@ -109,8 +122,11 @@ def check_config(hardware: dict[str, Any], path: str | None = None) -> Prophesee
     cfg = from_mapping(PropheseeConfig, hardware, path=path, key=KEY)
     for name in cfg.biases:
         if name not in KNOWN_BIASES:
-            raise ConfigError(f"no Prophesee-sensor camera has a bias {name!r} (known: {', '.join(KNOWN_BIASES)})",
-                              key=f"{KEY}.biases.{name}", path=path)
+            raise ConfigError(
+                f"no Prophesee-sensor camera has a bias {name!r} (known: {', '.join(KNOWN_BIASES)})",
+                key=f"{KEY}.biases.{name}",
+                path=path,
+            )
     return cfg
 
 
@@ -159,10 +175,17 @@ class PropheseeCamera:
             raise
         self._device = device
         self._stall = StallWatch(self.cfg.stall_timeout_s, self.label)
-        log.info("%s: %s %dx%d, settings %s", self.label, listed.name.value, properties.width, properties.height,
-                 settings)
-        return CameraInfo("prophesee", int(properties.width), int(properties.height), self._stream.published,
-                          serial=str(serial or ""), settings=settings)
+        log.info(
+            "%s: %s %dx%d, settings %s", self.label, listed.name.value, properties.width, properties.height, settings
+        )
+        return CameraInfo(
+            "prophesee",
+            int(properties.width),
+            int(properties.height),
+            self._stream.published,
+            serial=str(serial or ""),
+            settings=settings,
+        )
 
     def read(self, timeout_s: float) -> CameraData | None:
         if self._device is None or self._stream is None:
@@ -197,25 +220,38 @@ class PropheseeCamera:
         prophesee = [d for d in devices if not d.name.name.startswith("INIVATION")]
         matches = [d for d in prophesee if not self.cfg.serial or d.serial == self.cfg.serial]
         if not matches:
-            seen = ", ".join(f"{d.name.value} '{d.serial}'" + (f" ({d.error})" if d.error else "")
-                             for d in devices) or "none"
-            hint = " (an iniVation camera: use adapter: inivation)" if any(
-                d.serial == self.cfg.serial for d in devices) else ""
+            seen = (
+                ", ".join(f"{d.name.value} '{d.serial}'" + (f" ({d.error})" if d.error else "") for d in devices)
+                or "none"
+            )
+            hint = (
+                " (an iniVation camera: use adapter: inivation)"
+                if any(d.serial == self.cfg.serial for d in devices)
+                else ""
+            )
             raise DriverError(f"no such Prophesee-sensor camera found{hint}; connected: {seen}", device=self.label)
         if matches[0].error:
-            raise DriverError(f"{matches[0].name.value} found but not usable: {matches[0].error} "
-                              "(permissions: install the udev rules, see docs/cameras.md)", device=self.label)
+            raise DriverError(
+                f"{matches[0].name.value} found but not usable: {matches[0].error} "
+                "(permissions: install the udev rules, see docs/cameras.md)",
+                device=self.label,
+            )
         return matches[0]
 
-    def _settings(self, nd: Any, device: Any, listed: Any, configuration: Any, bounds: Any,
-                  clamped: list[str]) -> dict[str, Any]:
+    def _settings(
+        self, nd: Any, device: Any, listed: Any, configuration: Any, bounds: Any, clamped: list[str]
+    ) -> dict[str, Any]:
         roi = self.cfg.roi.as_dict() if self.cfg.roi is not None else None
         settings: dict[str, Any] = {
-            "driver": "neuromorphic-drivers", "driver_version": sdk_version("neuromorphic-drivers", nd),
-            "model": listed.name.value, "serial": plain(call_or_none(device, "serial")),
+            "driver": "neuromorphic-drivers",
+            "driver_version": sdk_version("neuromorphic-drivers", nd),
+            "model": listed.name.value,
+            "serial": plain(call_or_none(device, "serial")),
             "connection": plain(call_or_none(device, "connection") or call_or_none(device, "speed")),
             "device_encoding": self._stream.encoding if self._stream else "",
-            "biases": plain(configuration.biases), "biases_clamped": clamped, "roi": roi,
+            "biases": plain(configuration.biases),
+            "biases_clamped": clamped,
+            "roi": roi,
             "rate_limiter": plain(getattr(configuration, "rate_limiter", None)),
             "trigger_in": plain(getattr(configuration, "enable_external_trigger", None)),
         }
@@ -264,7 +300,8 @@ def build_configuration(module: Any, cfg: PropheseeConfig, bounds: Any, model: s
             raise ConfigError(f"{model} has no rate limiter", key=f"{KEY}.rate_limiter")
         kwargs["rate_limiter"] = module.RateLimiter(
             reference_period_us=cfg.rate_limiter.reference_period_us,
-            maximum_events_per_period=cfg.rate_limiter.maximum_events_per_period)
+            maximum_events_per_period=cfg.rate_limiter.maximum_events_per_period,
+        )
     if cfg.trigger_in is not None:
         if "enable_external_trigger" not in fields:
             raise ConfigError(f"{model} has no external trigger input", key=f"{KEY}.trigger_in")
@@ -284,8 +321,14 @@ def _biases(biases_cls: Any, wanted: dict[str, int], bounds: Any, model: str) ->
         if limits is not None and limits.minimum <= limits.maximum:
             fitted = min(max(value, int(limits.minimum)), int(limits.maximum))
             if fitted != value:
-                log.warning("bias %s = %d is outside the device's bounds [%d, %d]: set to %d", name, value,
-                            limits.minimum, limits.maximum, fitted)
+                log.warning(
+                    "bias %s = %d is outside the device's bounds [%d, %d]: set to %d",
+                    name,
+                    value,
+                    limits.minimum,
+                    limits.maximum,
+                    fitted,
+                )
                 clamped.append(name)
             value = fitted
         values[name] = value

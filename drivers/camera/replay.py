@@ -48,8 +48,9 @@ class ReplayConfig:
         if self.slice_us < 1:
             raise ValueError("slice_us must be positive")
         if self.encoding not in (None, "evt2", "evt3"):
-            raise ValueError(f"encoding must be evt2 or evt3 (the encodings packets are made in), "
-                             f"got {self.encoding!r}")
+            raise ValueError(
+                f"encoding must be evt2 or evt3 (the encodings packets are made in), got {self.encoding!r}"
+            )
 
 
 class ReplayCamera:
@@ -69,13 +70,20 @@ class ReplayCamera:
             info = reader.info
         width, height = info.width or self.cfg.width, info.height or self.cfg.height
         if not width or not height:
-            raise DriverError("the file does not give the sensor size: set camera.replay.width and height",
-                              device=str(path))
+            raise DriverError(
+                "the file does not give the sensor size: set camera.replay.width and height", device=str(path)
+            )
         encoding = self.cfg.encoding or (info.encoding if info.encoding in ("evt2", "evt3") else "evt3")
         self._slices = self._loop_slices(path)
         self._wall0 = time.monotonic()
-        return CameraInfo("replay", int(width), int(height), encoding, serial=str(path),
-                          settings={"speed": self.cfg.speed, "loop": self.cfg.loop, "source_format": info.format})
+        return CameraInfo(
+            "replay",
+            int(width),
+            int(height),
+            encoding,
+            serial=str(path),
+            settings={"speed": self.cfg.speed, "loop": self.cfg.loop, "source_format": info.format},
+        )
 
     def read(self, timeout_s: float) -> CameraData | None:
         if self._slices is None:
@@ -155,7 +163,7 @@ class ReplayCamera:
                 starts, slots, maxima = slot_table(events["t"], running_max, slice_us)
                 running_max = int(maxima[-1])
                 for q in range(len(slots)):
-                    piece = events[starts[q]:starts[q + 1]]
+                    piece = events[starts[q] : starts[q + 1]]
                     slot = int(slots[q])
                     if q == 0 and len(held) and slot == held_slot:  # the open slice goes on
                         piece = np.concatenate([held, piece])

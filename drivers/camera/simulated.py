@@ -88,8 +88,9 @@ class SimulatedCameraConfig:
     def __post_init__(self) -> None:
         if self.slice_us < 50 or self.time_scale <= 0:
             raise ValueError("slice_us must be >= 50 and time_scale > 0")
-        if self.trigger_period_ms < 0 or (self.trigger_period_ms > 0 and
-                                          not 0 < self.trigger_pulse_us < self.trigger_period_ms * 1000):
+        if self.trigger_period_ms < 0 or (
+            self.trigger_period_ms > 0 and not 0 < self.trigger_pulse_us < self.trigger_period_ms * 1000
+        ):
             raise ValueError("trigger_period_ms must be >= 0 and trigger_pulse_us within (0, period)")
 
 
@@ -184,16 +185,26 @@ class SimulatedCamera:
     def __init__(self, cfg: SimulatedCameraConfig, speed_source: Callable[[], float] | None = None) -> None:
         self.cfg = cfg
         self.speed_source = speed_source or (lambda: cfg.speed_mps)
-        base = FlagKinematics(length=cfg.length_px, root=cfg.root_px, direction_deg=cfg.direction_deg,
-                              wavelength_over_l=cfg.wavelength_over_l, w_travel=cfg.w_travel,
-                              w_standing=1.0 - cfg.w_travel)
+        base = FlagKinematics(
+            length=cfg.length_px,
+            root=cfg.root_px,
+            direction_deg=cfg.direction_deg,
+            wavelength_over_l=cfg.wavelength_over_l,
+            w_travel=cfg.w_travel,
+            w_standing=1.0 - cfg.w_travel,
+        )
         solved = with_peak_to_peak(base, 2 * _REFERENCE_AMP_OVER_L)
         if solved is None:
             raise DriverError(f"simulated flag cannot reach A/L {_REFERENCE_AMP_OVER_L}", device="simulated camera")
         self.kinematics = solved
         self.flutter = FlutterModel(cfg.flutter, seed=cfg.seed)
-        self.line = QuickLineParams(events_per_px2=cfg.events_per_px2, line_width_px=cfg.line_width_px,
-                                    noise_rate_hz=cfg.noise_rate_hz, n_s=100, slice_us=100)
+        self.line = QuickLineParams(
+            events_per_px2=cfg.events_per_px2,
+            line_width_px=cfg.line_width_px,
+            noise_rate_hz=cfg.noise_rate_hz,
+            n_s=100,
+            slice_us=100,
+        )
         self._t_us = 0
         self._wall0: float | None = None
         self._slice = 0
@@ -209,10 +220,19 @@ class SimulatedCamera:
     def open(self) -> CameraInfo:
         self._wall0 = time.monotonic()
         flutter = self.flutter.params
-        return CameraInfo("simulated", self.cfg.width, self.cfg.height, "evt3", serial="digital-twin",
-                          settings={"onset_speed_mps": flutter.onset_speed_mps,
-                                    "decay_speed_mps": flutter.decay_speed_mps,
-                                    "noise_rate_hz": self.cfg.noise_rate_hz, "time_scale": self.cfg.time_scale})
+        return CameraInfo(
+            "simulated",
+            self.cfg.width,
+            self.cfg.height,
+            "evt3",
+            serial="digital-twin",
+            settings={
+                "onset_speed_mps": flutter.onset_speed_mps,
+                "decay_speed_mps": flutter.decay_speed_mps,
+                "noise_rate_hz": self.cfg.noise_rate_hz,
+                "time_scale": self.cfg.time_scale,
+            },
+        )
 
     def read(self, timeout_s: float) -> CameraData | None:
         if self._wall0 is None:
@@ -236,8 +256,18 @@ class SimulatedCamera:
         end = self.flutter.advance(float(self.speed_source()), (t1_us - t0_us) * 1e-6)
         twin = _TwinSlice(self.kinematics, t0_us * 1e-6, t1_us * 1e-6, start, end, self.cfg.still_amp_over_l)
         self.truth.add(twin)
-        chunks = list(line_events(twin, t0_us, t1_us, self.cfg.width, self.cfg.height, self.line,
-                                  seed=self.cfg.seed * 1_000_003 + self._slice, chunk_us=t1_us - t0_us))
+        chunks = list(
+            line_events(
+                twin,
+                t0_us,
+                t1_us,
+                self.cfg.width,
+                self.cfg.height,
+                self.line,
+                seed=self.cfg.seed * 1_000_003 + self._slice,
+                chunk_us=t1_us - t0_us,
+            )
+        )
         self._slice += 1
         self._t_us = t1_us
         events = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
@@ -257,10 +287,14 @@ class SimulatedCamera:
             log.warning("simulated camera: cannot keep up with real time; skipping ahead (events dropped)")
         start = self.flutter.state
         end = self.flutter.advance(float(self.speed_source()), skip_us * 1e-6)
-        self.truth.add(_TwinSlice(self.kinematics, self._t_us * 1e-6, (self._t_us + skip_us) * 1e-6, start, end,
-                                  self.cfg.still_amp_over_l))
-        self._pending_triggers = np.concatenate([self._pending_triggers,
-                                                 trigger_edges(self.cfg, self._t_us, self._t_us + skip_us)])
+        self.truth.add(
+            _TwinSlice(
+                self.kinematics, self._t_us * 1e-6, (self._t_us + skip_us) * 1e-6, start, end, self.cfg.still_amp_over_l
+            )
+        )
+        self._pending_triggers = np.concatenate(
+            [self._pending_triggers, trigger_edges(self.cfg, self._t_us, self._t_us + skip_us)]
+        )
         self._t_us += skip_us
         self.skipped_us += skip_us
 

@@ -27,8 +27,28 @@ def packet_words(n_events: np.ndarray, n_triggers: np.ndarray) -> int:
 
 
 @njit(cache=True, nogil=True)
-def encode_packets(evt3, t, x, y, p, starts, stops, horizons, tr_t, tr_c, tr_e, tr_starts, tr_stops,
-                   loop_us, width, height, out, out_ends, t_offsets, n_on):
+def encode_packets(
+    evt3,
+    t,
+    x,
+    y,
+    p,
+    starts,
+    stops,
+    horizons,
+    tr_t,
+    tr_c,
+    tr_e,
+    tr_starts,
+    tr_stops,
+    loop_us,
+    width,
+    height,
+    out,
+    out_ends,
+    t_offsets,
+    n_on,
+):
     """Encode packet q from events ``starts[q]:stops[q]`` and triggers ``tr_starts[q]:tr_stops[q]``.
 
     Packet q's words are ``out[out_ends[q-1]:out_ends[q]]``; its time offset is the start of the
@@ -58,11 +78,39 @@ def encode_packets(evt3, t, x, y, p, starts, stops, horizons, tr_t, tr_c, tr_e, 
             state[:] = 0
             state[2] = -1
             if evt3:
-                _, _, k, status = encode_evt3(t[i0:i1], x[i0:i1], y[i0:i1], p[i0:i1], 0, tr_t[j0:j1], tr_c[j0:j1],
-                                              tr_e[j0:j1], 0, state, out[k0:], offset, width, height)
+                _, _, k, status = encode_evt3(
+                    t[i0:i1],
+                    x[i0:i1],
+                    y[i0:i1],
+                    p[i0:i1],
+                    0,
+                    tr_t[j0:j1],
+                    tr_c[j0:j1],
+                    tr_e[j0:j1],
+                    0,
+                    state,
+                    out[k0:],
+                    offset,
+                    width,
+                    height,
+                )
             else:
-                _, _, k, status = encode_evt2(t[i0:i1], x[i0:i1], y[i0:i1], p[i0:i1], 0, tr_t[j0:j1], tr_c[j0:j1],
-                                              tr_e[j0:j1], 0, state, out[k0:], offset, width, height)
+                _, _, k, status = encode_evt2(
+                    t[i0:i1],
+                    x[i0:i1],
+                    y[i0:i1],
+                    p[i0:i1],
+                    0,
+                    tr_t[j0:j1],
+                    tr_c[j0:j1],
+                    tr_e[j0:j1],
+                    0,
+                    state,
+                    out[k0:],
+                    offset,
+                    width,
+                    height,
+                )
             if status != OK:
                 return q, status
             k0 += k

@@ -38,8 +38,9 @@ class AedatReader(EventReader):
         (header_size,) = struct.unpack("<i", head[len(MAGIC) :])
         self.first_packet = len(MAGIC) + 4 + header_size
         if header_size <= 0 or self.first_packet > self.size_bytes:
-            raise FormatError(f"garbage AEDAT 4.0 header (IOHeader size {header_size})", path=str(self.path),
-                              offset=len(MAGIC))
+            raise FormatError(
+                f"garbage AEDAT 4.0 header (IOHeader size {header_size})", path=str(self.path), offset=len(MAGIC)
+            )
         streams = self._open_library().id_to_stream()
         events = sorted(i for i, s in streams.items() if s.get("type") == "events")
         triggers = sorted(i for i, s in streams.items() if s.get("type") == "triggers")
@@ -53,14 +54,16 @@ class AedatReader(EventReader):
         try:
             import aedat
         except ImportError:
-            raise FormatError("reading .aedat4 files needs the 'aedat' package (pip install aedat)",
-                              path=str(self.path)) from None
+            raise FormatError(
+                "reading .aedat4 files needs the 'aedat' package (pip install aedat)", path=str(self.path)
+            ) from None
 
         try:
             return aedat.Decoder(str(self.path))
         except Exception as exc:  # noqa: BLE001 - the library raises RuntimeError/OSError without offsets
-            raise FormatError(f"cannot read the AEDAT 4.0 header: {exc}", path=str(self.path),
-                              offset=len(MAGIC)) from None
+            raise FormatError(
+                f"cannot read the AEDAT 4.0 header: {exc}", path=str(self.path), offset=len(MAGIC)
+            ) from None
 
     def _packet_offsets(self) -> Iterator[int]:
         """Byte offset of each packet, in file order (checks that each fits in the file)."""
@@ -70,12 +73,16 @@ class AedatReader(EventReader):
                 f.seek(offset)
                 head = f.read(8)
                 if len(head) < 8:
-                    raise FormatError("file ends inside a packet header (truncated file?)", path=str(self.path),
-                                      offset=offset)
+                    raise FormatError(
+                        "file ends inside a packet header (truncated file?)", path=str(self.path), offset=offset
+                    )
                 _, size = struct.unpack("<ii", head)
                 if size < 0 or offset + 8 + size > self.size_bytes:
-                    raise FormatError(f"file ends inside a packet of {size} bytes (truncated file?)",
-                                      path=str(self.path), offset=offset)
+                    raise FormatError(
+                        f"file ends inside a packet of {size} bytes (truncated file?)",
+                        path=str(self.path),
+                        offset=offset,
+                    )
                 yield offset
                 offset += 8 + size
 

@@ -61,8 +61,13 @@ class CentrelineWriter:
         if n == 0:
             return
         columns = {
-            "t": batch.t_s, "x": batch.x, "y": batch.y, "joints/x": batch.joints_x,
-            "joints/y": batch.joints_y, "delta_rms": batch.delta_rms, "n_events": batch.n_events,
+            "t": batch.t_s,
+            "x": batch.x,
+            "y": batch.y,
+            "joints/x": batch.joints_x,
+            "joints/y": batch.joints_y,
+            "delta_rms": batch.delta_rms,
+            "n_events": batch.n_events,
         }
         start = self.n_updates
         for name, values in columns.items():
@@ -99,13 +104,21 @@ def write_attrs(target: h5py.File | h5py.Group, attrs: Mapping[str, Any]) -> Non
 
 
 def _is_numeric_sequence(value: Any) -> bool:
-    return isinstance(value, list | tuple) and len(value) > 0 and all(
-        isinstance(v, int | float) and not isinstance(v, bool) for v in value
+    return (
+        isinstance(value, list | tuple)
+        and len(value) > 0
+        and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
     )
 
 
-def centreline_attrs(processing: Mapping[str, Any], *, units: str, input_file: str | None = None,
-                     calibration: Mapping[str, Any] | None = None, **extra: Any) -> dict[str, Any]:
+def centreline_attrs(
+    processing: Mapping[str, Any],
+    *,
+    units: str,
+    input_file: str | None = None,
+    calibration: Mapping[str, Any] | None = None,
+    **extra: Any,
+) -> dict[str, Any]:
     """The root attributes every centreline file carries (``flagtrack_version`` is added by the writer).
 
     Args:
@@ -133,8 +146,11 @@ class CentrelineShapeError(FormatError):
     def __init__(self, got: tuple[int, int], want: tuple[int, int], *, path: str | None = None) -> None:
         self.got = got
         self.want = want
-        super().__init__(f"a batch of {got[0]} samples and {got[1]} joints does not fit the file's {want[0]} "
-                         f"samples and {want[1]} joints: not written", path=path)
+        super().__init__(
+            f"a batch of {got[0]} samples and {got[1]} joints does not fit the file's {want[0]} "
+            f"samples and {want[1]} joints: not written",
+            path=path,
+        )
 
 
 class CentrelineSink:
@@ -167,9 +183,17 @@ class CentrelineSink:
         atomic: write to a temporary file, renamed onto ``path`` at a successful close.
     """
 
-    def __init__(self, path: str | Path, attrs: Mapping[str, Any], *, s: np.ndarray | None = None,
-                 n_joints: int | None = None, max_pending: int = 8192, flush_interval_s: float | None = None,
-                 atomic: bool = False) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        attrs: Mapping[str, Any],
+        *,
+        s: np.ndarray | None = None,
+        n_joints: int | None = None,
+        max_pending: int = 8192,
+        flush_interval_s: float | None = None,
+        atomic: bool = False,
+    ) -> None:
         if (s is None) != (n_joints is None):
             raise ValueError("give both s and n_joints, or neither")
         self.path = Path(path)
@@ -346,9 +370,14 @@ def read_centrelines(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any]]
             if missing:
                 raise FormatError(f"not a flagtrack centreline file: missing /{missing[0]}", path=str(path))
             batch = CentrelineBatch(
-                t_s=f["t"][()], s=f["s"][()], x=f["x"][()], y=f["y"][()],
-                joints_x=f["joints/x"][()], joints_y=f["joints/y"][()],
-                delta_rms=f["delta_rms"][()], n_events=f["n_events"][()],
+                t_s=f["t"][()],
+                s=f["s"][()],
+                x=f["x"][()],
+                y=f["y"][()],
+                joints_x=f["joints/x"][()],
+                joints_y=f["joints/y"][()],
+                delta_rms=f["delta_rms"][()],
+                n_events=f["n_events"][()],
             )
             attrs = {name: _decode_attr(value) for name, value in f.attrs.items()}
     except OSError as exc:

@@ -127,8 +127,9 @@ class Decoder:
             return pieces[0][0], pieces[0][1]
         return np.concatenate([p[0] for p in pieces]), np.concatenate([p[1] for p in pieces])
 
-    def pieces(self, data: bytes | bytearray | memoryview, *, trim: bool = True
-               ) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
+    def pieces(
+        self, data: bytes | bytearray | memoryview, *, trim: bool = True
+    ) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
         """Decode the next bytes in bounded pieces: yield (events, triggers, file offset of the piece).
 
         With ``trim`` a piece that fills less than half its buffer is copied out of it (bounded memory
@@ -165,8 +166,11 @@ class Decoder:
         if self._tail:
             n = len(self._tail)
             self._tail = b""
-            self._report(f"stream ends inside a {self._word}-byte {NAMES[self.encoding]} word "
-                         f"({n} trailing bytes; truncated file?)", self._fed - n)
+            self._report(
+                f"stream ends inside a {self._word}-byte {NAMES[self.encoding]} word "
+                f"({n} trailing bytes; truncated file?)",
+                self._fed - n,
+            )
 
     def _kernel_runner(self, buf: memoryview, n_words: int):  # noqa: ANN202
         width = SENSOR_LIMIT if self.width is None else int(self.width)
@@ -189,8 +193,10 @@ class Decoder:
         if status == tb.BAD_WORD:
             what = f"corrupt {NAMES[self.encoding]} word 0x{value:0{2 * self._word}x}: reserved type 0x{typ:x}"
         else:
-            what = (f"corrupt {NAMES[self.encoding]} word 0x{value:0{2 * self._word}x}: event outside the "
-                    f"{self.width}x{self.height} sensor")
+            what = (
+                f"corrupt {NAMES[self.encoding]} word 0x{value:0{2 * self._word}x}: event outside the "
+                f"{self.width}x{self.height} sensor"
+            )
         self._report(what, offset)
 
     def _report(self, message: str, offset: int) -> None:
@@ -252,8 +258,9 @@ class Encoder:
         ev = _columns(events, ("t", "x", "y", "p"), EVENT_DTYPE)
         return self.encode_columns(*ev, triggers=triggers)
 
-    def encode_columns(self, t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray,
-                       triggers: np.ndarray | None = None) -> bytes:
+    def encode_columns(
+        self, t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, triggers: np.ndarray | None = None
+    ) -> bytes:
         """:meth:`encode` for events given as columns (t int64, x/y uint16, p uint8).
 
         Contiguous columns encode about twice as fast as the strided fields of an event array.
@@ -264,7 +271,9 @@ class Encoder:
         if n_ev + n_tr == 0:
             return b""
         if self._t_offset is None:
-            t0 = min(int(ev[0][0]) if n_ev else np.iinfo(np.int64).max, int(tr[0][0]) if n_tr else np.iinfo(np.int64).max)
+            t0 = min(
+                int(ev[0][0]) if n_ev else np.iinfo(np.int64).max, int(tr[0][0]) if n_tr else np.iinfo(np.int64).max
+            )
             self._t_offset = (t0 // self.loop_us) * self.loop_us
         kernel, dtype = (encode_evt3, "<u2") if self.encoding == "evt3" else (encode_evt2, "<u4")
         out = np.empty(3 * n_ev + 4 * n_tr + 64, dtype=dtype)
@@ -286,8 +295,9 @@ class Encoder:
             what, values = f"trigger {j}", {k: int(c[j]) for k, c in zip(("t", "channel", "edge"), tr)}
         else:
             what, values = f"event {self._count + i}", {k: int(c[i]) for k, c in zip(("t", "x", "y", "p"), ev)}
-        message = _ENCODE_ERRORS[status].format(t=values["t"], off=self._t_offset, name=NAMES[self.encoding],
-                                                w=self.width, h=self.height)
+        message = _ENCODE_ERRORS[status].format(
+            t=values["t"], off=self._t_offset, name=NAMES[self.encoding], w=self.width, h=self.height
+        )
         raise FormatError(f"cannot encode {what} {values}: {message}", path=self.target)
 
 

@@ -88,8 +88,9 @@ class CsvReader(EventReader):
                 yield EventChunk(self._events(rows[:n], offset + start), np.empty(0, TRIGGER_DTYPE), offset + start)
             if status == BAD:
                 line_end = bytes(buf[pos : pos + 80]).split(b"\n")[0].decode("utf-8", errors="replace")
-                raise FormatError(f"bad CSV row {line_end!r}: expected 4 integers t,x,y,p", path=str(self.path),
-                                  offset=offset + fault)
+                raise FormatError(
+                    f"bad CSV row {line_end!r}: expected 4 integers t,x,y,p", path=str(self.path), offset=offset + fault
+                )
             if status != FULL:
                 break
 
@@ -98,8 +99,11 @@ class CsvReader(EventReader):
         p = np.where(p == -1, 0, p)
         bad = (x < 0) | (x > 0xFFFF) | (y < 0) | (y > 0xFFFF) | (p < 0) | (p > 1)
         if bad.any():
-            raise FormatError(f"CSV row {rows[int(np.argmax(bad))].tolist()} out of range (x, y 0-65535, p 0 or 1)",
-                              path=str(self.path), offset=offset)
+            raise FormatError(
+                f"CSV row {rows[int(np.argmax(bad))].tolist()} out of range (x, y 0-65535, p 0 or 1)",
+                path=str(self.path),
+                offset=offset,
+            )
         events = np.empty(len(rows), dtype=EVENT_DTYPE)
         events["t"], events["x"], events["y"], events["p"] = t, x, y, p
         return events

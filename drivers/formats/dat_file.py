@@ -59,9 +59,12 @@ class DatReader(EventReader):
         else:
             self.event_type, self.event_size = 0, 8
         if self.event_type not in _SIZES or _SIZES[self.event_type] != self.event_size:
-            raise FormatError(f"unsupported DAT event type {self.event_type} of {self.event_size} bytes "
-                              f"(supported: CD types 0 and 12 of 8 bytes, trigger type 14)", path=str(self.path),
-                              offset=max(pos - 2, 0))
+            raise FormatError(
+                f"unsupported DAT event type {self.event_type} of {self.event_size} bytes "
+                f"(supported: CD types 0 and 12 of 8 bytes, trigger type 14)",
+                path=str(self.path),
+                offset=max(pos - 2, 0),
+            )
         self.body_offset = pos
         width, height = fields.get("Width"), fields.get("Height")
         size = (int(width), int(height)) if width and height and width.isdigit() and height.isdigit() else (None, None)
@@ -80,9 +83,12 @@ class DatReader(EventReader):
                 if whole:
                     yield self._decode(data[:whole], offset)
                 if whole < len(data):
-                    raise FormatError(f"file ends inside a {self.event_size}-byte event "
-                                      f"({len(data) - whole} trailing bytes; truncated file?)",
-                                      path=str(self.path), offset=offset + whole)
+                    raise FormatError(
+                        f"file ends inside a {self.event_size}-byte event "
+                        f"({len(data) - whole} trailing bytes; truncated file?)",
+                        path=str(self.path),
+                        offset=offset + whole,
+                    )
                 offset += whole
 
     def _decode(self, data: bytes, offset: int) -> EventChunk:
@@ -130,8 +136,11 @@ class DatWriter:
         bad = (t < 0) | (t > 0xFFFFFFFF) | (x > 0x3FFF) | (y > 0x3FFF) | (p > 1)
         if bad.any():
             i = int(np.argmax(bad))
-            raise FormatError(f"cannot write event {self._count + i} {events[i]} to DAT (t must fit 32 bits, "
-                              "x and y 14 bits, p 0 or 1)", path=str(self.path))
+            raise FormatError(
+                f"cannot write event {self._count + i} {events[i]} to DAT (t must fit 32 bits, "
+                "x and y 14 bits, p 0 or 1)",
+                path=str(self.path),
+            )
         raw = np.empty(len(t), dtype=_RAW_CD)
         raw["t"] = t
         raw["w"] = x | (y << 14) | (p << 28)

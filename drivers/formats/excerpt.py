@@ -13,8 +13,9 @@ from flagtrack.daemon.errors import FormatError
 log = logging.getLogger(__name__)
 
 
-def read_excerpt(path: str | Path, max_s: float | None = 10.0,
-                 size: tuple[int, int] | None = None) -> tuple[np.ndarray, tuple[int, int]]:
+def read_excerpt(
+    path: str | Path, max_s: float | None = 10.0, size: tuple[int, int] | None = None
+) -> tuple[np.ndarray, tuple[int, int]]:
     """Events of the first ``max_s`` seconds of ``path`` (any event file flagtrack reads), and the sensor size.
 
     Args:

@@ -72,13 +72,18 @@ class NpyReader(EventReader):
                 if got:
                     events = self._convert(np.frombuffer(data, dtype=self.dtype, count=got))
                     last = events["t"][-1]
-                    take = np.searchsorted(triggers["t"], last, side="right") if done + got < self.count else len(triggers)
+                    take = (
+                        np.searchsorted(triggers["t"], last, side="right") if done + got < self.count else len(triggers)
+                    )
                     yield EventChunk(events, triggers[:take], offset)
                     triggers = triggers[take:]
                 done += got
                 if got < want:
-                    raise FormatError(f"file ends after {done} of {self.count} events (truncated file?)",
-                                      path=str(self.path), offset=self.body_offset + done * size)
+                    raise FormatError(
+                        f"file ends after {done} of {self.count} events (truncated file?)",
+                        path=str(self.path),
+                        offset=self.body_offset + done * size,
+                    )
         if len(triggers):
             yield EventChunk(empty_events(), triggers, self.body_offset + done * size)
 

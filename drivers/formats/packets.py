@@ -83,8 +83,9 @@ class Packetizer:
         """Completeness horizon of the last packet emitted (-1 before the first)."""
         return -1 if self._horizon_us is None else self._horizon_us
 
-    def push(self, events: np.ndarray, triggers: np.ndarray | None = None, t_until_us: int | None = None
-             ) -> list[Packet]:
+    def push(
+        self, events: np.ndarray, triggers: np.ndarray | None = None, t_until_us: int | None = None
+    ) -> list[Packet]:
         """Add data (and, optionally, "complete before ``t_until_us``"); return the packets it closes."""
         if len(events):
             self._cols.append(events)
@@ -99,11 +100,16 @@ class Packetizer:
         n_closed_runs = int(np.searchsorted(run_slots, closed_slot, side="left"))
         segments: list[tuple[int, int, int]] = []
         for q in range(n_closed_runs):
-            segments += self._slot_segments(int(run_starts[q]), int(run_starts[q + 1]),
-                                            (int(run_slots[q]) + 1) * packet_us - 1)
+            segments += self._slot_segments(
+                int(run_starts[q]), int(run_starts[q + 1]), (int(run_slots[q]) + 1) * packet_us - 1
+            )
         start = segments[-1][1] if segments else 0
-        if not segments and t_until_us is not None and closed_slot * packet_us - 1 > (self._horizon_us or -1) \
-                and n_held == 0:
+        if (
+            not segments
+            and t_until_us is not None
+            and closed_slot * packet_us - 1 > (self._horizon_us or -1)
+            and n_held == 0
+        ):
             segments.append((0, 0, closed_slot * packet_us - 1))  # only time passed: an empty packet
         packets = self._packets(segments)
         if n_closed_runs:
@@ -116,8 +122,10 @@ class Packetizer:
         n_held = self._cols.n
         if n_held == 0 and len(self._triggers) == 0:
             return []
-        t_last = max(max(self._max_before, int(self._cols.t.max())) if n_held else -1,
-                     int(self._triggers["t"].max()) if len(self._triggers) else -1)
+        t_last = max(
+            max(self._max_before, int(self._cols.t.max())) if n_held else -1,
+            int(self._triggers["t"].max()) if len(self._triggers) else -1,
+        )
         packets = self._packets(self._slot_segments(0, n_held, t_last))
         self._cols.drop_front(n_held)
         return packets
@@ -147,22 +155,44 @@ class Packetizer:
         q0 = 0
         while q0 < n_packets:
             out = np.empty(packet_words(stops[q0:] - starts[q0:], n_triggers[q0:]), dtype=_WORD_DTYPE[self.encoding])
-            done, status = encode_packets(self.encoding == "evt3", cols.t, cols.x, cols.y, cols.p, starts[q0:],
-                                          stops[q0:], horizons[q0:], triggers["t"], triggers["channel"],
-                                          triggers["edge"], tr_bounds[q0:-1], tr_bounds[q0 + 1:],
-                                          LOOP_US[self.encoding], self.width, self.height, out, out_ends[q0:],
-                                          t_offsets[q0:], n_on[q0:])
+            done, status = encode_packets(
+                self.encoding == "evt3",
+                cols.t,
+                cols.x,
+                cols.y,
+                cols.p,
+                starts[q0:],
+                stops[q0:],
+                horizons[q0:],
+                triggers["t"],
+                triggers["channel"],
+                triggers["edge"],
+                tr_bounds[q0:-1],
+                tr_bounds[q0 + 1 :],
+                LOOP_US[self.encoding],
+                self.width,
+                self.height,
+                out,
+                out_ends[q0:],
+                t_offsets[q0:],
+                n_on[q0:],
+            )
             word = 0
             for q in range(q0, q0 + done):
-                data.append(out[word:out_ends[q]].tobytes())
+                data.append(out[word : out_ends[q]].tobytes())
                 word = int(out_ends[q])
             q0 += done
             if status != tb.OK:
                 # packet q0 did not fit the room the batch allows (time jumps or jitter across a time-base
                 # step cost more words per event) or holds a bad event: a fresh encoder grows its output
                 # as needed, and raises a FormatError naming the event and the reason
-                data.append(self._packet(cols.slice(int(starts[q0]), int(stops[q0])),
-                                         triggers[tr_bounds[q0]:tr_bounds[q0 + 1]], int(t_offsets[q0])))
+                data.append(
+                    self._packet(
+                        cols.slice(int(starts[q0]), int(stops[q0])),
+                        triggers[tr_bounds[q0] : tr_bounds[q0 + 1]],
+                        int(t_offsets[q0]),
+                    )
+                )
                 q0 += 1
         self._horizon_us = int(horizons[-1])
         packets = []
@@ -172,11 +202,18 @@ class Packetizer:
             if i1 > i0:
                 t_first = int(cols.t[i0])
             elif n_tr:
-                t_first = min(t_first, int(triggers["t"][tr_bounds[q]:tr_bounds[q + 1]].min()))
-            packets.append(Packet(
-                data=data[q], t_first_us=t_first, t_last_us=int(horizons[q]), n_events=i1 - i0, n_on=int(n_on[q]),
-                n_triggers=n_tr, t_offset_us=int(t_offsets[q]),
-            ))
+                t_first = min(t_first, int(triggers["t"][tr_bounds[q] : tr_bounds[q + 1]].min()))
+            packets.append(
+                Packet(
+                    data=data[q],
+                    t_first_us=t_first,
+                    t_last_us=int(horizons[q]),
+                    n_events=i1 - i0,
+                    n_on=int(n_on[q]),
+                    n_triggers=n_tr,
+                    t_offset_us=int(t_offsets[q]),
+                )
+            )
         return packets
 
     def _take_triggers(self, horizons: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -222,11 +259,11 @@ class _HeldColumns:
 
     @property
     def t(self) -> np.ndarray:
-        return self._buffers[0][:self.n]
+        return self._buffers[0][: self.n]
 
     def view(self) -> _Columns:
         """The held events (views: valid until the next append or drop)."""
-        return _Columns(*(buffer[:self.n] for buffer in self._buffers))
+        return _Columns(*(buffer[: self.n] for buffer in self._buffers))
 
     def append(self, events: np.ndarray) -> None:
         need = self.n + len(events)
@@ -234,10 +271,10 @@ class _HeldColumns:
             capacity = max(need, 2 * len(self._buffers[0]), 4096)
             grown = tuple(np.empty(capacity, dtype=buffer.dtype) for buffer in self._buffers)
             for new, old in zip(grown, self._buffers):
-                new[:self.n] = old[:self.n]
+                new[: self.n] = old[: self.n]
             self._buffers = grown
         for buffer, name in zip(self._buffers, ("t", "x", "y", "p")):
-            buffer[self.n:need] = events[name]
+            buffer[self.n : need] = events[name]
         self.n = need
 
     def drop_front(self, start: int) -> None:
@@ -245,7 +282,7 @@ class _HeldColumns:
         keep = self.n - start
         if keep > 0 and start > 0:
             for buffer in self._buffers:
-                buffer[:keep] = buffer[start:self.n]  # numpy copies overlapping ranges correctly
+                buffer[:keep] = buffer[start : self.n]  # numpy copies overlapping ranges correctly
         self.n = max(keep, 0)
 
 
@@ -262,11 +299,12 @@ def slot_table(t: np.ndarray, running_max: int, slot_us: int) -> tuple[np.ndarra
         t = t.astype(np.int64)
     n_runs = slot_runs(t, running_max, slot_us, starts, slots, maxima)  # strided (an event field) as it is
     starts[n_runs] = n
-    return starts[:n_runs + 1], slots[:n_runs], maxima[:n_runs]
+    return starts[: n_runs + 1], slots[:n_runs], maxima[:n_runs]
 
 
-def decode_packet(encoding: str, data: bytes, t_offset_us: int, *, source: str = "packet"
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def decode_packet(
+    encoding: str, data: bytes, t_offset_us: int, *, source: str = "packet"
+) -> tuple[np.ndarray, np.ndarray]:
     """Decode one self-contained packet (made by :class:`Packetizer`) to events and triggers.
 
     Raises:

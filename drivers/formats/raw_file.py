@@ -35,9 +35,17 @@ class RawReader(EventReader):
     def decoder(self) -> Decoder:
         """A fresh strict decoder positioned at the body (file offsets in its errors)."""
         lay = self.layout
-        return Decoder(lay.encoding, width=lay.width, height=lay.height, t_offset_us=lay.t_offset_us, strict=True,
-                       source=str(self.path), base_offset=self.body_offset, endianness=lay.endianness,
-                       max_events=max(self.chunk_bytes // 8, 1 << 16))
+        return Decoder(
+            lay.encoding,
+            width=lay.width,
+            height=lay.height,
+            t_offset_us=lay.t_offset_us,
+            strict=True,
+            source=str(self.path),
+            base_offset=self.body_offset,
+            endianness=lay.endianness,
+            max_events=max(self.chunk_bytes // 8, 1 << 16),
+        )
 
     def _chunks(self) -> Iterator[EventChunk]:
         decoder = self.decoder()

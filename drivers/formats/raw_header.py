@@ -61,7 +61,9 @@ def parse_header_lines(data: bytes, path: str | None = None) -> tuple[dict[str, 
         try:
             text = raw.decode("utf-8")
         except UnicodeDecodeError as exc:
-            raise FormatError("garbage header: a '%' line that is not text", path=path, offset=pos + 1 + exc.start) from None
+            raise FormatError(
+                "garbage header: a '%' line that is not text", path=path, offset=pos + 1 + exc.start
+            ) from None
         if any(ord(c) < 32 and c != "\t" for c in text):
             raise FormatError("garbage header: control characters in a '%' line", path=path, offset=pos)
         line_offset, pos = pos, end + 1

@@ -149,8 +149,13 @@ class AsciiSensor:
         units: unit of the readings.
     """
 
-    def __init__(self, adapter: SerialAdapter, protocol: AsciiSensorProtocol = AsciiSensorProtocol(),
-                 poll: PollParams = PollParams(), units: str = "mm") -> None:
+    def __init__(
+        self,
+        adapter: SerialAdapter,
+        protocol: AsciiSensorProtocol = AsciiSensorProtocol(),
+        poll: PollParams = PollParams(),
+        units: str = "mm",
+    ) -> None:
         self.adapter = adapter
         self.protocol = protocol
         self.poll = poll
@@ -167,8 +172,14 @@ class AsciiSensor:
         if self.protocol.mode == "stream" and self.protocol.start_command is not None:
             self._command(self.protocol.start_command, self.protocol.start_reply)
         self._last_line_s = time.monotonic()
-        return SensorInfo("ascii", self.device, self.units, "sensor" if self.protocol.stamps_time else "host",
-                          self.poll.rate_hz, {"mode": self.protocol.mode})
+        return SensorInfo(
+            "ascii",
+            self.device,
+            self.units,
+            "sensor" if self.protocol.stamps_time else "host",
+            self.poll.rate_hz,
+            {"mode": self.protocol.mode},
+        )
 
     def read(self, timeout_s: float) -> SensorReading:
         if self.protocol.mode == "poll":

@@ -53,12 +53,21 @@ class SensorReading:
         return len(self.t_us)
 
 
-def reading(t_us: list[int] | np.ndarray = (), value: list[float] | np.ndarray = (),
-            trigger_t_us: list[int] | np.ndarray = (), missing: int = 0, wall_ns: int | None = None) -> SensorReading:
+def reading(
+    t_us: list[int] | np.ndarray = (),
+    value: list[float] | np.ndarray = (),
+    trigger_t_us: list[int] | np.ndarray = (),
+    missing: int = 0,
+    wall_ns: int | None = None,
+) -> SensorReading:
     """Build a :class:`SensorReading` from lists (wall time now unless given)."""
-    return SensorReading(np.asarray(t_us, dtype=np.int64), np.asarray(value, dtype=np.float64),
-                         np.asarray(trigger_t_us, dtype=np.int64), int(missing),
-                         time.time_ns() if wall_ns is None else int(wall_ns))
+    return SensorReading(
+        np.asarray(t_us, dtype=np.int64),
+        np.asarray(value, dtype=np.float64),
+        np.asarray(trigger_t_us, dtype=np.int64),
+        int(missing),
+        time.time_ns() if wall_ns is None else int(wall_ns),
+    )
 
 
 class PointSensor(Protocol):

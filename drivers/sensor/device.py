@@ -56,8 +56,9 @@ class SimulatedSensorDevice:
         signal: the reading (sensor units, NaN = out of range) at a device-clock time (µs).
     """
 
-    def __init__(self, params: DeviceParams = DeviceParams(), signal: Callable[[int], float] = lambda t_us: 100.0
-                 ) -> None:
+    def __init__(
+        self, params: DeviceParams = DeviceParams(), signal: Callable[[int], float] = lambda t_us: 100.0
+    ) -> None:
         self.params = params
         self.signal = signal
         self._stop = threading.Event()

@@ -81,8 +81,9 @@ class ModbusSensor:
         units: unit of the readings.
     """
 
-    def __init__(self, client: Any, modbus_map: ModbusSensorMap, device: str, poll: PollParams = PollParams(),
-                 units: str = "mm") -> None:
+    def __init__(
+        self, client: Any, modbus_map: ModbusSensorMap, device: str, poll: PollParams = PollParams(), units: str = "mm"
+    ) -> None:
         from pymodbus.exceptions import ModbusException
 
         self.client = client
@@ -94,21 +95,44 @@ class ModbusSensor:
         self._poller = Poller(self._exchange, poll, HostClock(), device)
 
     @classmethod
-    def open_port(cls, port: str, modbus_map: ModbusSensorMap = ModbusSensorMap(), *, baudrate: int = 115200,
-                  timeout_s: float = 0.05, parity: str = "N", stopbits: int = 1, bytesize: int = 8,
-                  poll: PollParams = PollParams(), units: str = "mm") -> ModbusSensor:
+    def open_port(
+        cls,
+        port: str,
+        modbus_map: ModbusSensorMap = ModbusSensorMap(),
+        *,
+        baudrate: int = 115200,
+        timeout_s: float = 0.05,
+        parity: str = "N",
+        stopbits: int = 1,
+        bytesize: int = 8,
+        poll: PollParams = PollParams(),
+        units: str = "mm",
+    ) -> ModbusSensor:
         """Open ``port`` and connect a pymodbus RTU client (no retries: a late sample is a missing one)."""
         from pymodbus.client import ModbusSerialClient
 
-        client = ModbusSerialClient(port=port, baudrate=baudrate, timeout=timeout_s, retries=0, parity=parity,
-                                    stopbits=stopbits, bytesize=bytesize)
+        client = ModbusSerialClient(
+            port=port,
+            baudrate=baudrate,
+            timeout=timeout_s,
+            retries=0,
+            parity=parity,
+            stopbits=stopbits,
+            bytesize=bytesize,
+        )
         if not client.connect():
             raise DriverError("cannot open the serial port of the Modbus sensor", device=port)
         return cls(client, modbus_map, port, poll, units)
 
     def open(self) -> SensorInfo:
-        return SensorInfo("modbus", self.device, self.units, "host", self.poll.rate_hz,
-                          {"device_id": self.map.device_id, "register": self.map.register})
+        return SensorInfo(
+            "modbus",
+            self.device,
+            self.units,
+            "host",
+            self.poll.rate_hz,
+            {"device_id": self.map.device_id, "register": self.map.register},
+        )
 
     def read(self, timeout_s: float) -> SensorReading:
         return self._poller.read(timeout_s)

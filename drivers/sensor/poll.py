@@ -53,8 +53,14 @@ class Poller:
             sample (its time on that clock is unknown), only to the missing count.
     """
 
-    def __init__(self, exchange: Callable[[], tuple[float, int | None]], params: PollParams, clock: HostClock,
-                 device: str, sensor_clock: bool = False) -> None:
+    def __init__(
+        self,
+        exchange: Callable[[], tuple[float, int | None]],
+        params: PollParams,
+        clock: HostClock,
+        device: str,
+        sensor_clock: bool = False,
+    ) -> None:
         self.exchange = exchange
         self.sensor_clock = sensor_clock
         self.params = params

@@ -64,8 +64,15 @@ class SensorRecord:
         return int(np.isfinite(self.value).sum())
 
 
-_ARRAYS = {"t_us": "t_us", "value": "value", "trigger_t_us": "trigger_t_us", "wall_t_us": "wall/t_us",
-           "wall_ns": "wall/ns", "camera_t_us": "camera_wall/t_us", "camera_wall_ns": "camera_wall/ns"}
+_ARRAYS = {
+    "t_us": "t_us",
+    "value": "value",
+    "trigger_t_us": "trigger_t_us",
+    "wall_t_us": "wall/t_us",
+    "wall_ns": "wall/ns",
+    "camera_t_us": "camera_wall/t_us",
+    "camera_wall_ns": "camera_wall/ns",
+}
 
 
 def write_sensor_record(path: str | Path, record: SensorRecord) -> Path:
@@ -78,9 +85,16 @@ def write_sensor_record(path: str | Path, record: SensorRecord) -> Path:
     with h5py.File(path, "w") as f:
         for name, where in _ARRAYS.items():
             f.create_dataset(where, data=np.asarray(getattr(record, name)))
-        f.attrs.update({"sensor_id": record.sensor_id, "units": record.units, "clock": record.clock,
-                        "missing": int(record.missing), "config": json.dumps(record.config),
-                        "flagtrack_version": __version__})
+        f.attrs.update(
+            {
+                "sensor_id": record.sensor_id,
+                "units": record.units,
+                "clock": record.clock,
+                "missing": int(record.missing),
+                "config": json.dumps(record.config),
+                "flagtrack_version": __version__,
+            }
+        )
     return path
 
 
@@ -102,5 +116,11 @@ def read_sensor_record(path: str | Path) -> SensorRecord:
         config = json.loads(attrs.get("config", "{}"))
     except ValueError as exc:
         raise FormatError(f"bad config attribute: {exc}", path=str(path)) from exc
-    return SensorRecord(str(attrs.get("sensor_id", "")), str(attrs.get("units", "")), str(attrs.get("clock", "sensor")),
-                        missing=int(attrs.get("missing", 0)), config=config, **arrays)
+    return SensorRecord(
+        str(attrs.get("sensor_id", "")),
+        str(attrs.get("units", "")),
+        str(attrs.get("clock", "sensor")),
+        missing=int(attrs.get("missing", 0)),
+        config=config,
+        **arrays,
+    )

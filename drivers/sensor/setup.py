@@ -97,20 +97,39 @@ def open_sensor(cfg: SensorConfig, camera: Any = None, rig_path: str | None = No
     """
     if cfg.driver == "simulated":
         if camera is None or not hasattr(camera, "truth"):
-            raise ConfigError("the simulated sensor reads the simulated camera's flag: run the camera (adapter "
-                              "'simulated') in the same process", key="sensor.driver", path=rig_path)
+            raise ConfigError(
+                "the simulated sensor reads the simulated camera's flag: run the camera (adapter "
+                "'simulated') in the same process",
+                key="sensor.driver",
+                path=rig_path,
+            )
         from flagtrack.drivers.sensor.twin import TwinSensor
 
         return TwinSensor(cfg.simulated, cfg.beam, camera, cfg.units)
     if cfg.driver == "modbus":
         from flagtrack.drivers.sensor.modbus import ModbusSensor
 
-        return ModbusSensor.open_port(cfg.port, cfg.modbus, baudrate=cfg.baudrate, timeout_s=cfg.timeout_s,
-                                      parity=cfg.parity, stopbits=cfg.stopbits, bytesize=cfg.bytesize,
-                                      poll=cfg.poll, units=cfg.units)
+        return ModbusSensor.open_port(
+            cfg.port,
+            cfg.modbus,
+            baudrate=cfg.baudrate,
+            timeout_s=cfg.timeout_s,
+            parity=cfg.parity,
+            stopbits=cfg.stopbits,
+            bytesize=cfg.bytesize,
+            poll=cfg.poll,
+            units=cfg.units,
+        )
     from flagtrack.drivers.sensor.ascii import AsciiSensor
     from flagtrack.drivers.serial.adapter import SerialAdapter
 
-    adapter = SerialAdapter(cfg.port, cfg.baudrate, cfg.timeout_s, cfg.ascii.eol.encode("ascii"), parity=cfg.parity,
-                            stopbits=cfg.stopbits, bytesize=cfg.bytesize)
+    adapter = SerialAdapter(
+        cfg.port,
+        cfg.baudrate,
+        cfg.timeout_s,
+        cfg.ascii.eol.encode("ascii"),
+        parity=cfg.parity,
+        stopbits=cfg.stopbits,
+        bytesize=cfg.bytesize,
+    )
     return AsciiSensor(adapter, cfg.ascii, cfg.poll, cfg.units)

@@ -96,9 +96,19 @@ class TwinSensor:
 
     def open(self) -> SensorInfo:
         self._next_k = None
-        return SensorInfo("simulated", "digital twin", self.units, "sensor", self.params.rate_hz,
-                          {"noise_over_l": self.params.noise_over_l, "latency_ms": self.params.latency_ms,
-                           "clock_offset_ms": self.params.clock_offset_ms, "drift_ppm": self.params.drift_ppm})
+        return SensorInfo(
+            "simulated",
+            "digital twin",
+            self.units,
+            "sensor",
+            self.params.rate_hz,
+            {
+                "noise_over_l": self.params.noise_over_l,
+                "latency_ms": self.params.latency_ms,
+                "clock_offset_ms": self.params.clock_offset_ms,
+                "drift_ppm": self.params.drift_ppm,
+            },
+        )
 
     def read(self, timeout_s: float) -> SensorReading:
         available_us = self.camera.truth.horizon_us - self.params.latency_ms * 1000
@@ -108,8 +118,10 @@ class TwinSensor:
                 return reading()
             self._next_k = math.ceil(float(self.sensor_us(np.array([available_us]))[0]) / self._period_us)
             self._pulses_until_us = int(available_us)
-        last_k = min(math.floor(float(self.sensor_us(np.array([available_us]))[0]) / self._period_us),
-                     self._next_k + math.ceil(self.params.max_read_s * self.params.rate_hz) - 1)
+        last_k = min(
+            math.floor(float(self.sensor_us(np.array([available_us]))[0]) / self._period_us),
+            self._next_k + math.ceil(self.params.max_read_s * self.params.rate_hz) - 1,
+        )
         if last_k < self._next_k:
             time.sleep(max(0.0, min(timeout_s, 0.002)))
             return reading()

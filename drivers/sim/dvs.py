@@ -59,7 +59,7 @@ class DvsParams:
 
 
 @njit(cache=True)
-def grow_buffers(out_t: np.ndarray, out_i: np.ndarray, out_p: np.ndarray, n_out: int, need: int):  # noqa: ANN201
+def grow_buffers(out_t: np.ndarray, out_i: np.ndarray, out_p: np.ndarray, n_out: int, need: int):
     """Return buffers holding at least ``need`` events (the first ``n_out`` kept)."""
     if need <= len(out_t):
         return out_t, out_i, out_p
@@ -72,8 +72,23 @@ def grow_buffers(out_t: np.ndarray, out_i: np.ndarray, out_p: np.ndarray, n_out:
 
 
 @njit(cache=True)
-def advance_pixels(idx, new_levels, t1, level, t_upd, ref, t_ready, c_on, c_off, leak_slope, refractory,  # noqa: ANN001, ANN201 - numba kernel
-                   out_t, out_i, out_p, n_out):  # noqa: ANN001
+def advance_pixels(
+    idx,
+    new_levels,
+    t1,
+    level,
+    t_upd,
+    ref,
+    t_ready,
+    c_on,
+    c_off,
+    leak_slope,
+    refractory,
+    out_t,
+    out_i,
+    out_p,
+    n_out,
+):
     """Move pixels ``idx`` from their last update to ``t1``, log level linear in time towards ``new_levels``.
 
     Returns (out_t, out_i, out_p, n_out): the event buffers (grown when needed) and their fill.
@@ -134,7 +149,7 @@ def advance_pixels(idx, new_levels, t1, level, t_upd, ref, t_ready, c_on, c_off,
 
 
 @njit(cache=True)
-def pending_pixels(level, ref, t_ready, t_upd, c_on, c_off, out):  # noqa: ANN001, ANN201
+def pending_pixels(level, ref, t_ready, t_upd, c_on, c_off, out):
     """Pixels that may still fire at constant level without leak (blind at their last update or at a threshold).
 
     Writes them into ``out``; returns their count.
@@ -203,8 +218,22 @@ class EventCamera:
 
     def _run(self, idx: np.ndarray, new_levels: np.ndarray, t_us: float) -> None:
         self.out_t, self.out_i, self.out_p, self.n_out = advance_pixels(
-            idx, new_levels, float(t_us), self.level, self.t_upd, self.ref, self.t_ready, self.c_on, self.c_off,
-            self.leak_slope, float(self.params.refractory_us), self.out_t, self.out_i, self.out_p, self.n_out)
+            idx,
+            new_levels,
+            float(t_us),
+            self.level,
+            self.t_upd,
+            self.ref,
+            self.t_ready,
+            self.c_on,
+            self.c_off,
+            self.leak_slope,
+            float(self.params.refractory_us),
+            self.out_t,
+            self.out_i,
+            self.out_p,
+            self.n_out,
+        )
 
     def take(self) -> np.ndarray:
         """Return the buffered events (unsorted EVENT_DTYPE) and empty the buffer."""

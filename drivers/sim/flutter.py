@@ -101,10 +101,14 @@ def flutter_step(state: FlutterState, speed_mps: float, dt_s: float, params: Flu
         freq = flapping_frequency_hz(speed_mps, params)
     else:  # decaying oscillation keeps its last frequency while the amplitude dies out
         freq = state.frequency_hz if state.frequency_hz > 0 else params.freq_onset_hz
-    phase = state.phase_rad + 2.0 * math.pi * 0.5 * (state.frequency_hz + freq) * dt_s if state.frequency_hz > 0 \
+    phase = (
+        state.phase_rad + 2.0 * math.pi * 0.5 * (state.frequency_hz + freq) * dt_s
+        if state.frequency_hz > 0
         else state.phase_rad + 2.0 * math.pi * freq * dt_s
-    return FlutterState(t_s=state.t_s + dt_s, flapping=flapping, amp_over_l=amp, frequency_hz=freq,
-                        phase_rad=phase, speed_mps=speed_mps)
+    )
+    return FlutterState(
+        t_s=state.t_s + dt_s, flapping=flapping, amp_over_l=amp, frequency_hz=freq, phase_rad=phase, speed_mps=speed_mps
+    )
 
 
 class FlutterModel:

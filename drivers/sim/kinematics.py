@@ -59,7 +59,10 @@ class FlagKinematics:
         phi = np.asarray(phase_rad, dtype=np.float64).reshape(-1, 1)
         s_row = np.asarray(s, dtype=np.float64).reshape(1, -1)
         k_s = 2.0 * np.pi * s_row / (self.wavelength_over_l * self.length)
-        env = self.envelope_root + (1.0 - self.envelope_root) * np.clip(s_row / self.length, 0.0, None) ** self.envelope_power
+        env = (
+            self.envelope_root
+            + (1.0 - self.envelope_root) * np.clip(s_row / self.length, 0.0, None) ** self.envelope_power
+        )
         wave = self.w_travel * np.sin(k_s - phi) + self.w_standing * np.sin(k_s) * np.cos(phi)
         return np.deg2rad(self.direction_deg) + amp_scale * self.amp_rad * env * wave
 
@@ -83,9 +86,21 @@ class FlagKinematics:
         phi = np.ascontiguousarray(np.atleast_1d(np.asarray(phase_rad, dtype=np.float64)))
         x = np.empty((len(phi), len(s)))
         y = np.empty((len(phi), len(s)))
-        _positions_kernel(phi, s, n_fine, self.length, math.radians(self.direction_deg), amp_scale * self.amp_rad,
-                          2.0 * math.pi / (self.wavelength_over_l * self.length), self.w_travel, self.w_standing,
-                          self.envelope_root, self.envelope_power, x, y)
+        _positions_kernel(
+            phi,
+            s,
+            n_fine,
+            self.length,
+            math.radians(self.direction_deg),
+            amp_scale * self.amp_rad,
+            2.0 * math.pi / (self.wavelength_over_l * self.length),
+            self.w_travel,
+            self.w_standing,
+            self.envelope_root,
+            self.envelope_power,
+            x,
+            y,
+        )
         return self.root[0] + x, self.root[1] + y
 
     def lateral(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -139,7 +154,7 @@ class KinematicsFamily:
     max_amp_rad: float = 1.3
 
 
-def _peak_to_peak_curve(kin: FlagKinematics, n_phase: int = 128, n_fine: int = 64):  # noqa: ANN202
+def _peak_to_peak_curve(kin: FlagKinematics, n_phase: int = 128, n_fine: int = 64):
     """Return f(amps) -> 2A/L for an array of ``amp_rad`` values (tip only, Simpson, vectorised)."""
     phi = np.linspace(0.0, 2.0 * np.pi, n_phase, endpoint=False)
     s = np.linspace(0.0, kin.length, 2 * n_fine + 1)
@@ -190,10 +205,13 @@ def sample_kinematics(
     for _ in range(100):
         w_travel = float(rng.uniform(*family.w_travel))
         base = FlagKinematics(
-            length=length, root=root, direction_deg=direction_deg,
+            length=length,
+            root=root,
+            direction_deg=direction_deg,
             frequency_hz=float(rng.uniform(*family.frequency_hz)),
             wavelength_over_l=float(rng.uniform(*family.wavelength_over_l)),
-            w_travel=w_travel, w_standing=1.0 - w_travel,
+            w_travel=w_travel,
+            w_standing=1.0 - w_travel,
             envelope_root=float(rng.uniform(*family.envelope_root)),
             envelope_power=float(rng.uniform(*family.envelope_power)),
             phase0_rad=float(rng.uniform(0.0, 2.0 * math.pi)),
@@ -207,8 +225,21 @@ def sample_kinematics(
 
 
 @njit(cache=True, nogil=True)
-def _positions_kernel(phi, s, n_fine, length, direction, amp, k, w_travel, w_standing, env_root, env_power,  # noqa: ANN202
-                      out_x, out_y):
+def _positions_kernel(
+    phi,
+    s,
+    n_fine,
+    length,
+    direction,
+    amp,
+    k,
+    w_travel,
+    w_standing,
+    env_root,
+    env_power,
+    out_x,
+    out_y,
+):
     """x, y (relative to the root) of :meth:`FlagKinematics.positions_at_phase`, one phase per row.
 
     The tangent angle at ``2 n_fine + 1`` points (nodes and mid-points), Simpson per interval for

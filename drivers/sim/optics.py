@@ -73,8 +73,13 @@ class PlaneCamera:
 
     def to_attrs(self) -> dict[str, object]:
         """Parameters as a flat mapping."""
-        return {"homography": list(self.homography), "k1": self.k1, "centre_px": list(self.centre_px),
-                "focal_px": self.focal_px, "units": self.units}
+        return {
+            "homography": list(self.homography),
+            "k1": self.k1,
+            "centre_px": list(self.centre_px),
+            "focal_px": self.focal_px,
+            "units": self.units,
+        }
 
 
 def tilted_pinhole(
@@ -111,5 +116,10 @@ def tilted_pinhole(
     k = np.array([[focal_px, 0.0, width / 2 - 0.5], [0.0, focal_px, height / 2 - 0.5], [0.0, 0.0, 1.0]])
     h = k @ np.column_stack([rot[:, 0], rot[:, 1], trans])
     h /= h[2, 2]
-    return PlaneCamera(homography=tuple(float(v) for v in h.ravel()), k1=k1,
-                       centre_px=(width / 2 - 0.5, height / 2 - 0.5), focal_px=focal_px, units="m")
+    return PlaneCamera(
+        homography=tuple(float(v) for v in h.ravel()),
+        k1=k1,
+        centre_px=(width / 2 - 0.5, height / 2 - 0.5),
+        focal_px=focal_px,
+        units="m",
+    )

@@ -52,7 +52,9 @@ class WavyFlag:
         k = 2 * np.pi / (self.wavelength_over_l * self.length)
         omega = 2 * np.pi * self.frequency_hz
         env = self.amp_rad * (0.25 + 0.75 * s_row / self.length)
-        wave = self.w_travel * np.sin(k * s_row - omega * t) + (1 - self.w_travel) * np.sin(k * s_row) * np.cos(omega * t)
+        wave = self.w_travel * np.sin(k * s_row - omega * t) + (1 - self.w_travel) * np.sin(k * s_row) * np.cos(
+            omega * t
+        )
         return np.deg2rad(self.direction_deg) + env * wave
 
     def positions(self, t_s: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -114,31 +116,64 @@ def line_events(
     ds = s[1] - s[0]
     for chunk_start in range(t_start_us, t_stop_us, chunk_us):
         chunk_stop = min(chunk_start + chunk_us, t_stop_us)
-        edges_us = np.unique(np.minimum(np.arange(chunk_start, chunk_stop + params.slice_us, params.slice_us), chunk_stop))
+        edges_us = np.unique(
+            np.minimum(np.arange(chunk_start, chunk_stop + params.slice_us, params.slice_us), chunk_stop)
+        )
         x, y = kinematics.positions(edges_us * 1e-6, s)
         yield _chunk_events(x, y, edges_us.astype(np.float64), ds, width, height, params, rng)
 
 
-def _chunk_events(x: np.ndarray, y: np.ndarray, edges_us: np.ndarray, ds: float, width: int, height: int,
-                  params: QuickLineParams, rng: np.random.Generator) -> np.ndarray:
+def _chunk_events(
+    x: np.ndarray,
+    y: np.ndarray,
+    edges_us: np.ndarray,
+    ds: float,
+    width: int,
+    height: int,
+    params: QuickLineParams,
+    rng: np.random.Generator,
+) -> np.ndarray:
     """Line and noise events of every slice between consecutive rows of x, y (positions at ``edges_us``)."""
     x0, y0 = x[:-1], y[:-1]
     tx, ty, dx, dy, normal_motion = _slice_geometry(np.ascontiguousarray(x), np.ascontiguousarray(y))
     counts = rng.poisson(np.abs(normal_motion) * ds * params.events_per_px2 * (1.0 - params.drop_fraction))
-    noise = rng.poisson(params.noise_rate_hz * np.diff(edges_us) * 1e-6) if params.noise_rate_hz > 0 \
+    noise = (
+        rng.poisson(params.noise_rate_hz * np.diff(edges_us) * 1e-6)
+        if params.noise_rate_hz > 0
         else np.zeros(len(edges_us) - 1, dtype=np.int64)
+    )
     n_line, n_noise = int(counts.sum()), int(noise.sum())
     uniforms = rng.random((3, n_line))
     spread = np.abs(rng.normal(0.0, params.line_width_px, n_line))
     noise_uniforms = rng.random((4, n_noise))
     events = np.empty(n_line + n_noise, dtype=EVENT_DTYPE)
-    n = _fill_events(x0, y0, dx, dy, tx, ty, normal_motion, counts, noise, edges_us, ds, width, height,
-                     uniforms, spread, noise_uniforms, events["t"], events["x"], events["y"], events["p"])
+    n = _fill_events(
+        x0,
+        y0,
+        dx,
+        dy,
+        tx,
+        ty,
+        normal_motion,
+        counts,
+        noise,
+        edges_us,
+        ds,
+        width,
+        height,
+        uniforms,
+        spread,
+        noise_uniforms,
+        events["t"],
+        events["x"],
+        events["y"],
+        events["p"],
+    )
     return events[:n]
 
 
 @njit(cache=True, nogil=True)
-def _slice_geometry(x, y):  # noqa: ANN202
+def _slice_geometry(x, y):
     """Unit tangent (tx, ty) at the slice starts (rows of x, y but the last; np.gradient along s),
     displacement (dx, dy) to the next row, and its component along the normal (-ty, tx)."""
     n_rows, n_s = x.shape[0] - 1, x.shape[1]
@@ -156,8 +191,28 @@ def _slice_geometry(x, y):  # noqa: ANN202
 
 
 @njit(cache=True, nogil=True)
-def _fill_events(x0, y0, dx, dy, tx, ty, normal_motion, counts, noise, edges_us, ds, width, height,  # noqa: ANN202
-                 uniforms, spread, noise_uniforms, out_t, out_x, out_y, out_p):
+def _fill_events(
+    x0,
+    y0,
+    dx,
+    dy,
+    tx,
+    ty,
+    normal_motion,
+    counts,
+    noise,
+    edges_us,
+    ds,
+    width,
+    height,
+    uniforms,
+    spread,
+    noise_uniforms,
+    out_t,
+    out_x,
+    out_y,
+    out_p,
+):
     """Fill the events slice by slice, each slice sorted by time; return how many are on the sensor.
 
     Line events: one per count of each (slice, sample) cell, at a random time in the slice and a
@@ -193,6 +248,11 @@ def _fill_events(x0, y0, dx, dy, tx, ty, normal_motion, counts, noise, edges_us,
             k += 1
         if k - first > 1:
             order = np.argsort(out_t[first:k], kind="mergesort")
-            t_s, x_s, y_s, p_s = out_t[first:k][order], out_x[first:k][order], out_y[first:k][order], out_p[first:k][order]
+            t_s, x_s, y_s, p_s = (
+                out_t[first:k][order],
+                out_x[first:k][order],
+                out_y[first:k][order],
+                out_p[first:k][order],
+            )
             out_t[first:k], out_x[first:k], out_y[first:k], out_p[first:k] = t_s, x_s, y_s, p_s
     return k

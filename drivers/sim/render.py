@@ -52,7 +52,7 @@ class LineRenderParams:
 
 
 @njit(cache=True)
-def splat_line(u, v, sigma, peak, width, height, acc, mark, stamp, touched):  # noqa: ANN201
+def splat_line(u, v, sigma, peak, width, height, acc, mark, stamp, touched):
     """Add a Gaussian ridge along polyline (u, v) into ``acc``; return the count of touched pixels.
 
     A pixel first touched at this ``stamp`` is zeroed, marked and listed in ``touched``.
@@ -93,9 +93,38 @@ def splat_line(u, v, sigma, peak, width, height, acc, mark, stamp, touched):  # 
 
 
 @njit(cache=True)
-def line_steps(us, vs, t_steps, t_prev, sigma, peak, background, log_eps, width, height,  # noqa: ANN201
-               acc, mark, stamp, prev, n_prev, cur, scratch_i, scratch_l,
-               level, t_upd, ref, t_ready, c_on, c_off, leak_slope, refractory, out_t, out_i, out_p, n_out):
+def line_steps(
+    us,
+    vs,
+    t_steps,
+    t_prev,
+    sigma,
+    peak,
+    background,
+    log_eps,
+    width,
+    height,
+    acc,
+    mark,
+    stamp,
+    prev,
+    n_prev,
+    cur,
+    scratch_i,
+    scratch_l,
+    level,
+    t_upd,
+    ref,
+    t_ready,
+    c_on,
+    c_off,
+    leak_slope,
+    refractory,
+    out_t,
+    out_i,
+    out_p,
+    n_out,
+):
     """Render the line at each of ``t_steps`` (rows of us, vs) and advance the touched pixels.
 
     Returns (stamp, n_prev, out_t, out_i, out_p, n_out); ``prev[:n_prev]`` lists the pixels the
@@ -114,13 +143,41 @@ def line_steps(us, vs, t_steps, t_prev, sigma, peak, background, log_eps, width,
                 scratch_l[n_stale] = level[p]
                 n_stale += 1
         out_t, out_i, out_p, n_out = advance_pixels(
-            scratch_i[:n_stale], scratch_l[:n_stale], t_prev, level, t_upd, ref, t_ready, c_on, c_off, leak_slope,
-            refractory, out_t, out_i, out_p, n_out)
+            scratch_i[:n_stale],
+            scratch_l[:n_stale],
+            t_prev,
+            level,
+            t_upd,
+            ref,
+            t_ready,
+            c_on,
+            c_off,
+            leak_slope,
+            refractory,
+            out_t,
+            out_i,
+            out_p,
+            n_out,
+        )
         for j in range(n_cur):
             scratch_l[j] = math.log(background + acc[cur[j]] + log_eps)
         out_t, out_i, out_p, n_out = advance_pixels(
-            cur[:n_cur], scratch_l[:n_cur], t, level, t_upd, ref, t_ready, c_on, c_off, leak_slope,
-            refractory, out_t, out_i, out_p, n_out)
+            cur[:n_cur],
+            scratch_l[:n_cur],
+            t,
+            level,
+            t_upd,
+            ref,
+            t_ready,
+            c_on,
+            c_off,
+            leak_slope,
+            refractory,
+            out_t,
+            out_i,
+            out_p,
+            n_out,
+        )
         n_left = 0
         for j in range(n_prev):  # the line left these pixels: back to the background
             p = prev[j]
@@ -129,8 +186,22 @@ def line_steps(us, vs, t_steps, t_prev, sigma, peak, background, log_eps, width,
                 scratch_l[n_left] = log_bg
                 n_left += 1
         out_t, out_i, out_p, n_out = advance_pixels(
-            scratch_i[:n_left], scratch_l[:n_left], t, level, t_upd, ref, t_ready, c_on, c_off, leak_slope,
-            refractory, out_t, out_i, out_p, n_out)
+            scratch_i[:n_left],
+            scratch_l[:n_left],
+            t,
+            level,
+            t_upd,
+            ref,
+            t_ready,
+            c_on,
+            c_off,
+            leak_slope,
+            refractory,
+            out_t,
+            out_i,
+            out_p,
+            n_out,
+        )
         prev[:n_cur] = cur[:n_cur]
         n_prev = n_cur
         t_prev = t
@@ -147,8 +218,14 @@ class LaserLineScene:
         params: line look and render-step size.
     """
 
-    def __init__(self, kinematics: FlagKinematics, optics: PlaneCamera, width: int, height: int,
-                 params: LineRenderParams = LineRenderParams()) -> None:
+    def __init__(
+        self,
+        kinematics: FlagKinematics,
+        optics: PlaneCamera,
+        width: int,
+        height: int,
+        params: LineRenderParams = LineRenderParams(),
+    ) -> None:
         self.kinematics, self.optics, self.params = kinematics, optics, params
         self.width, self.height = width, height
         self.s = np.linspace(0.0, kinematics.length, params.n_s)
@@ -178,8 +255,9 @@ class LaserLineScene:
         u, v = self.pixels(np.array([t_us]))
         self._stamp += 1
         p = self.params
-        self._n_prev = splat_line(u[0], v[0], p.line_sigma_px, p.peak, self.width, self.height,
-                                  self._acc, self._mark, self._stamp, self._prev)
+        self._n_prev = splat_line(
+            u[0], v[0], p.line_sigma_px, p.peak, self.width, self.height, self._acc, self._mark, self._stamp, self._prev
+        )
         image = np.full(self.width * self.height, p.background)
         touched = self._prev[: self._n_prev]
         image[touched] += self._acc[touched]
@@ -215,8 +293,35 @@ class LaserLineScene:
         u, v = self.pixels(steps)
         p, c = self.params, camera
         self._stamp, self._n_prev, c.out_t, c.out_i, c.out_p, c.n_out = line_steps(
-            u, v, steps, self.t_us, p.line_sigma_px, p.peak, p.background, c.params.log_eps, self.width, self.height,
-            self._acc, self._mark, self._stamp, self._prev, self._n_prev, self._cur, self._scratch_i, self._scratch_l,
-            c.level, c.t_upd, c.ref, c.t_ready, c.c_on, c.c_off, c.leak_slope, float(c.params.refractory_us),
-            c.out_t, c.out_i, c.out_p, c.n_out)
+            u,
+            v,
+            steps,
+            self.t_us,
+            p.line_sigma_px,
+            p.peak,
+            p.background,
+            c.params.log_eps,
+            self.width,
+            self.height,
+            self._acc,
+            self._mark,
+            self._stamp,
+            self._prev,
+            self._n_prev,
+            self._cur,
+            self._scratch_i,
+            self._scratch_l,
+            c.level,
+            c.t_upd,
+            c.ref,
+            c.t_ready,
+            c.c_on,
+            c.c_off,
+            c.leak_slope,
+            float(c.params.refractory_us),
+            c.out_t,
+            c.out_i,
+            c.out_p,
+            c.n_out,
+        )
         self.t_us = float(t_us)

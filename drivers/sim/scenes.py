@@ -100,8 +100,9 @@ class BlinkParams:
 class BlinkingPatternScene:
     """A plane pattern (e.g. :func:`checkerboard`) on a screen that blinks, seen through ``optics``."""
 
-    def __init__(self, pattern: PlanePattern, optics: PlaneCamera, width: int, height: int,
-                 blink: BlinkParams = BlinkParams()) -> None:
+    def __init__(
+        self, pattern: PlanePattern, optics: PlaneCamera, width: int, height: int, blink: BlinkParams = BlinkParams()
+    ) -> None:
         self.optics, self.blink, self.width, self.height = optics, blink, width, height
         k = blink.supersample
         offsets = (np.arange(k) + 0.5) / k - 0.5

@@ -110,8 +110,16 @@ def truth_batch(kin: FlagKinematics, duration_s: float, rate_hz: float, n_s: int
     s = np.linspace(0.0, kin.length, n_s)
     x, y = kin.positions(t_s, s)
     jx, jy = kin.positions(t_s, np.linspace(0.0, kin.length, n_joints + 1))
-    return CentrelineBatch(t_s=t_s, s=s, x=x, y=y, joints_x=jx, joints_y=jy,
-                           delta_rms=np.full(len(t_s), np.nan), n_events=np.zeros(len(t_s), np.int64))
+    return CentrelineBatch(
+        t_s=t_s,
+        s=s,
+        x=x,
+        y=y,
+        joints_x=jx,
+        joints_y=jy,
+        delta_rms=np.full(len(t_s), np.nan),
+        n_events=np.zeros(len(t_s), np.int64),
+    )
 
 
 def write_events_file(path: Path, chunks: Iterable[np.ndarray], width: int, height: int) -> tuple[Path, int]:
@@ -158,18 +166,29 @@ def simulate_recording(spec: RecordingSpec, out_dir: str | Path, name: str | Non
     return RecordingResult(str(events_path), str(truth_path), str(params_path), n_events, duration_s, wall_s)
 
 
-def recording_attrs(spec: RecordingSpec, kin: FlagKinematics, optics: PlaneCamera, duration_s: float,
-                    events_path: Path, n_events: int) -> dict[str, Any]:
+def recording_attrs(
+    spec: RecordingSpec, kin: FlagKinematics, optics: PlaneCamera, duration_s: float, events_path: Path, n_events: int
+) -> dict[str, Any]:
     """Root attributes of the truth file: every parameter, with units."""
     attrs: dict[str, Any] = {
         "source": "flagtrack simulate (ground truth)",
-        "units": optics.units, "length": kin.length, "time_unit": "s",
-        "seed": spec.seed, "duration_s": duration_s, "width": spec.width, "height": spec.height,
-        "events_file": Path(events_path).name, "n_events_file": n_events,
-        "peak_to_peak_over_l": kin.peak_to_peak_over_l(), "tilted": spec.tilted,
-        "truth_rate_hz": spec.truth_rate_hz, "n_joints": spec.truth_n_joints,
-        "kinematics": kin.to_attrs(), "optics": optics.to_attrs(),
-        "dvs": spec.dvs.to_attrs(), "line": spec.line.to_attrs(),
+        "units": optics.units,
+        "length": kin.length,
+        "time_unit": "s",
+        "seed": spec.seed,
+        "duration_s": duration_s,
+        "width": spec.width,
+        "height": spec.height,
+        "events_file": Path(events_path).name,
+        "n_events_file": n_events,
+        "peak_to_peak_over_l": kin.peak_to_peak_over_l(),
+        "tilted": spec.tilted,
+        "truth_rate_hz": spec.truth_rate_hz,
+        "n_joints": spec.truth_n_joints,
+        "kinematics": kin.to_attrs(),
+        "optics": optics.to_attrs(),
+        "dvs": spec.dvs.to_attrs(),
+        "line": spec.line.to_attrs(),
     }
     for key, value in kin.to_attrs().items():
         attrs[f"kin_{key}"] = value
@@ -221,13 +240,23 @@ def simulate_checkerboard(
     corners = spec.corners()
     u, v = optics.project(corners[:, 0], corners[:, 1])
     params = {
-        "source": "flagtrack simulate --checkerboard", "events_file": events_path.name, "n_events": n_events,
-        "width": width, "height": height, "units": optics.units, "inner_corners": list(spec.inner_corners),
-        "square": spec.square, "origin": list(spec.origin), "blink": blink.to_attrs(), "n_periods": n_periods,
-        "optics": optics.to_attrs(), "dvs": dvs.to_attrs(), "seed": seed,
-        "corners_plane": corners.tolist(), "corners_px": np.column_stack([u, v]).tolist(),
+        "source": "flagtrack simulate --checkerboard",
+        "events_file": events_path.name,
+        "n_events": n_events,
+        "width": width,
+        "height": height,
+        "units": optics.units,
+        "inner_corners": list(spec.inner_corners),
+        "square": spec.square,
+        "origin": list(spec.origin),
+        "blink": blink.to_attrs(),
+        "n_periods": n_periods,
+        "optics": optics.to_attrs(),
+        "dvs": dvs.to_attrs(),
+        "seed": seed,
+        "corners_plane": corners.tolist(),
+        "corners_px": np.column_stack([u, v]).tolist(),
     }
     params_path = out / f"{name}.json"
     params_path.write_text(json.dumps(params, indent=2) + "\n")
     return RecordingResult(str(events_path), "", str(params_path), n_events, t_stop * 1e-6, wall_s)
-

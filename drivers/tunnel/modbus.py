@@ -171,7 +171,9 @@ class ModbusTunnel:
         try:
             response = method(*args, device_id=self.map.device_id, **kwargs)
         except self._modbus_exception as exc:
-            raise DriverError(f"{what}: no valid reply from drive {self.map.device_id} ({exc})", device=self.device) from exc
+            raise DriverError(
+                f"{what}: no valid reply from drive {self.map.device_id} ({exc})", device=self.device
+            ) from exc
         if response.isError():
             code = getattr(response, "exception_code", "?")
             raise DriverError(f"{what}: drive {self.map.device_id} answered exception {code}", device=self.device)

@@ -330,4 +330,4 @@ def _text(exc: DriverError) -> str:
     """The message of a DriverError without its ``device:`` prefix."""
     text = str(exc)
     prefix = f"{exc.device}: " if exc.device else ""
-    return text[len(prefix):] if prefix and text.startswith(prefix) else text
+    return text[len(prefix) :] if prefix and text.startswith(prefix) else text

@@ -51,9 +51,15 @@ def tracking_config(variant: Variant, attrs: dict[str, Any]) -> Any:
     from flagtrack.daemon.typed_yaml import from_mapping
 
     tau_s = variant.tau_over_t / float(attrs["kin_frequency_hz"])
-    values = {**METHODS[variant.method], "root": [float(v) for v in attrs["kin_root"]], "length": float(attrs["length"]),
-              "direction_deg": float(attrs["kin_direction_deg"]), "joints": variant.joints, "tau_s": tau_s,
-              "t_start_s": tau_s / 2}
+    values = {
+        **METHODS[variant.method],
+        "root": [float(v) for v in attrs["kin_root"]],
+        "length": float(attrs["length"]),
+        "direction_deg": float(attrs["kin_direction_deg"]),
+        "joints": variant.joints,
+        "tau_s": tau_s,
+        "t_start_s": tau_s / 2,
+    }
     return from_mapping(TrackingConfig, values, key="tracker")
 
 
@@ -63,8 +69,9 @@ def loss_time_cycles(t_s: np.ndarray, delta_over_l: np.ndarray, frequency_hz: fl
     return float(t_s[over[0]] * frequency_hz) if len(over) else math.nan
 
 
-def score(recon: CentrelineBatch, truth: CentrelineBatch, attrs: dict[str, Any], with_twi: bool = True
-          ) -> dict[str, float]:
+def score(
+    recon: CentrelineBatch, truth: CentrelineBatch, attrs: dict[str, Any], with_twi: bool = True
+) -> dict[str, float]:
     """Metrics of one reconstruction, measured after the settling time (lengths over L).
 
     ``with_twi``: also the travelling-wave indices (``metrics.compare``; an SVD over every update, the
@@ -74,17 +81,31 @@ def score(recon: CentrelineBatch, truth: CentrelineBatch, attrs: dict[str, Any],
     recon = recon.select(recon.t_s >= SETTLE_PERIODS / f)
     pair = align(recon, truth)
     delta = np.hypot(pair.x[:, -1] - pair.x_ref[:, -1], pair.y[:, -1] - pair.y_ref[:, -1])
-    out = {"delta_rms_over_l": rms(delta) / length, "t_loss_cycles": loss_time_cycles(pair.t_s, delta / length, f),
-           "evaluated_cycles": float(pair.t_s[-1] - pair.t_s[0]) * f, "max_delta_over_l": float(np.max(delta)) / length}
+    out = {
+        "delta_rms_over_l": rms(delta) / length,
+        "t_loss_cycles": loss_time_cycles(pair.t_s, delta / length, f),
+        "evaluated_cycles": float(pair.t_s[-1] - pair.t_s[0]) * f,
+        "max_delta_over_l": float(np.max(delta)) / length,
+    }
     if with_twi:
         c = compare(recon, truth, length)
-        out.update(max_eps_rms_over_l=c.max_eps_rms_over_l, twi=c.twi, twi_ref=c.twi_ref, twi_abs_error=c.twi_abs_error,
-                   twi_rel_error=c.twi_abs_error / c.twi_ref if c.twi_ref > 0 else math.nan)
+        out.update(
+            max_eps_rms_over_l=c.max_eps_rms_over_l,
+            twi=c.twi,
+            twi_ref=c.twi_ref,
+            twi_abs_error=c.twi_abs_error,
+            twi_rel_error=c.twi_abs_error / c.twi_ref if c.twi_ref > 0 else math.nan,
+        )
     else:
         sq = (pair.x - pair.x_ref) ** 2 + (pair.y - pair.y_ref) ** 2
         eps = np.sqrt(trapezoid(sq, pair.s) / (pair.s[-1] - pair.s[0]))
-        out.update(max_eps_rms_over_l=float(np.nanmax(eps)) / length, twi=math.nan, twi_ref=math.nan,
-                   twi_abs_error=math.nan, twi_rel_error=math.nan)
+        out.update(
+            max_eps_rms_over_l=float(np.nanmax(eps)) / length,
+            twi=math.nan,
+            twi_ref=math.nan,
+            twi_abs_error=math.nan,
+            twi_rel_error=math.nan,
+        )
     return out
 
 
@@ -97,8 +118,9 @@ def initial_state(truth: CentrelineBatch, n_joints: int) -> Any:
     return ChainState(np.arctan2(np.diff(y), np.diff(x)))
 
 
-def track_events(events: np.ndarray, config: Any, size: tuple[int, int], state: Any = None
-                 ) -> tuple[CentrelineBatch, int]:
+def track_events(
+    events: np.ndarray, config: Any, size: tuple[int, int], state: Any = None
+) -> tuple[CentrelineBatch, int]:
     """Reconstruct in-memory events from ``state``; returns the centrelines and the events the filter kept."""
     from flagtrack.daemon.core.tracker import Tracker
 
@@ -144,9 +166,17 @@ def run_task(task: Task, work_dir: str, keep_files: bool = False) -> Outcome:
         state = initial_state(truth, variant.joints) if START_ON_TRUTH else None
         batch, kept = track_events(events, config, (task.width, task.height), state)
         wall = time.perf_counter() - start
-        rows.append({**task_columns(task, attrs, result.n_events), "method": variant.method,
-                     "joints": variant.joints, "tau_over_t": variant.tau_over_t, "events_kept": kept,
-                     "track_wall_s": wall, **score(batch, truth, attrs, with_twi=at_paper_params(variant))})
+        rows.append(
+            {
+                **task_columns(task, attrs, result.n_events),
+                "method": variant.method,
+                "joints": variant.joints,
+                "tau_over_t": variant.tau_over_t,
+                "events_kept": kept,
+                "track_wall_s": wall,
+                **score(batch, truth, attrs, with_twi=at_paper_params(variant)),
+            }
+        )
     if not keep_files:
         for path in (result.events_path, result.truth_path, result.params_path):
             Path(path).unlink(missing_ok=True)
@@ -155,9 +185,18 @@ def run_task(task: Task, work_dir: str, keep_files: bool = False) -> Outcome:
 
 def task_columns(task: Task, attrs: dict[str, Any], n_events: int) -> dict[str, Any]:
     """Columns describing the recording (same for each of its variants)."""
-    return {"name": task.name, "part": task.part, "kinematics": task.kinematics, "seed": task.seed,
-            "level": task.level, "frequency_hz": float(attrs["kin_frequency_hz"]),
-            "wavelength_over_l": float(attrs["kin_wavelength_over_l"]), "w_travel": float(attrs["kin_w_travel"]),
-            "peak_to_peak_over_l": float(attrs["peak_to_peak_over_l"]), "duration_s": float(attrs["duration_s"]),
-            "leak_rate_hz": float(attrs["dvs_leak_rate_hz"]), "shot_noise_hz": float(attrs["dvs_shot_noise_hz"]),
-            "n_events": n_events}
+    return {
+        "name": task.name,
+        "part": task.part,
+        "kinematics": task.kinematics,
+        "seed": task.seed,
+        "level": task.level,
+        "frequency_hz": float(attrs["kin_frequency_hz"]),
+        "wavelength_over_l": float(attrs["kin_wavelength_over_l"]),
+        "w_travel": float(attrs["kin_w_travel"]),
+        "peak_to_peak_over_l": float(attrs["peak_to_peak_over_l"]),
+        "duration_s": float(attrs["duration_s"]),
+        "leak_rate_hz": float(attrs["dvs_leak_rate_hz"]),
+        "shot_noise_hz": float(attrs["dvs_shot_noise_hz"]),
+        "n_events": n_events,
+    }

@@ -53,8 +53,16 @@ def family_figure(rows: Sequence[dict[str, Any]], path: Path) -> None:
     fig, ax = plt.subplots(2, 2, figsize=(11, 8.5))
     lo_d, hi_d = PAPER_FAMILY["delta_rms_over_l"]
     lo_e, hi_e = PAPER_FAMILY["max_eps_rms_over_l"]
-    ax[0, 0].add_patch(plt.Rectangle((100 * lo_d, 100 * lo_e), 100 * (hi_d - lo_d), 100 * (hi_e - lo_e), color="0.85",
-                                     label="paper's range", zorder=0))
+    ax[0, 0].add_patch(
+        plt.Rectangle(
+            (100 * lo_d, 100 * lo_e),
+            100 * (hi_d - lo_d),
+            100 * (hi_e - lo_e),
+            color="0.85",
+            label="paper's range",
+            zorder=0,
+        )
+    )
     bins = _log_bins(_pct([r["delta_rms_over_l"] for r in rows]))
     rel_bins = _log_bins(_pct([r["twi_rel_error"] for r in rows]))
     for method in _methods(rows):
@@ -63,27 +71,46 @@ def family_figure(rows: Sequence[dict[str, Any]], path: Path) -> None:
         width = 2.5 if method == "robust" else 1.2  # drawn under the others: visible where they coincide
         d, e = _pct([r["delta_rms_over_l"] for r in group]), _pct([r["max_eps_rms_over_l"] for r in group])
         if method == "robust":
-            sc = ax[0, 0].scatter(d, e, c=[r["wavelength_over_l"] for r in group], cmap="viridis", marker=marker, s=14,
-                                  label=method, zorder=3)
+            sc = ax[0, 0].scatter(
+                d,
+                e,
+                c=[r["wavelength_over_l"] for r in group],
+                cmap="viridis",
+                marker=marker,
+                s=14,
+                label=method,
+                zorder=3,
+            )
             fig.colorbar(sc, ax=ax[0, 0], label="λ/L (robust)")
         else:
             ax[0, 0].scatter(d, e, color=color, marker=marker, s=10, alpha=0.5, label=method, zorder=2)
         ax[0, 1].hist(d, bins=bins, histtype="step", color=color, lw=width, label=f"{method} δ_RMS/L")
         rel = _pct([r["twi_rel_error"] for r in group])
         ax[1, 0].hist(rel[np.isfinite(rel)], bins=rel_bins, histtype="step", color=color, lw=width, label=method)
-        ax[1, 1].scatter([r["twi_ref"] for r in group], [r["twi"] for r in group], color=color, marker=marker, s=10,
-                         alpha=0.6, label=method)
-    ax[0, 0].set(xscale="log", yscale="log", xlabel="δ_RMS / L (%)", ylabel="max ε_RMS / L (%)",
-                 title="(c) tip and shape errors")
+        ax[1, 1].scatter(
+            [r["twi_ref"] for r in group],
+            [r["twi"] for r in group],
+            color=color,
+            marker=marker,
+            s=10,
+            alpha=0.6,
+            label=method,
+        )
+    ax[0, 0].set(
+        xscale="log", yscale="log", xlabel="δ_RMS / L (%)", ylabel="max ε_RMS / L (%)", title="(c) tip and shape errors"
+    )
     ax[0, 0].legend(fontsize=8)
     ax[0, 1].axvspan(100 * lo_d, 100 * hi_d, color="0.85", label="paper's range")
     ax[0, 1].set(xscale="log", xlabel="δ_RMS / L (%)", ylabel="recordings", title="tip error histogram")
     ax[0, 1].legend(fontsize=8)
-    for value, label in ((PAPER_FAMILY["twi_rel_error_median"], "paper median"),
-                         (PAPER_FAMILY["twi_rel_error_p95"], "paper 95 %")):
+    for value, label in (
+        (PAPER_FAMILY["twi_rel_error_median"], "paper median"),
+        (PAPER_FAMILY["twi_rel_error_p95"], "paper 95 %"),
+    ):
         ax[1, 0].axvline(100 * value, color="k", ls="--" if "median" in label else ":", label=label)
-    ax[1, 0].set(xscale="log", xlabel="|I - I_ref| / I_ref (%)", ylabel="recordings",
-                 title="(d) travelling-wave index error")
+    ax[1, 0].set(
+        xscale="log", xlabel="|I - I_ref| / I_ref (%)", ylabel="recordings", title="(d) travelling-wave index error"
+    )
     ax[1, 0].legend(fontsize=8)
     top = max([1e-3] + [max(r["twi"], r["twi_ref"]) for r in rows if math.isfinite(r["twi"])]) * 1.05
     ax[1, 1].plot([0, top], [0, top], color="k", lw=0.8)
@@ -131,8 +158,12 @@ def defects_figure(leak: Sequence[dict[str, Any]], shot: Sequence[dict[str, Any]
         axis.set(yscale="log", ylabel="δ_RMS / L (%)")
         axis.legend(fontsize=7)
     ax[0, 0].set(xlabel="f_lr / f (leak rate over flapping frequency; v2e leak)", title="(a) leak")
-    ax[0, 1].set(yscale="log", xlabel="f_lr / f", ylabel=f"t_loss (cycles; δ/L > {LOSS_THRESHOLD:g})",
-                 title="(b) first loss of tracking")
+    ax[0, 1].set(
+        yscale="log",
+        xlabel="f_lr / f",
+        ylabel=f"t_loss (cycles; δ/L > {LOSS_THRESHOLD:g})",
+        title="(b) first loss of tracking",
+    )
     ax[0, 1].legend(fontsize=7)
     ax[1, 0].set(xlabel="paper-equivalent f_snr / f (= 37 (N/N0 - 1))", title="(f) shot noise")
     ax[1, 1].set(xlabel="paper-equivalent f_snr / f", ylabel="N_evs / N_evs,0", title="events with noise")
@@ -150,12 +181,18 @@ def params_figure(joints: Sequence[dict[str, Any]], tau: Sequence[dict[str, Any]
         for method in _methods(summary):
             color, marker = _style(method)
             for condition, ls in (("clean", "-"), ("shot 20", "--")):
-                entries = sorted((e for e in summary if e["method"] == method and e["condition"] == condition),
-                                 key=lambda e: e[key])
+                entries = sorted(
+                    (e for e in summary if e["method"] == method and e["condition"] == condition), key=lambda e: e[key]
+                )
                 if entries:
-                    axis.plot([e[key] for e in entries], _pct([e["delta_rms_over_l_median"] for e in entries]),
-                              color=color, marker=marker, ls=ls,
-                              label=f"{method}, {'clean' if condition == 'clean' else 'noisy'}")
+                    axis.plot(
+                        [e[key] for e in entries],
+                        _pct([e["delta_rms_over_l_median"] for e in entries]),
+                        color=color,
+                        marker=marker,
+                        ls=ls,
+                        label=f"{method}, {'clean' if condition == 'clean' else 'noisy'}",
+                    )
         axis.set(yscale="log", ylabel="δ_RMS / L (%), median over kinematics")
         axis.legend(fontsize=7)
     ax[0].set(xlabel="N_j", title="(a) number of joints (τ/T = 5e-3)")

@@ -74,8 +74,15 @@ class Preset:
 
 PRESETS: dict[str, Preset] = {
     "full": Preset(),
-    "quick": Preset(n_family=24, n_sweep=2, cycles=4.0, leak_levels=(0.6, 1.2, 2.4, 3.6),
-                    shot_levels=(10.0, 20.0, 35.0, 70.0), joints=(4, 6, 10, 20), tau_over_t=(2e-4, 1e-3, 5e-3, 2e-2)),
+    "quick": Preset(
+        n_family=24,
+        n_sweep=2,
+        cycles=4.0,
+        leak_levels=(0.6, 1.2, 2.4, 3.6),
+        shot_levels=(10.0, 20.0, 35.0, 70.0),
+        joints=(4, 6, 10, 20),
+        tau_over_t=(2e-4, 1e-3, 5e-3, 2e-2),
+    ),
 }
 
 
@@ -142,31 +149,71 @@ def param_variants(methods: tuple[str, ...], preset: Preset) -> tuple[Variant, .
 
 def family_tasks(seed: int, preset: Preset, methods: tuple[str, ...]) -> list[Task]:
     """Part (a): one clean recording of 3-6 periods per kinematics."""
-    return [Task(f"family_{i:04d}", "family", i, kinematics_seed(seed, i), variants=paper_variants(methods),
-                 width=preset.width, height=preset.height) for i in range(preset.n_family)]
+    return [
+        Task(
+            f"family_{i:04d}",
+            "family",
+            i,
+            kinematics_seed(seed, i),
+            variants=paper_variants(methods),
+            width=preset.width,
+            height=preset.height,
+        )
+        for i in range(preset.n_family)
+    ]
 
 
 def sweep_clean_tasks(seed: int, preset: Preset, methods: tuple[str, ...], params: bool) -> list[Task]:
     """The clean recordings of the sweep kinematics (level 0 of (b) and (c), clean curves of (d))."""
     variants = param_variants(methods, preset) if params else paper_variants(methods)
-    return [Task(f"clean_{k:02d}", "clean", k, kinematics_seed(seed, k), cycles=preset.cycles,
-                 variants=variants, width=preset.width, height=preset.height) for k in range(preset.n_sweep)]
+    return [
+        Task(
+            f"clean_{k:02d}",
+            "clean",
+            k,
+            kinematics_seed(seed, k),
+            cycles=preset.cycles,
+            variants=variants,
+            width=preset.width,
+            height=preset.height,
+        )
+        for k in range(preset.n_sweep)
+    ]
 
 
 def leak_tasks(clean: list[Task], preset: Preset, methods: tuple[str, ...]) -> list[Task]:
     """Part (b): each sweep kinematics at each leak level (same seed as its clean recording)."""
-    return [replace(task, name=f"leak_{task.kinematics:02d}_{level_tag(level)}", part="leak", level=level, leak_over_f=level,
-                    variants=paper_variants(methods)) for task in clean for level in preset.leak_levels]
+    return [
+        replace(
+            task,
+            name=f"leak_{task.kinematics:02d}_{level_tag(level)}",
+            part="leak",
+            level=level,
+            leak_over_f=level,
+            variants=paper_variants(methods),
+        )
+        for task in clean
+        for level in preset.leak_levels
+    ]
 
 
-def shot_tasks(task: Task, clean_events: int, duration_s: float, preset: Preset, methods: tuple[str, ...],
-               params: bool) -> list[Task]:
+def shot_tasks(
+    task: Task, clean_events: int, duration_s: float, preset: Preset, methods: tuple[str, ...], params: bool
+) -> list[Task]:
     """Part (c) for one kinematics, from its clean recording's event count N_evs,0."""
     out = []
     pixels = task.width * task.height
     for level in preset.shot_levels:
         rate = level * PAPER_NOISE_PER_LEVEL * clean_events / (duration_s * pixels)
         variants = param_variants(methods, preset) if params and level == 20.0 else paper_variants(methods)
-        out.append(replace(task, name=f"shot_{task.kinematics:02d}_{level_tag(level)}", part="shot", level=level,
-                           shot_noise_hz=rate, variants=variants))
+        out.append(
+            replace(
+                task,
+                name=f"shot_{task.kinematics:02d}_{level_tag(level)}",
+                part="shot",
+                level=level,
+                shot_noise_hz=rate,
+                variants=variants,
+            )
+        )
     return out

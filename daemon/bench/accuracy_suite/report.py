@@ -56,20 +56,52 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
 def family_section(summary: Sequence[dict[str, Any]]) -> str:
     """Part (a): distributions per method next to the paper's figures."""
     p = tables.PAPER_FAMILY
-    rows = [["paper (Metavision sim.)", "-", f"{_pct(p['delta_rms_over_l'][0])}-{_pct(p['delta_rms_over_l'][1])}", "-",
-             f"{_pct(p['max_eps_rms_over_l'][0])}-{_pct(p['max_eps_rms_over_l'][1])}", _pct(p["twi_rel_error_median"]),
-             _pct(p["twi_rel_error_p95"]), _num(p["twi_abs_error_median"]), f"< {p['twi_abs_error_max']}", "-"]]
+    rows = [
+        [
+            "paper (Metavision sim.)",
+            "-",
+            f"{_pct(p['delta_rms_over_l'][0])}-{_pct(p['delta_rms_over_l'][1])}",
+            "-",
+            f"{_pct(p['max_eps_rms_over_l'][0])}-{_pct(p['max_eps_rms_over_l'][1])}",
+            _pct(p["twi_rel_error_median"]),
+            _pct(p["twi_rel_error_p95"]),
+            _num(p["twi_abs_error_median"]),
+            f"< {p['twi_abs_error_max']}",
+            "-",
+        ]
+    ]
     for e in summary:
-        rows.append([e["method"], str(e["recordings"]),
-                     f"{_pct(e['delta_rms_over_l_min'])}-{_pct(e['delta_rms_over_l_max'])}",
-                     _pct(e["delta_rms_over_l_median"]),
-                     f"{_pct(e['max_eps_rms_over_l_min'])}-{_pct(e['max_eps_rms_over_l_max'])}",
-                     _pct(e["twi_rel_error_median"]), _pct(e["twi_rel_error_p95"]), _num(e["twi_abs_error_median"]),
-                     _num(e["twi_abs_error_max"]), str(e["lost"])])
-    header = ["method", "recordings", "δ_RMS/L range %", "median %", "max ε_RMS/L range %", "I rel. err. median %",
-              "I rel. err. 95th %", "abs err. median", "abs err. max", "lost (δ/L > 0.1)"]
-    return "## (a) Kinematics family (clean, N_j = 10, τ/T = 5e-3, dt = τ, α = 0.6)\n\n" + _table(header, rows) + \
-        "\n![family](fig4_family.png)\n\n"
+        rows.append(
+            [
+                e["method"],
+                str(e["recordings"]),
+                f"{_pct(e['delta_rms_over_l_min'])}-{_pct(e['delta_rms_over_l_max'])}",
+                _pct(e["delta_rms_over_l_median"]),
+                f"{_pct(e['max_eps_rms_over_l_min'])}-{_pct(e['max_eps_rms_over_l_max'])}",
+                _pct(e["twi_rel_error_median"]),
+                _pct(e["twi_rel_error_p95"]),
+                _num(e["twi_abs_error_median"]),
+                _num(e["twi_abs_error_max"]),
+                str(e["lost"]),
+            ]
+        )
+    header = [
+        "method",
+        "recordings",
+        "δ_RMS/L range %",
+        "median %",
+        "max ε_RMS/L range %",
+        "I rel. err. median %",
+        "I rel. err. 95th %",
+        "abs err. median",
+        "abs err. max",
+        "lost (δ/L > 0.1)",
+    ]
+    return (
+        "## (a) Kinematics family (clean, N_j = 10, τ/T = 5e-3, dt = τ, α = 0.6)\n\n"
+        + _table(header, rows)
+        + "\n![family](fig4_family.png)\n\n"
+    )
 
 
 def sweep_section(title: str, summary: Sequence[dict[str, Any]], loss: bool) -> str:
@@ -86,12 +118,21 @@ def sweep_section(title: str, summary: Sequence[dict[str, Any]], loss: bool) -> 
         row = [f"{level:g}", _num(any_entry["n_over_n0_median"], ".2f")]
         for m in methods:
             e = index.get((m, level))
-            row.append("-" if e is None else f"{_pct(e['delta_rms_over_l_median'])} / {_pct(e['delta_rms_over_l_max'])}")
+            row.append(
+                "-" if e is None else f"{_pct(e['delta_rms_over_l_median'])} / {_pct(e['delta_rms_over_l_max'])}"
+            )
         if loss:
             for m in methods:
                 e = index.get((m, level))
-                row.append("-" if e is None else (_num(e["t_loss_cycles_min"], ".2f") if e["lost"] else
-                                                  f"never (≥ {e['evaluated_cycles_min']:.1f})"))
+                row.append(
+                    "-"
+                    if e is None
+                    else (
+                        _num(e["t_loss_cycles_min"], ".2f")
+                        if e["lost"]
+                        else f"never (≥ {e['evaluated_cycles_min']:.1f})"
+                    )
+                )
         rows.append(row)
     return f"## {title}\n\n" + _table(header, rows) + "\n"
 
@@ -112,8 +153,9 @@ def params_section(summary: Sequence[dict[str, Any]], key: str, label: str) -> s
     return _table(header, rows) + "\n"
 
 
-def targets_section(leak: Sequence[dict[str, Any]], shot: Sequence[dict[str, Any]],
-                    family: Sequence[dict[str, Any]]) -> str:
+def targets_section(
+    leak: Sequence[dict[str, Any]], shot: Sequence[dict[str, Any]], family: Sequence[dict[str, Any]]
+) -> str:
     """Beyond the paper: worst tip error at twice the paper's tolerated leak and shot noise; clean medians."""
     methods = list(dict.fromkeys([e["method"] for e in family] + [e["method"] for e in leak + shot]))
     rows = []
@@ -127,11 +169,20 @@ def targets_section(leak: Sequence[dict[str, Any]], shot: Sequence[dict[str, Any
         f = next((x for x in family if x["method"] == m), None)
         cells.append("-" if f is None else f"{_pct(f['delta_rms_over_l_median'])} / {_pct(f['delta_rms_over_l_max'])}")
         rows.append(cells)
-    header = ["method", "worst δ_RMS/L %, f_lr/f = 2.4", "worst δ_RMS/L %, f_snr/f = 70",
-              "highest f_lr/f with all < 1 %", "highest f_snr/f with all < 1 %", "clean family δ_RMS/L % median / worst"]
-    return ("## Beyond the paper: paper vs ours\n\nTarget: the tip within 1 % of L at twice the paper's tolerated "
-            "leak (f_lr/f = 2.4) and shot noise (f_snr/f = 70), no loss of accuracy on clean data.\n\n"
-            + _table(header, rows) + "\n")
+    header = [
+        "method",
+        "worst δ_RMS/L %, f_lr/f = 2.4",
+        "worst δ_RMS/L %, f_snr/f = 70",
+        "highest f_lr/f with all < 1 %",
+        "highest f_snr/f with all < 1 %",
+        "clean family δ_RMS/L % median / worst",
+    ]
+    return (
+        "## Beyond the paper: paper vs ours\n\nTarget: the tip within 1 % of L at twice the paper's tolerated "
+        "leak (f_lr/f = 2.4) and shot noise (f_snr/f = 70), no loss of accuracy on clean data.\n\n"
+        + _table(header, rows)
+        + "\n"
+    )
 
 
 def rows_from_folder(out: Path) -> tuple[RunResult, dict[str, Any]]:
@@ -145,8 +196,13 @@ def rows_from_folder(out: Path) -> tuple[RunResult, dict[str, Any]]:
                 row.pop("n_over_n0", None)
                 rows[(row["name"], row["method"], row["joints"], row["tau_over_t"])] = row
     run = json.loads((out / "run.json").read_text())
-    result = RunResult(rows=list(rows.values()), recordings=run["recordings"], events=run["events"],
-                       sim_wall_s=run["sim_wall_s"], wall_s=run["wall_s"])
+    result = RunResult(
+        rows=list(rows.values()),
+        recordings=run["recordings"],
+        events=run["events"],
+        sim_wall_s=run["sim_wall_s"],
+        wall_s=run["wall_s"],
+    )
     result.rows.sort(key=lambda r: (r["part"], r["name"], r["method"], r["joints"], r["tau_over_t"]))
     return result, run
 
@@ -163,16 +219,23 @@ def write_results(out: Path, result: RunResult, settings: RunSettings, command: 
     shot = tables.sweep_summary(parts["shot_noise"]) if parts["shot_noise"] else []
     joints = tables.param_summary(parts["params_joints"], "joints")
     tau = tables.param_summary(parts["params_tau"], "tau_over_t")
-    for name, rows in (("summary_family", family), ("summary_leak", leak), ("summary_shot_noise", shot),
-                       ("summary_params_joints", joints), ("summary_params_tau", tau)):
+    for name, rows in (
+        ("summary_family", family),
+        ("summary_leak", leak),
+        ("summary_shot_noise", shot),
+        ("summary_params_joints", joints),
+        ("summary_params_tau", tau),
+    ):
         if rows:
             tables.write_csv(out / f"{name}.csv", rows, list(rows[0]))
-    text = [f"# Accuracy benchmark (Raynaud & Mulleners 2024, section 3) on flagtrack's simulator\n\n"
-            f"`{command}`: {result.recordings} simulated recordings, {result.events / 1e6:.0f} M events, "
-            f"wall time {result.wall_s / 60:.1f} min on {settings.jobs or 'all'} processes "
-            f"(simulation {result.sim_wall_s / 60:.1f} CPU-min). Methods: {', '.join(settings.methods)} "
-            f"(`robust-classic`: the robust method with the classic one-neighbour filter; `robust`: the default, "
-            f"adaptive filter).\n\n"]
+    text = [
+        f"# Accuracy benchmark (Raynaud & Mulleners 2024, section 3) on flagtrack's simulator\n\n"
+        f"`{command}`: {result.recordings} simulated recordings, {result.events / 1e6:.0f} M events, "
+        f"wall time {result.wall_s / 60:.1f} min on {settings.jobs or 'all'} processes "
+        f"(simulation {result.sim_wall_s / 60:.1f} CPU-min). Methods: {', '.join(settings.methods)} "
+        f"(`robust-classic`: the robust method with the classic one-neighbour filter; `robust`: the default, "
+        f"adaptive filter).\n\n"
+    ]
     if family:
         figures.family_figure(parts["family"], out / "fig4_family.png")
         text.append(family_section(family))
@@ -185,8 +248,9 @@ def write_results(out: Path, result: RunResult, settings: RunSettings, command: 
         text.append("![defects](fig5_defects.png)\n\n")
     if joints or tau:
         figures.params_figure(joints, tau, out / "fig6_params.png")
-        text.append("## (d) Processing parameters (clean and f_snr/f = 20)\n\nMedian δ_RMS/L over the sweep "
-                    "kinematics.\n\n")
+        text.append(
+            "## (d) Processing parameters (clean and f_snr/f = 20)\n\nMedian δ_RMS/L over the sweep kinematics.\n\n"
+        )
         if joints:
             text.append(params_section(joints, "joints", "N_j (τ/T = 5e-3)"))
         if tau:
@@ -196,8 +260,16 @@ def write_results(out: Path, result: RunResult, settings: RunSettings, command: 
         text.append(targets_section(leak, shot, family))
     text.append(NOTES)
     (out / "report.md").write_text("".join(text))
-    headline = {"command": command, "wall_s": result.wall_s, "recordings": result.recordings, "events": result.events,
-                "sim_wall_s": result.sim_wall_s, "family": family, "leak": leak, "shot_noise": shot}
+    headline = {
+        "command": command,
+        "wall_s": result.wall_s,
+        "recordings": result.recordings,
+        "events": result.events,
+        "sim_wall_s": result.sim_wall_s,
+        "family": family,
+        "leak": leak,
+        "shot_noise": shot,
+    }
     settings_json = {**asdict(settings), "work_dir": str(settings.work_dir)}
     (out / "run.json").write_text(json.dumps({**headline, "settings": settings_json}, indent=1, default=_json) + "\n")
     return headline

@@ -79,8 +79,14 @@ def follow_up(outcome: Outcome, settings: RunSettings) -> list[plan.Task]:
     """Shot-noise tasks of a finished clean sweep recording (parts (c) and the noisy (d))."""
     if outcome.task.part != "clean" or not {"shot", "params"} & set(settings.parts):
         return []
-    tasks = plan.shot_tasks(outcome.task, outcome.n_events, outcome.duration_s, settings.preset, settings.methods,
-                            "params" in settings.parts)
+    tasks = plan.shot_tasks(
+        outcome.task,
+        outcome.n_events,
+        outcome.duration_s,
+        settings.preset,
+        settings.methods,
+        "params" in settings.parts,
+    )
     if "shot" not in settings.parts:
         tasks = [t for t in tasks if t.level == 20.0]
     return tasks
@@ -97,8 +103,9 @@ def run(settings: RunSettings) -> RunResult:
     n_shot = len(settings.preset.shot_levels) if "shot" in settings.parts else int("params" in settings.parts)
     expected = len(tasks) + (settings.preset.n_sweep * n_shot if any(t.part == "clean" for t in tasks) else 0)
     result = RunResult()
-    bar = tqdm(total=expected, desc="bench accuracy", unit="rec", file=sys.stderr, miniters=1,
-               disable=not settings.progress)
+    bar = tqdm(
+        total=expected, desc="bench accuracy", unit="rec", file=sys.stderr, miniters=1, disable=not settings.progress
+    )
     pool: Executor = _SerialExecutor() if jobs == 1 else ProcessPoolExecutor(max_workers=jobs)
     with pool, bar:
         pending = {pool.submit(run_task, t, str(settings.work_dir), settings.keep_recordings) for t in tasks}

@@ -18,17 +18,48 @@ import numpy as np
 
 from flagtrack.daemon.bench.accuracy_suite.plan import METHODS, PAPER_JOINTS, PAPER_TAU_OVER_T
 
-RECORDING_COLUMNS = ("name", "part", "kinematics", "seed", "level", "frequency_hz", "wavelength_over_l", "w_travel",
-                     "peak_to_peak_over_l", "duration_s", "leak_rate_hz", "shot_noise_hz", "n_events")
-RUN_COLUMNS = ("method", "joints", "tau_over_t", "events_kept", "track_wall_s", "delta_rms_over_l",
-               "max_eps_rms_over_l", "twi", "twi_ref", "twi_abs_error", "twi_rel_error", "t_loss_cycles",
-               "evaluated_cycles", "max_delta_over_l")
+RECORDING_COLUMNS = (
+    "name",
+    "part",
+    "kinematics",
+    "seed",
+    "level",
+    "frequency_hz",
+    "wavelength_over_l",
+    "w_travel",
+    "peak_to_peak_over_l",
+    "duration_s",
+    "leak_rate_hz",
+    "shot_noise_hz",
+    "n_events",
+)
+RUN_COLUMNS = (
+    "method",
+    "joints",
+    "tau_over_t",
+    "events_kept",
+    "track_wall_s",
+    "delta_rms_over_l",
+    "max_eps_rms_over_l",
+    "twi",
+    "twi_ref",
+    "twi_abs_error",
+    "twi_rel_error",
+    "t_loss_cycles",
+    "evaluated_cycles",
+    "max_delta_over_l",
+)
 COLUMNS = RECORDING_COLUMNS + RUN_COLUMNS
 SWEEP_COLUMNS = ("condition", "n_over_n0") + COLUMNS
 
-PAPER_FAMILY = {"delta_rms_over_l": (0.0036, 0.010), "max_eps_rms_over_l": (0.0053, 0.016),
-                "twi_rel_error_median": 0.0109, "twi_rel_error_p95": 0.0303, "twi_abs_error_max": 0.025,
-                "twi_abs_error_median": 1.3e-3}
+PAPER_FAMILY = {
+    "delta_rms_over_l": (0.0036, 0.010),
+    "max_eps_rms_over_l": (0.0053, 0.016),
+    "twi_rel_error_median": 0.0109,
+    "twi_rel_error_p95": 0.0303,
+    "twi_abs_error_max": 0.025,
+    "twi_abs_error_median": 1.3e-3,
+}
 """The paper's section 3 figures for the family (fractions)."""
 
 
@@ -115,8 +146,14 @@ def _stats(values: Sequence[float]) -> dict[str, float]:
     v = np.asarray([x for x in values if math.isfinite(x)], dtype=np.float64)
     if len(v) == 0:
         return {k: math.nan for k in ("min", "p5", "median", "p95", "max", "mean")}
-    return {"min": float(v.min()), "p5": float(np.percentile(v, 5)), "median": float(np.median(v)),
-            "p95": float(np.percentile(v, 95)), "max": float(v.max()), "mean": float(v.mean())}
+    return {
+        "min": float(v.min()),
+        "p5": float(np.percentile(v, 5)),
+        "median": float(np.median(v)),
+        "p95": float(np.percentile(v, 95)),
+        "max": float(v.max()),
+        "mean": float(v.mean()),
+    }
 
 
 def family_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -145,11 +182,19 @@ def sweep_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     for (method, level), group in sorted(groups.items(), key=lambda item: (method_rank(item[0][0]), item[0][1])):
         delta = [r["delta_rms_over_l"] for r in group]
         losses = [r["t_loss_cycles"] for r in group if math.isfinite(r["t_loss_cycles"])]
-        out.append({"method": method, "level": level, "kinematics": len(group),
-                    "delta_rms_over_l_median": float(np.median(delta)), "delta_rms_over_l_max": float(np.max(delta)),
-                    "n_over_n0_median": float(np.median([r["n_over_n0"] for r in group])),
-                    "lost": len(losses), "t_loss_cycles_min": min(losses) if losses else math.nan,
-                    "evaluated_cycles_min": float(min(r["evaluated_cycles"] for r in group))})
+        out.append(
+            {
+                "method": method,
+                "level": level,
+                "kinematics": len(group),
+                "delta_rms_over_l_median": float(np.median(delta)),
+                "delta_rms_over_l_max": float(np.max(delta)),
+                "n_over_n0_median": float(np.median([r["n_over_n0"] for r in group])),
+                "lost": len(losses),
+                "t_loss_cycles_min": min(losses) if losses else math.nan,
+                "evaluated_cycles_min": float(min(r["evaluated_cycles"] for r in group)),
+            }
+        )
     return out
 
 
@@ -158,9 +203,17 @@ def param_summary(rows: Sequence[dict[str, Any]], key: str) -> list[dict[str, An
     groups: dict[tuple[str, str, float], list[float]] = defaultdict(list)
     for r in rows:
         groups[(r["method"], r["condition"], r[key])].append(r["delta_rms_over_l"])
-    return [{"method": m, "condition": c, key: v, "kinematics": len(d), "delta_rms_over_l_median": float(np.median(d)),
-             "delta_rms_over_l_max": float(np.max(d))}
-            for (m, c, v), d in sorted(groups.items(), key=lambda item: (method_rank(item[0][0]), *item[0][1:]))]
+    return [
+        {
+            "method": m,
+            "condition": c,
+            key: v,
+            "kinematics": len(d),
+            "delta_rms_over_l_median": float(np.median(d)),
+            "delta_rms_over_l_max": float(np.max(d)),
+        }
+        for (m, c, v), d in sorted(groups.items(), key=lambda item: (method_rank(item[0][0]), *item[0][1:]))
+    ]
 
 
 def tolerated_level(summary: Sequence[dict[str, Any]], method: str, limit: float = 0.01) -> float:

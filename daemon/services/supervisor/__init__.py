@@ -6,4 +6,3 @@ from flagtrack.daemon.services.supervisor.section import FeedbackConfig, Supervi
 from flagtrack.daemon.services.supervisor.service import FlagGeometry, SupervisorService
 
 __all__ = ["FeedbackConfig", "FlagGeometry", "SupervisorConfig", "SupervisorService"]
-

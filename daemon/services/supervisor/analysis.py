@@ -29,8 +29,13 @@ class PointMetrics:
     delta_rms_std_over_l: float = math.nan
 
 
-def point_metrics(batches: list[CentrelineBatch], length: float, root: tuple[float, float], direction_deg: float,
-                  cycles_window: int = 1) -> PointMetrics:
+def point_metrics(
+    batches: list[CentrelineBatch],
+    length: float,
+    root: tuple[float, float],
+    direction_deg: float,
+    cycles_window: int = 1,
+) -> PointMetrics:
     """A/L (half peak-to-peak of the tip's lateral displacement, and its spread over cycles), f, TWI, Delta_RMS/L
     (time mean and standard deviation).
 
@@ -59,8 +64,15 @@ def point_metrics(batches: list[CentrelineBatch], length: float, root: tuple[flo
         resampled = np.stack([np.interp(uniform_t, t_run, lateral_run[:, k]) for k in range(lateral.shape[1])], axis=1)
         twi = travelling_wave_index(resampled)
     delta = batch.delta_rms[np.isfinite(batch.delta_rms)] / length
-    return PointMetrics(amplitude, spread, frequency, twi, float(delta.mean()) if len(delta) else math.nan, n,
-                        float(delta.std()) if len(delta) else math.nan)
+    return PointMetrics(
+        amplitude,
+        spread,
+        frequency,
+        twi,
+        float(delta.mean()) if len(delta) else math.nan,
+        n,
+        float(delta.std()) if len(delta) else math.nan,
+    )
 
 
 def _longest_run(t_s: np.ndarray, gap_factor: float = 5.0) -> slice:

@@ -44,14 +44,18 @@ class BusMonitor:
         sensor_id: a point sensor whose samples are gathered with each point (None: no sensor).
     """
 
-    def __init__(self, bus: Bus, camera_id: str, onset: OnsetParams, required: tuple[str, ...],
-                 sensor_id: str | None = None) -> None:
+    def __init__(
+        self, bus: Bus, camera_id: str, onset: OnsetParams, required: tuple[str, ...], sensor_id: str | None = None
+    ) -> None:
         keys = bus.keys
         self.rates = bus.subscribe(keys.event_rate(camera_id), EventRate, capacity=100_000)
         self.lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=1_000_000, max_bytes=256 << 20)
         self.recorder = bus.subscribe(keys.recorder_status(), RecorderStatus, capacity=1000)
-        self.sensor = None if sensor_id is None else bus.subscribe(keys.sensor_samples(sensor_id), SensorSamples,
-                                                                   capacity=100_000)
+        self.sensor = (
+            None
+            if sensor_id is None
+            else bus.subscribe(keys.sensor_samples(sensor_id), SensorSamples, capacity=100_000)
+        )
         self.liveliness = bus.watch_liveliness()
         self.alive_keys = {name: keys.alive(SERVICE_KEYS[name].format(camera_id=camera_id)) for name in required}
         self.detector = OnsetDetector(onset)

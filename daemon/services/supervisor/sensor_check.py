@@ -28,8 +28,16 @@ def sensor_paths(base: Path) -> tuple[Path, Path]:
     return base.with_name(base.name + "_sensor.h5"), base.with_name(base.name + "_sensor.png")
 
 
-def check_point(base: Path, run_dir: Path, collection: Collection, raw: Path, frame: FlagFrame, cfg: SensorConfig,
-                state: str, title: str = "") -> dict[str, Any]:
+def check_point(
+    base: Path,
+    run_dir: Path,
+    collection: Collection,
+    raw: Path,
+    frame: FlagFrame,
+    cfg: SensorConfig,
+    state: str,
+    title: str = "",
+) -> dict[str, Any]:
     """Write ``<base>_sensor.h5`` and ``<base>_sensor.png``; return the point's sensor fields.
 
     Args:
@@ -53,14 +61,28 @@ def check_point(base: Path, run_dir: Path, collection: Collection, raw: Path, fr
         if cfg.sync.mode in ("auto", "trigger") and raw.exists() and len(record.trigger_t_us):
             triggers = raw_triggers(raw)
         lines = CentrelineBatch.concatenate(collection.batches) if collection.batches else None
-        validation = validate_point(lines, record, triggers, frame, cfg.beam, cfg.sync, collection.units,
-                                    compare_without_events=state != "flapping")
+        validation = validate_point(
+            lines,
+            record,
+            triggers,
+            frame,
+            cfg.beam,
+            cfg.sync,
+            collection.units,
+            compare_without_events=state != "flapping",
+        )
         fields.update(validation.fields())
         plot_point(validation, figure_path, title)
         fields["sensor_figure"] = str(figure_path.relative_to(run_dir))
-        log.info("supervisor: sensor %s: %s, e/L RMS %.4f, sync %s %.1f ± %.1f us", cfg.id, validation.status,
-                 fields["sensor_error_rms_over_l"], validation.sync.method, validation.sync.offset_us,
-                 validation.sync.uncertainty_us)
+        log.info(
+            "supervisor: sensor %s: %s, e/L RMS %.4f, sync %s %.1f ± %.1f us",
+            cfg.id,
+            validation.status,
+            fields["sensor_error_rms_over_l"],
+            validation.sync.method,
+            validation.sync.offset_us,
+            validation.sync.uncertainty_us,
+        )
     except Exception as exc:  # noqa: BLE001 - the sensor never fails a point: say what went wrong instead
         log.error("supervisor: sensor check of %s failed: %s", base.name, exc)
         fields["sensor_status"] = f"error: {type(exc).__name__}: {exc}"

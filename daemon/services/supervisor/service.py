@@ -64,8 +64,17 @@ class SupervisorService:
 
     name = "supervisor"
 
-    def __init__(self, bus: Bus, cfg: SupervisorConfig, tunnel: Any, camera_id: str, flag: FlagGeometry,
-                 rig_snapshot: dict[str, Any], resume_dir: Path | None = None, sensor: Any = None) -> None:
+    def __init__(
+        self,
+        bus: Bus,
+        cfg: SupervisorConfig,
+        tunnel: Any,
+        camera_id: str,
+        flag: FlagGeometry,
+        rig_snapshot: dict[str, Any],
+        resume_dir: Path | None = None,
+        sensor: Any = None,
+    ) -> None:
         self.bus, self.cfg, self.tunnel, self.flag = bus, cfg, tunnel, flag
         self.rig_snapshot = rig_snapshot
         self.resume_dir = resume_dir
@@ -173,7 +182,9 @@ class SupervisorService:
     def _wait_for_services(self) -> None:
         """Wait for the required services and for the still-flag baseline of the onset detector."""
         deadline = time.monotonic() + self.cfg.startup_timeout_s
-        while self.monitor.missing() or self.monitor.reading is None or not np.isfinite(self.monitor.thresholds_hz()[0]):
+        while (
+            self.monitor.missing() or self.monitor.reading is None or not np.isfinite(self.monitor.thresholds_hz()[0])
+        ):
             if time.monotonic() > deadline:
                 missing = self.monitor.missing()
                 what = f"services {', '.join(missing)} did not appear" if missing else "no event-rate baseline"
@@ -187,13 +198,27 @@ class SupervisorService:
             return
         self._last_publish = now
         m = self.monitor
-        self._state_pub.put(SupervisorState(m.state.value, float(m.rate_hz) if np.isfinite(m.rate_hz) else 0.0,
-                                            self._mode, self._point, self._branch, float(self.tunnel.setpoint_mps)
-                                            if np.isfinite(self.tunnel.setpoint_mps) else 0.0, self.stop_reason))
+        self._state_pub.put(
+            SupervisorState(
+                m.state.value,
+                float(m.rate_hz) if np.isfinite(m.rate_hz) else 0.0,
+                self._mode,
+                self._point,
+                self._branch,
+                float(self.tunnel.setpoint_mps) if np.isfinite(self.tunnel.setpoint_mps) else 0.0,
+                self.stop_reason,
+            )
+        )
         status = self.tunnel.status()
-        self._tunnel_pub.put(TunnelState(float(status.speed_mps) if np.isfinite(status.speed_mps) else -1.0,
-                                         float(status.setpoint_mps) if np.isfinite(status.setpoint_mps) else 0.0,
-                                         "fault" if status.fault else self._mode, status.fault or "", time.time()))
+        self._tunnel_pub.put(
+            TunnelState(
+                float(status.speed_mps) if np.isfinite(status.speed_mps) else -1.0,
+                float(status.setpoint_mps) if np.isfinite(status.setpoint_mps) else 0.0,
+                "fault" if status.fault else self._mode,
+                status.fault or "",
+                time.time(),
+            )
+        )
 
     def _recorder(self, command: RecorderCommand, wait: bool = True) -> Any:
         """Send a command to the recorder; with ``wait``, return its acknowledgement."""
@@ -203,8 +228,9 @@ class SupervisorService:
         deadline = time.monotonic() + self.cfg.recorder_timeout_s
         while command.request_id not in self.monitor.recorder_replies:
             if time.monotonic() > deadline:
-                raise RunStopped(f"the recorder did not acknowledge '{command.action}' within "
-                                 f"{self.cfg.recorder_timeout_s:g} s")
+                raise RunStopped(
+                    f"the recorder did not acknowledge '{command.action}' within {self.cfg.recorder_timeout_s:g} s"
+                )
             self._idle(0.02)
         return self.monitor.recorder_replies.pop(command.request_id)
 
@@ -254,8 +280,12 @@ class SupervisorService:
                 outcome = self._run_action(step, point, len(outcomes))
                 outcomes.append(outcome)
                 if outcome.required and not outcome.ok:  # the point is failed (a resumed run measures it again)
-                    failed = replace(result or PointResult.planned(point), status="failed",
-                                     error=f"required action: {outcome.summary()}", actions=_summary(outcomes))
+                    failed = replace(
+                        result or PointResult.planned(point),
+                        status="failed",
+                        error=f"required action: {outcome.summary()}",
+                        actions=_summary(outcomes),
+                    )
                     runlog.point(failed)
                     self.points_done.append(failed)
                     raise RunStopped(f"point {point.point_id}: required action {outcome.summary()}")
@@ -275,10 +305,16 @@ class SupervisorService:
             return ActionOutcome(step.name, True, "", action.seconds)
         point_dir = self.run_dir / POINTS_DIR  # type: ignore[operator]
         raw, lines = point_paths(point.point_id)
-        context = {"point_id": point.point_id, "index": point.index, "branch": point.branch.value,
-                   "speed_mps": f"{point.speed_mps:g}", "run_dir": str(self.run_dir.resolve()),  # type: ignore[union-attr]
-                   "point_dir": str(point_dir.resolve()), "raw": str((self.run_dir / raw).resolve()),  # type: ignore[operator]
-                   "centrelines": str((self.run_dir / lines).resolve())}  # type: ignore[operator]
+        context = {
+            "point_id": point.point_id,
+            "index": point.index,
+            "branch": point.branch.value,
+            "speed_mps": f"{point.speed_mps:g}",
+            "run_dir": str(self.run_dir.resolve()),  # type: ignore[union-attr]
+            "point_dir": str(point_dir.resolve()),
+            "raw": str((self.run_dir / raw).resolve()),  # type: ignore[operator]
+            "centrelines": str((self.run_dir / lines).resolve()),
+        }  # type: ignore[operator]
         log_path = point_dir / f"{point.point_id}.action{number}.log"
         log.info("supervisor: action %s for %s", step.name, point.point_id)
         outcome = run_command(action, step.name, context, self.run_dir, log_path, idle=self._idle)  # type: ignore[arg-type]
@@ -289,8 +325,9 @@ class SupervisorService:
     def _record_point(self, point: Point, step: Record) -> PointResult:
         base = self.run_dir / "points" / point.point_id  # type: ignore[operator]
         t_start = time.time()
-        self._recorder(RecorderCommand("start", path=str(base.resolve()), centrelines=True,
-                                       request_id=uuid.uuid4().hex))
+        self._recorder(
+            RecorderCommand("start", path=str(base.resolve()), centrelines=True, request_id=uuid.uuid4().hex)
+        )
         self.monitor.start_collecting()
         readbacks = []
         end = time.monotonic() + step.duration_s
@@ -304,20 +341,32 @@ class SupervisorService:
         state = point_state(collection.rates_hz, on_hz, off_hz, previous)
         metrics = point_metrics(collection.batches, self.flag.length, self.flag.root, self.flag.direction_deg)
         if state != "flapping":  # a still flag has no amplitude or frequency worth a number
-            metrics = type(metrics)(amplitude_over_l=metrics.amplitude_over_l, delta_rms_over_l=metrics.delta_rms_over_l,
-                                    updates=metrics.updates, delta_rms_std_over_l=metrics.delta_rms_std_over_l)
+            metrics = type(metrics)(
+                amplitude_over_l=metrics.amplitude_over_l,
+                delta_rms_over_l=metrics.delta_rms_over_l,
+                updates=metrics.updates,
+                delta_rms_std_over_l=metrics.delta_rms_std_over_l,
+            )
         raw, lines = (self.run_dir / path for path in point_paths(point.point_id))  # type: ignore[operator]
         readback = [v for v in readbacks if np.isfinite(v)]
         sensor_fields = self._check_sensor(point, base, collection, raw, state)
         return PointResult.planned(
-            point, state=state, speed_readback_mps=float(np.mean(readback)) if readback else math.nan,
-            amplitude_over_l=metrics.amplitude_over_l, amplitude_std_over_l=metrics.amplitude_std_over_l,
-            frequency_hz=metrics.frequency_hz, twi=metrics.twi, delta_rms_over_l=metrics.delta_rms_over_l,
+            point,
+            state=state,
+            speed_readback_mps=float(np.mean(readback)) if readback else math.nan,
+            amplitude_over_l=metrics.amplitude_over_l,
+            amplitude_std_over_l=metrics.amplitude_std_over_l,
+            frequency_hz=metrics.frequency_hz,
+            twi=metrics.twi,
+            delta_rms_over_l=metrics.delta_rms_over_l,
             event_rate_mev_s=float(np.mean(collection.rates_hz)) / 1e6 if collection.rates_hz else math.nan,
             raw_bytes=raw.stat().st_size if raw.exists() else int(stopped.bytes),
-            raw_file=str(raw.relative_to(self.run_dir)), centreline_file=str(lines.relative_to(self.run_dir))
-            if lines.exists() else None, t_start_unix=t_start, t_stop_unix=time.time(),
-            delta_rms_std_over_l=metrics.delta_rms_std_over_l, **sensor_fields,
+            raw_file=str(raw.relative_to(self.run_dir)),
+            centreline_file=str(lines.relative_to(self.run_dir)) if lines.exists() else None,
+            t_start_unix=t_start,
+            t_stop_unix=time.time(),
+            delta_rms_std_over_l=metrics.delta_rms_std_over_l,
+            **sensor_fields,
         )
 
     def _check_sensor(self, point: Point, base: Path, collection: Any, raw: Path, state: str) -> dict[str, Any]:
@@ -348,7 +397,9 @@ class SupervisorService:
             recent = _last_seconds(collection.batches, fb.window_s)
             self.monitor.start_collecting()
             self.monitor.collection.batches.extend(recent)  # type: ignore[union-attr]
-            amplitude = point_metrics(recent, self.flag.length, self.flag.root, self.flag.direction_deg).amplitude_over_l
+            amplitude = point_metrics(
+                recent, self.flag.length, self.flag.root, self.flag.direction_deg
+            ).amplitude_over_l
             state = control_step(state, amplitude, fb.period_s, fb)
             self.feedback_trace.append((time.monotonic() - started, amplitude, state.speed_mps))
             log.info("feedback: A/L %.3f -> %.2f m/s", amplitude, state.speed_mps)
