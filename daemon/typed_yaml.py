@@ -75,7 +75,7 @@ def from_mapping(cls: type[T], data: Any, *, path: str | None = None, key: str =
     for name, field in fields.items():
         sub = _join(key, name)
         if name in data:
-            section = _default_section(field) if base is None else getattr(base, name)
+            section = _default_section(field) if base is None else _as_section(getattr(base, name))
             if section is not None and isinstance(data[name], Mapping):
                 values[name] = from_mapping(type(section), data[name], path=path, key=sub, base=section)
             else:
@@ -112,7 +112,12 @@ def _default_section(field: dataclasses.Field) -> Any:
         default = field.default_factory()
     else:
         return None
-    return default if dataclasses.is_dataclass(default) and not isinstance(default, type) else None
+    return _as_section(default)
+
+
+def _as_section(value: Any) -> Any:
+    """``value`` if it is a config section (a dataclass instance), else None."""
+    return value if dataclasses.is_dataclass(value) and not isinstance(value, type) else None
 
 
 @functools.cache

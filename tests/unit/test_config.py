@@ -133,3 +133,31 @@ def test_a_folder_without_write_permission_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="not writable") as info:
         require_folder(locked / "rec", key="recorder.directory", path="rig.yaml")
     assert info.value.key == "recorder.directory"
+
+
+@dataclass(frozen=True)
+class _Leaf:
+    a: int = 1
+    b: int = 2
+    extra: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class _Branch:
+    leaf: _Leaf = _Leaf(a=5)
+    name: str = "x"
+
+
+@dataclass(frozen=True)
+class _Root:
+    branch: _Branch = _Branch(leaf=_Leaf(a=7, b=8))
+
+
+def test_a_nested_section_starts_from_its_fields_default() -> None:
+    """Keys a section leaves out keep the value of the field's default (here a=7, b=8 set by _Root),
+    not the section class's own defaults (a=1, b=2); plain values below it are converted as usual."""
+    got = from_mapping(_Root, {"branch": {"leaf": {"b": 3, "extra": {"k": 1}}}})
+    assert got.branch.leaf == _Leaf(a=7, b=3, extra={"k": 1}) and got.branch.name == "x"
+    assert from_mapping(_Branch, {"leaf": {"b": 4}}).leaf == _Leaf(a=5, b=4)
+    with pytest.raises(ConfigError, match="branch.leaf.c"):
+        from_mapping(_Root, {"branch": {"leaf": {"c": 1}}})
