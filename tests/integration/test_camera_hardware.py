@@ -21,7 +21,6 @@ from flagtrack.daemon.services.build import open_camera
 from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.camera.packets import decode_packet
-from tests.fakes.fixtures import fake_dv, fake_hal, fake_nd  # noqa: F401 - fixtures
 from tests.integration.test_transport import free_port
 
 RIGS = {

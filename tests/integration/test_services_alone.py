@@ -17,7 +17,7 @@ from flagtrack.daemon.schema import TrackerStatus
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.formats import read_events
 from tests.integration.test_transport import free_port
-from tests.integration.test_up import TRACKER_ARGS, flagtrack, recording, start  # noqa: F401 (fixture)
+from tests.integration.test_up import TRACKER_ARGS, flagtrack, start
 
 TAU_S = 0.0003
 SPEED = 0.1  # the 0.2 s recording replayed over 2 s: the tracker's 1 s status windows see it flow
@@ -34,7 +34,7 @@ def _wait_alive(bus: Bus, services: list[str], timeout_s: float) -> bool:
 
 
 @pytest.mark.slow
-def test_each_service_alone_through_a_router(recording: Path, tmp_path: Path) -> None:  # noqa: F811
+def test_each_service_alone_through_a_router(recording: Path, tmp_path: Path) -> None:
     port = free_port()
     rig = tmp_path / "rig.yaml"
     rig.write_text(f"""

@@ -16,12 +16,8 @@ import pytest
 
 from flagtrack.daemon.schema import CentrelineMessage
 from flagtrack.daemon.transport import Bus, BusConfig
-from flagtrack.drivers.formats import write_events
-from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
-from tests.fakes.fixtures import fake_nd  # noqa: F401 - fixture
 from tests.integration.test_transport import free_port
 
-FLAG = WavyFlag(length=200.0, root=(100.0, 240.0))
 TRACKER_ARGS = ["--root", "100", "240", "--length", "200", "--tau", "0.0003"]
 
 
@@ -33,14 +29,6 @@ def flagtrack(*args: str, **kwargs) -> subprocess.CompletedProcess:  # noqa: ANN
 def start(*args: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "flagtrack.daemon", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-
-
-@pytest.fixture(scope="module")
-def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("up") / "flag.raw"
-    events = np.concatenate(list(line_events(FLAG, 0, 200_000, 640, 480, QuickLineParams(noise_rate_hz=1e5))))
-    write_events(path, events, width=640, height=480, encoding="evt3")
-    return path
 
 
 def test_up_replay_gives_exactly_the_reconstruct_centrelines(recording: Path, tmp_path: Path) -> None:
