@@ -163,11 +163,11 @@ def test_killed_writer_leaves_a_readable_log(tmp_path: Path) -> None:
         "for i in itertools.count():\n"
         "    log.point(PointResult.planned(points[0], raw_bytes=i, error='x' * 2000))\n"
     )  # fmt: skip
-    proc = subprocess.Popen([sys.executable, "-c", script, str(tmp_path)], stdout=subprocess.PIPE, text=True)
-    assert proc.stdout is not None and proc.stdout.readline() == "started\n"
-    time.sleep(0.3)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait(timeout=5)
+    with subprocess.Popen([sys.executable, "-c", script, str(tmp_path)], stdout=subprocess.PIPE, text=True) as proc:
+        assert proc.stdout is not None and proc.stdout.readline() == "started\n"
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=5)
     record = read_run(tmp_path)
     assert len(record.points) > 0
     assert [p.raw_bytes for p in record.points] == list(range(len(record.points)))
@@ -242,6 +242,7 @@ def test_sensor_fields_round_trip_and_older_records_load(tmp_path: Path) -> None
     assert got[1].sensor_status is None and math.isnan(got[1].sensor_error_rms_over_l)
     assert got[2].sensor_status is None and got[2].sensor_samples == 0
     csv_path, _ = write_summary(tmp_path)
-    rows = list(csv.DictReader(open(csv_path, newline="")))
+    with open(csv_path, newline="") as handle:
+        rows = list(csv.DictReader(handle))
     assert rows[0]["sensor_error_rms_over_l"] == "0.004" and rows[1]["sensor_error_max_over_l"] == "NaN"
     assert (tmp_path / "validation.png").stat().st_size > 5000  # the sweep figure, as a point has sensor data
