@@ -62,7 +62,8 @@ viewer: {{sink: rrd, rrd_path: {tmp_path / 'view.rrd'}}}
                 msg = status.recv(timeout_s=0.5)  # until the camera is done and a status saw no events
                 if msg is not None:
                     statuses.append(msg)
-            assert camera.wait(timeout=10) == 0, camera.communicate()[1]
+            _, camera_err = camera.communicate(timeout=10)  # (closes its pipes)
+            assert camera.returncode == 0, camera_err
     finally:
         for proc in [*services, router]:
             proc.send_signal(signal.SIGINT)
