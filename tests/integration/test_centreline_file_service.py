@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +13,7 @@ from flagtrack.daemon.schema import CentrelineMessage, encode
 from flagtrack.daemon.services.centreline_file import CentrelineFileService
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.formats.centreline import read_centrelines
+from tests.fakes.helpers import wait_subscribed
 from tests.integration.test_transport import free_port
 
 
@@ -36,7 +36,7 @@ def test_messages_that_do_not_fit_the_file_are_counted_and_the_stream_is_written
         service = CentrelineFileService(bus, path, {"length": 200.0}, exit_after_final=True)
         thread = threading.Thread(target=service.run, args=(threading.Event(),))
         thread.start()
-        time.sleep(0.4)
+        wait_subscribed(source, source.keys.centrelines())
         pub = source.publisher(source.keys.centrelines())
         pub.put(message(0, 4, 51))
         pub.put(message(1, 5, 7))

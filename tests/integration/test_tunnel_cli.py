@@ -18,17 +18,9 @@ import pytest
 from flagtrack.drivers.tunnel.ascii import AsciiTunnel
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
+from tests.fakes.helpers import wait_until
 
 FLAGTRACK = [sys.executable, "-m", "flagtrack.daemon"]
-
-
-def wait_until(predicate, timeout_s: float = 5.0) -> bool:  # noqa: ANN001 - tiny test helper
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return predicate()
 
 
 @pytest.fixture

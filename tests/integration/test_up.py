@@ -16,6 +16,7 @@ import pytest
 
 from flagtrack.daemon.schema import CentrelineMessage
 from flagtrack.daemon.transport import Bus, BusConfig
+from tests.fakes.helpers import wait_until
 from tests.integration.test_transport import free_port
 
 TRACKER_ARGS = ["--root", "100", "240", "--length", "200", "--tau", "0.0003"]
@@ -81,20 +82,22 @@ recorder: {{directory: {tmp_path / 'rec'}, path: run}}
     return config
 
 
+def size(path: Path) -> int:
+    return path.stat().st_size if path.exists() else 0
+
+
 def test_sigint_stops_every_service_cleanly(tmp_path: Path) -> None:
     proc = start("up", "-c", str(sim_rig(tmp_path)))
-    recorded = tmp_path / "rec" / "run.raw"
-    deadline = time.monotonic() + 60
-    while not (recorded.exists() and recorded.stat().st_size > 10_000) and time.monotonic() < deadline:
-        time.sleep(0.2)
-    time.sleep(1.0)
+    recorded, rrd = tmp_path / "rec" / "run.raw", tmp_path / "live.rrd"
+    wait_until(lambda: size(recorded) > 10_000 and size(rrd) > 1000, 60, "the recorder and the viewer writing",
+               poll_s=0.2)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
     assert "stopping" in err and "did not stop" not in err
     info = flagtrack("events", "info", str(recorded), "--json")
     assert info.returncode == 0 and '"events"' in info.stdout
-    assert (tmp_path / "live.rrd").stat().st_size > 1000
+    assert rrd.stat().st_size > 1000
 
 
 STUBBORN = """
@@ -104,10 +107,11 @@ from flagtrack.daemon.services.runner import run_services
 class Stubborn:
     name = "stubborn"
     def run(self, stop):
+        print("ready", flush=True)  # the signal handlers are installed
         stop.wait()
+        print("asked to stop", flush=True)
         time.sleep(60)  # ignores the request to stop for a minute
 
-print("ready", flush=True)
 run_services([Stubborn()], shutdown_timeout_s=120)
 """
 
@@ -115,10 +119,9 @@ run_services([Stubborn()], shutdown_timeout_s=120)
 def test_second_signal_forces_exit() -> None:
     proc = subprocess.Popen([sys.executable, "-c", STUBBORN], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout.readline().strip() == "ready"
-    time.sleep(0.3)
     started = time.monotonic()
     proc.send_signal(signal.SIGTERM)
-    time.sleep(0.5)
+    assert proc.stdout.readline().strip() == "asked to stop"  # handled: a second signal is not merged into it
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130 and "stopping (again to force)" in err and "forcing exit" in err
@@ -137,7 +140,7 @@ tracker: {{root: [100, 240], length: 200, tau_s: 0.0003}}
     router = start("router", "--listen", f"tcp/127.0.0.1:{port}")
     procs = []
     try:
-        time.sleep(2.0)
+        assert "listening" in router.stderr.readline()
         procs = [start("tracker", "-c", str(host_cfg)), start("camera", "-c", str(host_cfg))]
         with Bus(BusConfig(namespace="flagtrack/tworouter", mode="client", connect=(f"tcp/127.0.0.1:{port}",))) as bus:
             sub = bus.subscribe(bus.keys.centrelines(), CentrelineMessage)
@@ -333,19 +336,15 @@ services: [camera, tracker]
         camera, tracker = bus.keys.alive("camera/cam0"), bus.keys.alive("tracker")
         proc = start("up", "-c", str(config))
         try:
-            deadline = time.monotonic() + 60
-            while camera not in watch.gone and proc.poll() is None and time.monotonic() < deadline:
-                time.sleep(0.02)
+            wait_until(lambda: camera in watch.gone or proc.poll() is not None, 60, "the camera gone", poll_s=0.02)
             assert camera in watch.gone and not watch.is_alive(camera)
-            time.sleep(0.5)
+            time.sleep(0.5)  # a window to see what must not happen: nothing to wait for
             assert watch.is_alive(tracker) and proc.poll() is None  # the tracker runs on, its token stays
         finally:
             proc.send_signal(signal.SIGINT)
             _, err = proc.communicate(timeout=30)
         assert proc.returncode == 130, err
-        deadline = time.monotonic() + 10
-        while tracker not in watch.gone and time.monotonic() < deadline:
-            time.sleep(0.02)
+        wait_until(lambda: tracker in watch.gone, 10, "the tracker gone")
         assert watch.gone == [camera, tracker]
 
 

@@ -8,7 +8,6 @@ import math
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -25,6 +24,7 @@ from flagtrack.daemon.sweep.runlog import (
     stored_sweep,
 )
 from flagtrack.daemon.sweep.summary import SUMMARY_COLUMNS, transition_speeds, write_summary
+from tests.fakes.helpers import wait_until
 
 CFG = SweepConfig(range=SpeedRange(3.0, 6.0, 0.5), settle_s=1, record_s=1)
 ONSET_MPS, DECAY_MPS = 5.0, 4.0
@@ -165,7 +165,7 @@ def test_killed_writer_leaves_a_readable_log(tmp_path: Path) -> None:
     )  # fmt: skip
     with subprocess.Popen([sys.executable, "-c", script, str(tmp_path)], stdout=subprocess.PIPE, text=True) as proc:
         assert proc.stdout is not None and proc.stdout.readline() == "started\n"
-        time.sleep(0.3)
+        wait_until(lambda: (tmp_path / RUN_LOG).read_bytes().count(b"\n") > 20, what="20 point records written")
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=5)
     record = read_run(tmp_path)
