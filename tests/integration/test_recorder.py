@@ -276,6 +276,7 @@ def test_a_restarted_camera_goes_to_a_new_file_and_the_last_centrelines_are_kept
     assert len(old) == old_updates > 80 and old.t_s.max() < 0.025
 
 
+@pytest.mark.timeout(400)  # its `up` child has its own 300 s timeout
 def test_up_replay_exit_at_eof_records_every_centreline(tmp_path: Path) -> None:
     """``flagtrack up --replay F --speed 0 --exit-at-eof --centrelines OUT.h5 --record BASE`` with the
     recorder taking centrelines: the file as fast as possible, so the tracker's last centrelines come

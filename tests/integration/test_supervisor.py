@@ -64,6 +64,7 @@ def run(config: RigConfig, during=None, resume_dir: Path | None = None, timeout_
     return supervisor, report, simulator
 
 
+@pytest.mark.slow
 def test_a_sweep_records_every_point_and_ends_at_zero(tmp_path: Path) -> None:
     supervisor, report, simulator = run(rig(tmp_path))
     assert supervisor.stop_reason == "finished" and not report.errors
@@ -95,6 +96,7 @@ def fault_after_first_point(action):  # noqa: ANN001, ANN201
     return during
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("fault", "words"),
     [
@@ -155,6 +157,7 @@ def test_feedback_controller_respects_rate_and_bounds() -> None:
     assert held == state
 
 
+@pytest.mark.slow
 def test_feedback_holds_the_target_amplitude_on_the_simulated_rig(tmp_path: Path) -> None:
     # open loop, 5.2 m/s gives A/L ~ 0.25; the target needs ~4.65 m/s (on the flapping branch)
     config = rig(tmp_path, mode="feedback", sweep=None,
@@ -171,6 +174,7 @@ def test_feedback_holds_the_target_amplitude_on_the_simulated_rig(tmp_path: Path
     assert simulator.setpoint_mps == 0.0
 
 
+@pytest.mark.slow
 def test_point_actions_run_with_placeholders_and_a_required_failure_stops_at_zero(tmp_path: Path) -> None:
     write_raw_path = "import pathlib, sys; pathlib.Path(sys.argv[1]).write_text(sys.argv[2] + ' ' + sys.argv[3])"
     config = rig(tmp_path, sweep={"speeds": [4.0], "branches": ["up"], "settle_s": 0.3, "record_s": 0.5, "actions": [

@@ -128,6 +128,7 @@ def test_second_signal_forces_exit() -> None:
     assert time.monotonic() - started < 10
 
 
+@pytest.mark.slow
 def test_camera_and_tracker_on_two_hosts_through_a_router(recording: Path, tmp_path: Path) -> None:
     port = free_port()
     host_cfg = tmp_path / "host.yaml"
@@ -158,6 +159,7 @@ tracker: {{root: [100, 240], length: 200, tau_s: 0.0003}}
     assert [p.returncode for p in procs] == [130, 130]
 
 
+@pytest.mark.timeout(400)  # its child may compile for up to its own 300 s timeout
 def test_the_rig_does_its_slow_one_off_work_before_its_services_start() -> None:
     """A first run after installing compiles for tens of seconds: that must happen before the services
     start (else a supervisor in the same process gives up waiting for the tracker), so after the
