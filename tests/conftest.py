@@ -1,4 +1,5 @@
-"""Shared pytest fixtures: the real recordings in ../shared/data/real and the hardware switch."""
+"""Shared pytest fixtures: the real recordings in ../shared/data/real and the hardware switch; the fake
+camera SDKs' fixtures (``fake_nd``, ``fake_hal``, ``fake_dv``, ``no_sdk``) are a plugin of every test."""
 
 from __future__ import annotations
 
@@ -10,6 +11,8 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_REAL = Path(os.environ.get("FLAGTRACK_SHARED_DATA", REPO.parent / "shared" / "data" / "real"))
+
+pytest_plugins = ["tests.fakes.fixtures"]
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -1,14 +1,47 @@
-"""Test helpers around a hardware camera adapter backed by a fake SDK."""
+"""Test helpers: waiting for a condition, and reading a hardware camera adapter backed by a fake SDK."""
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from flagtrack.daemon.core.events import empty_events, empty_triggers
 from flagtrack.drivers.camera.base import Camera
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.transport import Bus
+
+
+def wait_until(predicate: Callable[[], object], timeout_s: float = 5.0, what: str = "", poll_s: float = 0.01) -> object:
+    """Poll ``predicate`` until it returns something true, and return that; after ``timeout_s`` raise
+    AssertionError saying ``what`` did not happen (by default, where the predicate is written).
+
+    For tests that wait for something to happen (a thread's result, a subscription reaching the
+    other session, a file being written) instead of sleeping a fixed time and hoping.
+    """
+    deadline = time.monotonic() + timeout_s
+    while not (result := predicate()):
+        if time.monotonic() >= deadline:
+            if not what:
+                code = getattr(predicate, "__code__", None)
+                what = f"the condition at {code.co_filename}:{code.co_firstlineno}" if code else repr(predicate)
+            raise AssertionError(f"timed out after {timeout_s:g} s waiting for {what}")
+        time.sleep(poll_s)
+    return result
+
+
+def wait_subscribed(bus: Bus, *keys: str, timeout_s: float = 10.0) -> None:
+    """Wait until ``bus``'s session knows a subscriber for each key: what it publishes there from now on
+    is delivered (Zenoh drops samples put before a remote subscription has reached the publisher)."""
+    for key in keys:
+        probe = bus.session.declare_publisher(key)
+        try:
+            wait_until(lambda p=probe: p.matching_status.matching, timeout_s, f"a subscriber of {key} to reach us")
+        finally:
+            probe.undeclare()
 
 
 def read_until(camera: Camera, done: Callable[[], bool], timeout_s: float = 20.0, read_timeout_s: float = 0.01

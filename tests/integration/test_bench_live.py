@@ -7,7 +7,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 
+
+@pytest.mark.slow
 def test_bench_live_reports_rate_latency_and_cpu_without_loss(tmp_path: Path) -> None:
     out = subprocess.run([sys.executable, "-m", "flagtrack.daemon", "bench", "live", "--seconds", "0.3",
                           "--latency-seconds", "1.0", "--latency-rate", "1.0", "--cache", str(tmp_path), "--json"],

@@ -8,7 +8,6 @@ the settings read back, and a stalled camera ends the service with an error stat
 from __future__ import annotations
 
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +20,7 @@ from flagtrack.daemon.rig.build import open_camera
 from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.formats.packets import decode_packet
-from tests.fakes.fixtures import fake_dv, fake_hal, fake_nd  # noqa: F401 - fixtures
+from tests.fakes.helpers import wait_subscribed
 from tests.integration.test_transport import free_port
 
 RIGS = {
@@ -69,7 +68,7 @@ def test_service_publishes_the_sensor_events_and_reports_the_stall(adapter: str,
             Bus(BusConfig(namespace="flagtrack/hw", connect=(endpoint,))) as sub_bus:
         packets_sub = sub_bus.subscribe(sub_bus.keys.camera_events("cam0"), EventPacket, capacity=1_000_000)
         status_sub = sub_bus.subscribe(sub_bus.keys.camera_status("cam0"), CameraStatus)
-        time.sleep(0.3)
+        wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"), cam_bus.keys.camera_status("cam0"))
         service = CameraService(cam_bus, CameraStreamConfig(), camera)
         failure: list[BaseException] = []
 

@@ -18,6 +18,7 @@ from flagtrack.drivers.formats.packets import PacketParams, Packetizer, decode_p
 from flagtrack.drivers.camera.replay import ReplayCamera, ReplayConfig
 from flagtrack.drivers.formats import make_decoder, read_events, write_events
 from flagtrack.drivers.sim.quickline import WavyFlag, line_events
+from tests.fakes.helpers import wait_subscribed
 from tests.integration.test_transport import free_port
 
 
@@ -29,7 +30,7 @@ def replay_over_bus(path: Path, speed: float = 0.0) -> tuple[list[EventPacket], 
         packets_sub = sub_bus.subscribe(keys.camera_events("cam0"), EventPacket, capacity=1_000_000)
         rate_sub = sub_bus.subscribe(keys.event_rate("cam0"), EventRate)
         status_sub = sub_bus.subscribe(keys.camera_status("cam0"), CameraStatus)
-        time.sleep(0.3)
+        wait_subscribed(cam_bus, keys.camera_events("cam0"), keys.event_rate("cam0"), keys.camera_status("cam0"))
         service = CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(ReplayConfig(path, speed=speed)))
         service.run(threading.Event())
         packets, statuses = [], []

@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +15,8 @@ from flagtrack.daemon.services.centreline_file import CentrelineFileService
 from flagtrack.daemon.services.recorder import RecorderConfig, RecorderService
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.formats.centreline import read_centrelines
-from tests.integration.test_transport import free_port, wait_for
+from tests.fakes.helpers import wait_subscribed, wait_until
+from tests.integration.test_transport import free_port
 
 
 def message(seq: int, n_t: int, n_s: int, final: bool = False) -> CentrelineMessage:
@@ -38,7 +38,7 @@ def test_messages_that_do_not_fit_the_file_are_counted_and_the_stream_is_written
         service = CentrelineFileService(bus, path, {"length": 200.0}, exit_after_final=True)
         thread = threading.Thread(target=service.run, args=(threading.Event(),))
         thread.start()
-        time.sleep(0.4)
+        wait_subscribed(source, source.keys.centrelines())
         pub = source.publisher(source.keys.centrelines())
         pub.put(message(0, 4, 51))
         pub.put(message(1, 5, 7))
@@ -79,7 +79,7 @@ def test_the_recorder_and_the_centreline_file_write_the_same_attributes(tmp_path
                 pub.put(msg)
             threads[0].join(20)
             sink = recorder.current.centrelines  # type: ignore[union-attr]
-            assert wait_for(lambda: sink.n_updates + sink.n_pending == 7)
+            wait_until(lambda: sink.n_updates + sink.n_pending == 7, what="7 updates in the sink")
         finally:
             stop.set()
             for thread in threads:

@@ -129,6 +129,7 @@ def test_errors_are_one_line(raw_file: Path, tmp_path: Path, extra: list[str], w
     assert err.startswith("flagtrack reconstruct: error:") and words in err and "\n" not in err
 
 
+@pytest.mark.filterwarnings("default::flagtrack.drivers.formats.codec.FormatWarning")  # shown, as outside tests
 def test_a_truncated_file_is_reconstructed_with_a_one_line_warning(raw_file: Path, tmp_path: Path,
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
     cut = tmp_path / "cut.raw"

@@ -22,6 +22,7 @@ from flagtrack.drivers.camera.replay import ReplayCamera, ReplayConfig
 from flagtrack.drivers.formats import read_events, write_events
 from flagtrack.drivers.formats.centreline import read_centrelines
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
+from tests.fakes.helpers import wait_subscribed
 from tests.integration.test_transport import free_port, wait_for
 
 
@@ -32,6 +33,16 @@ def make_recording(tmp_path: Path, t0_us: int, t1_us: int) -> tuple[Path, np.nda
     return path, events
 
 
+def data_bytes(path: Path) -> int:
+    """Bytes of a RAW file past its header (0 while there are none, or no file)."""
+    data = path.read_bytes() if path.exists() else b""
+    end = 0
+    while data.startswith(b"%", end):
+        if (end := data.find(b"\n", end) + 1) == 0:
+            return 0
+    return len(data) - end
+
+
 def run_rig(source: Path, rec_cfg: RecorderConfig, speed: float, during=None) -> RecorderService:  # noqa: ANN001
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with Bus(BusConfig(namespace="flagtrack/rec", listen=(endpoint,))) as rec_bus, \
@@ -40,7 +51,7 @@ def run_rig(source: Path, rec_cfg: RecorderConfig, speed: float, during=None) ->
         stop = threading.Event()
         thread = threading.Thread(target=recorder.run, args=(stop,))
         thread.start()
-        time.sleep(0.4)
+        wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"), cam_bus.keys.recorder_command())
         camera = CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(ReplayConfig(source, speed=speed)))
         cam_thread = threading.Thread(target=camera.run, args=(threading.Event(),))
         cam_thread.start()
@@ -76,9 +87,9 @@ def test_rotate_on_command_splits_without_losing_events(tmp_path: Path) -> None:
         status = bus.subscribe(bus.keys.recorder_status(), RecorderStatus)
         commands = bus.publisher(bus.keys.recorder_command())
         commands.put(RecorderCommand("start", path="a", request_id="1"))
-        time.sleep(0.3)
+        assert wait_for(lambda: recorder.current is not None and recorder.current.packets > 0)  # a.raw has some
         commands.put(RecorderCommand("rotate", path="b", request_id="2"))
-        while (msg := status.recv(timeout_s=2.0)) is not None and len(statuses) < 3:
+        while len(statuses) < 3 and (msg := status.recv(timeout_s=2.0)) is not None:
             statuses.append(msg)
 
     run_rig(source, RecorderConfig(directory=tmp_path / "out"), speed=1.0, during=rotate)
@@ -97,7 +108,8 @@ def test_a_recording_cut_mid_write_is_readable_up_to_its_last_flush(tmp_path: Pa
     copies: list[Path] = []
 
     def snapshot(bus: Bus, recorder: RecorderService) -> None:
-        time.sleep(0.35)  # mid-recording: copy the file as a power cut would leave it
+        # mid-recording (after its first flush of events): copy the file as a power cut would leave it
+        assert wait_for(lambda: data_bytes(tmp_path / "out" / "live.raw") > 0)
         copy = tmp_path / "cut.raw"
         shutil.copyfile(tmp_path / "out" / "live.raw", copy)
         with open(copy, "ab") as f:
@@ -120,7 +132,7 @@ def test_malformed_packets_are_counted_not_written(tmp_path: Path) -> None:
         stop = threading.Event()
         thread = threading.Thread(target=recorder.run, args=(stop,))
         thread.start()
-        time.sleep(0.3)
+        wait_subscribed(bus, bus.keys.camera_events("cam0"))
         pub = bus.publisher(bus.keys.camera_events("cam0"))
         pub.put_bytes(b"FT\x01\x01garbage")
         pub.put(EventPacket("cam0", 0, 0, 999, 0, 640, 480, "evt3", 0, data=b""))
@@ -168,7 +180,7 @@ def test_packets_and_commands_that_cannot_be_carried_out_stop_nothing(tmp_path: 
         thread = threading.Thread(target=recorder.run, args=(stop,))
         thread.start()
         try:
-            time.sleep(0.3)
+            wait_subscribed(bus, bus.keys.camera_events("cam0"), bus.keys.recorder_command())
             pub = bus.publisher(bus.keys.camera_events("cam0"))
             publish(pub, packets[:1], t_offset_us=123)
             publish(pub, packets[:1], camera_id="cam\n0")
@@ -179,7 +191,7 @@ def test_packets_and_commands_that_cannot_be_carried_out_stop_nothing(tmp_path: 
             bus.publisher(bus.keys.recorder_command()).put(RecorderCommand("start", path=str(blocked / "x"),
                                                                            request_id="bad"))
             replies = []
-            while (msg := statuses.recv(timeout_s=5.0)) is not None and len(replies) < 2:
+            while len(replies) < 2 and (msg := statuses.recv(timeout_s=5.0)) is not None:
                 replies += [msg] if msg.request_id == "bad" else []
             assert [r.state for r in replies] == ["idle", "error"] and "a-file" in replies[1].message
             assert thread.is_alive()
@@ -230,7 +242,9 @@ def test_a_restarted_camera_goes_to_a_new_file_and_the_last_centrelines_are_kept
         for thread in threads:
             thread.start()
         try:
-            time.sleep(1.0)  # the tracker warms its kernels up
+            watch = cam_bus.watch_liveliness()  # the tracker is alive once its kernels are warm
+            assert wait_for(lambda: watch.is_alive(cam_bus.keys.alive(tracker.name)), timeout_s=120)
+            wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"))
             pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
             publish(pub, first_packets)  # then the camera dies: no end of stream
             assert wait_for(lambda: recorder.current is not None and recorder.current.packets == 25, timeout_s=20)
@@ -262,6 +276,7 @@ def test_a_restarted_camera_goes_to_a_new_file_and_the_last_centrelines_are_kept
     assert len(old) == old_updates > 80 and old.t_s.max() < 0.025
 
 
+@pytest.mark.timeout(400)  # its `up` child has its own 300 s timeout
 def test_up_replay_exit_at_eof_records_every_centreline(tmp_path: Path) -> None:
     """``flagtrack up --replay F --speed 0 --exit-at-eof --centrelines OUT.h5 --record BASE`` with the
     recorder taking centrelines: the file as fast as possible, so the tracker's last centrelines come
@@ -321,7 +336,7 @@ def test_packets_a_full_queue_drops_are_in_the_sidecar_and_logged(tmp_path: Path
             Bus(BusConfig(namespace="flagtrack/rfull", listen=(endpoint,))) as bus:
         recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, max_queue_packets=10))
         recorder.start("q", centrelines=False)
-        time.sleep(0.3)
+        wait_subscribed(bus, bus.keys.camera_events("cam0"))
         publish(bus.publisher(bus.keys.camera_events("cam0")), packets)
         assert wait_for(lambda: recorder._packets.channel.dropped == 50)
         stop = threading.Event()
@@ -329,7 +344,7 @@ def test_packets_a_full_queue_drops_are_in_the_sidecar_and_logged(tmp_path: Path
         thread.start()
         try:
             assert wait_for(lambda: recorder.current is not None and recorder.current.packets == 10)
-            time.sleep(0.1)
+            assert wait_for(lambda: recorder.current.dropped == 50)
         finally:
             stop.set()
             thread.join(10)
@@ -352,7 +367,7 @@ def test_the_recorder_queue_is_bounded_by_bytes(tmp_path: Path) -> None:
     with Bus(BusConfig(namespace="flagtrack/rbytes", listen=(endpoint,))) as bus:
         recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, max_queue_bytes=100_000))
         recorder.start("b", centrelines=False)
-        time.sleep(0.3)
+        wait_subscribed(bus, bus.keys.camera_events("cam0"))
         pub = bus.publisher(bus.keys.camera_events("cam0"))
         sizes = []
         for seq, p in enumerate(packets):
@@ -367,7 +382,7 @@ def test_the_recorder_queue_is_bounded_by_bytes(tmp_path: Path) -> None:
         thread.start()
         try:
             assert wait_for(lambda: recorder.current is not None and recorder.current.packets == kept)
-            time.sleep(0.1)
+            assert wait_for(lambda: recorder.current.dropped == 60 - kept)
         finally:
             stop.set()
             thread.join(10)
@@ -391,7 +406,7 @@ def test_a_duplicated_packet_is_dropped_and_the_file_stays_one_stream(tmp_path: 
         thread = threading.Thread(target=recorder.run, args=(stop,))
         thread.start()
         try:
-            time.sleep(0.3)
+            wait_subscribed(bus, bus.keys.camera_events("cam0"))
             pub = bus.publisher(bus.keys.camera_events("cam0"))
             for seq in [*range(32), 30, *range(32, 50)]:
                 p = packets[seq]

@@ -20,6 +20,7 @@ from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.sensor.setup import SensorConfig, open_sensor
 from flagtrack.drivers.sensor.device import DeviceParams, SimulatedSensorDevice
 from flagtrack.drivers.sensor.modbus import ModbusSensorMap
+from tests.fakes.helpers import wait_until
 
 
 def wave(t_us: int) -> float:
@@ -150,9 +151,9 @@ def test_the_sensor_service_survives_a_silent_sensor_and_recovers() -> None:
             group.start()
 
             def fault() -> None:
-                time.sleep(0.5)
+                wait_until(lambda: services[0].samples >= 50, 10, "samples flowing before the fault")
                 device.inject(mute=True)
-                time.sleep(1.2)
+                time.sleep(1.2)  # silent for longer than fail_after_s: declared silent, reopened
                 device.inject(mute=False)
 
             injector = threading.Thread(target=fault)

@@ -16,8 +16,9 @@ import pytest
 from flagtrack.daemon.schema import TrackerStatus
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.formats import read_events
+from tests.fakes.helpers import wait_subscribed, wait_until
 from tests.integration.test_transport import free_port
-from tests.integration.test_up import TRACKER_ARGS, flagtrack, recording, start  # noqa: F401 (fixture)
+from tests.integration.test_up import TRACKER_ARGS, flagtrack, start
 
 TAU_S = 0.0003
 SPEED = 0.1  # the 0.2 s recording replayed over 2 s: the tracker's 1 s status windows see it flow
@@ -25,16 +26,12 @@ SPEED = 0.1  # the 0.2 s recording replayed over 2 s: the tracker's 1 s status w
 
 def _wait_alive(bus: Bus, services: list[str], timeout_s: float) -> bool:
     watch = bus.watch_liveliness()
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if all(watch.is_alive(bus.keys.alive(name)) for name in services):
-            return True
-        time.sleep(0.1)
-    return False
+    return wait_until(lambda: all(watch.is_alive(bus.keys.alive(name)) for name in services), timeout_s,
+                      f"{', '.join(services)} alive", poll_s=0.1)
 
 
 @pytest.mark.slow
-def test_each_service_alone_through_a_router(recording: Path, tmp_path: Path) -> None:  # noqa: F811
+def test_each_service_alone_through_a_router(recording: Path, tmp_path: Path) -> None:
     port = free_port()
     rig = tmp_path / "rig.yaml"
     rig.write_text(f"""
@@ -49,12 +46,12 @@ viewer: {{sink: rrd, rrd_path: {tmp_path / 'view.rrd'}}}
     services, camera = [], None
     statuses: list[TrackerStatus] = []
     try:
-        time.sleep(1.0)
+        assert "listening" in router.stderr.readline()
         services = [start(name, "-c", str(rig)) for name in ("tracker", "recorder", "viewer")]
         with Bus(BusConfig(namespace="flagtrack/alone", mode="client", connect=(f"tcp/127.0.0.1:{port}",))) as bus:
             status = bus.subscribe(bus.keys.tracker_status(), TrackerStatus)
             assert _wait_alive(bus, ["tracker", "recorder", "viewer"], 90), "services did not come up"
-            time.sleep(1.0)  # their subscriptions reach the router
+            wait_subscribed(bus, bus.keys.camera_events("cam0"), bus.keys.centrelines())  # theirs reached the router
             camera = start("camera", "-c", str(rig))
             deadline = time.monotonic() + 60
             while time.monotonic() < deadline and (camera.poll() is None or len(statuses) < 3
@@ -62,7 +59,8 @@ viewer: {{sink: rrd, rrd_path: {tmp_path / 'view.rrd'}}}
                 msg = status.recv(timeout_s=0.5)  # until the camera is done and a status saw no events
                 if msg is not None:
                     statuses.append(msg)
-            assert camera.wait(timeout=10) == 0, camera.communicate()[1]
+            _, camera_err = camera.communicate(timeout=10)  # (closes its pipes)
+            assert camera.returncode == 0, camera_err
     finally:
         for proc in [*services, router]:
             proc.send_signal(signal.SIGINT)

@@ -24,6 +24,7 @@ from flagtrack.daemon.sweep.runlog import completed_points, read_run
 from flagtrack.daemon.sweep.summary import SUMMARY_COLUMNS
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.formats import read_events
+from tests.fakes.helpers import wait_until
 
 SPEEDS = [4.0, 5.5]
 
@@ -63,6 +64,7 @@ def run(config: RigConfig, during=None, resume_dir: Path | None = None, timeout_
     return supervisor, report, simulator
 
 
+@pytest.mark.slow
 def test_a_sweep_records_every_point_and_ends_at_zero(tmp_path: Path) -> None:
     supervisor, report, simulator = run(rig(tmp_path))
     assert supervisor.stop_reason == "finished" and not report.errors
@@ -87,14 +89,14 @@ def test_a_sweep_records_every_point_and_ends_at_zero(tmp_path: Path) -> None:
 def fault_after_first_point(action):  # noqa: ANN001, ANN201
     def during(services: list, group: ServiceGroup) -> None:
         supervisor = services[0]
-        deadline = time.monotonic() + 60
-        while not supervisor.points_done and time.monotonic() < deadline:
-            time.sleep(0.05)
-        time.sleep(0.3)
+        simulator = supervisor.tunnel.simulator
+        wait_until(lambda: supervisor.points_done and simulator.setpoint_mps > SPEEDS[0], 60,
+                   "the first point done and the ramp to the second begun")
         action(services, group)
     return during
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("fault", "words"),
     [
@@ -122,10 +124,7 @@ def test_faults_end_at_zero_with_finished_points_kept_and_a_resumable_run(tmp_pa
     record = read_run(tmp_path / "runs" / "run")
     assert words in (record.stop["reason"] + " " + str(record.stop.get("error"))), record.stop
     assert completed_points(tmp_path / "runs" / "run") >= {"000-up-4.00"}
-    deadline = time.monotonic() + 5
-    while simulator.speed_mps > 0.2 and time.monotonic() < deadline:  # the tunnel's watchdog, if muted
-        time.sleep(0.05)
-    assert simulator.speed_mps <= 0.2
+    wait_until(lambda: simulator.speed_mps <= 0.2, 5, "the tunnel at zero (by its watchdog, if muted)")
     if fault == "sigterm":  # resume: the finished point is not redone, the others are done
         done_before = completed_points(tmp_path / "runs" / "run")
         supervisor, _, _ = run(rig(tmp_path), resume_dir=tmp_path / "runs" / "run")
@@ -158,6 +157,7 @@ def test_feedback_controller_respects_rate_and_bounds() -> None:
     assert held == state
 
 
+@pytest.mark.slow
 def test_feedback_holds_the_target_amplitude_on_the_simulated_rig(tmp_path: Path) -> None:
     # open loop, 5.2 m/s gives A/L ~ 0.25; the target needs ~4.65 m/s (on the flapping branch)
     config = rig(tmp_path, mode="feedback", sweep=None,
@@ -174,6 +174,7 @@ def test_feedback_holds_the_target_amplitude_on_the_simulated_rig(tmp_path: Path
     assert simulator.setpoint_mps == 0.0
 
 
+@pytest.mark.slow
 def test_point_actions_run_with_placeholders_and_a_required_failure_stops_at_zero(tmp_path: Path) -> None:
     write_raw_path = "import pathlib, sys; pathlib.Path(sys.argv[1]).write_text(sys.argv[2] + ' ' + sys.argv[3])"
     config = rig(tmp_path, sweep={"speeds": [4.0], "branches": ["up"], "settle_s": 0.3, "record_s": 0.5, "actions": [

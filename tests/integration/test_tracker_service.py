@@ -22,6 +22,7 @@ from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.camera.replay import ReplayCamera, ReplayConfig
 from flagtrack.drivers.formats import open_events, write_events
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
+from tests.fakes.helpers import wait_subscribed
 from tests.integration.test_transport import free_port, received, wait_for
 
 FLAG = WavyFlag(length=200.0, root=(100.0, 240.0), frequency_hz=20.0)
@@ -37,9 +38,10 @@ def offline(path: Path, config: TrackingConfig) -> CentrelineBatch:
 
 @contextmanager
 def running_tracker(config: TrackingConfig, namespace: str) -> Iterator[tuple[Bus, TrackerService, Callable[[], None]]]:
-    """A tracker service on its own bus and thread; yields (a second bus joined to it, the service,
-    a function that stops the service and waits for it). Callers subscribe, then wait a little for
-    the subscriptions to reach the other session before publishing."""
+    """A tracker service on its own bus and thread, running (its kernels warm, its packet subscription
+    known to the second bus); yields (a second bus joined to it, the service, a function that stops
+    the service and waits for it). Callers subscribe, then wait for their subscriptions to reach the
+    tracker's session (``wait_subscribed(service.bus, ...)``) before publishing."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     params = config.tracker_params()
     with Bus(BusConfig(namespace=namespace, listen=(endpoint,))) as trk_bus, \
@@ -49,6 +51,9 @@ def running_tracker(config: TrackingConfig, namespace: str) -> Iterator[tuple[Bu
         stop = threading.Event()
         thread = threading.Thread(target=service.run, args=(stop,))
         thread.start()
+        watch = cam_bus.watch_liveliness()
+        assert wait_for(lambda: watch.is_alive(cam_bus.keys.alive(service.name)), timeout_s=120)  # a first run compiles
+        wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"))
 
         def stop_service() -> None:
             stop.set()
@@ -64,7 +69,7 @@ def live(path: Path, config: TrackingConfig, speed: float = 0.0) -> tuple[Centre
     with running_tracker(config, "flagtrack/trk") as (cam_bus, service, stop_service):
         lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000)
         status = cam_bus.subscribe(cam_bus.keys.tracker_status(), TrackerStatus)
-        time.sleep(0.4)
+        wait_subscribed(service.bus, cam_bus.keys.centrelines(), cam_bus.keys.tracker_status())
         CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(ReplayConfig(path, speed=speed))).run(threading.Event())
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
         messages = received(lines)
@@ -102,7 +107,7 @@ def test_bad_packets_and_gaps_are_counted_and_tracking_goes_on(tmp_path: Path) -
     with running_tracker(CONFIG, "flagtrack/bad") as (cam_bus, service, _):
         lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=100_000)
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
-        time.sleep(0.4)
+        wait_subscribed(service.bus, cam_bus.keys.centrelines())
         corrupt = np.full(8, 0x9000, dtype="<u2").tobytes()  # a reserved EVT 3.0 word type
         for seq, packet in enumerate(packets):
             if seq == 10:
@@ -142,7 +147,7 @@ def test_the_window_ending_with_a_packet_is_published_with_that_packet() -> None
     with running_tracker(CONFIG, "flagtrack/horizon") as (cam_bus, service, _):
         lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=100_000)
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
-        time.sleep(0.4)
+        wait_subscribed(service.bus, cam_bus.keys.centrelines())
         for seq, packet in enumerate(packets[:5]):
             pub.put(EventPacket("cam0", seq, packet.t_first_us, packet.t_last_us, packet.n_events, 640, 480,
                                 "evt3", time.time_ns(), packet.t_offset_us, data=packet.data))
@@ -191,7 +196,7 @@ def test_a_restarted_camera_is_tracked_afresh(tmp_path: Path) -> None:
         lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=100_000)
         status = cam_bus.subscribe(cam_bus.keys.tracker_status(), TrackerStatus, capacity=1000)
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
-        time.sleep(0.4)
+        wait_subscribed(service.bus, cam_bus.keys.centrelines(), cam_bus.keys.tracker_status())
         publish(pub, packets_of(first, 30_000)[:25])  # then the camera dies: no end of stream
         assert wait_for(lambda: service.packets == 25, timeout_s=20)
         publish(pub, packets_of(second, 60_000), end=True)
@@ -220,7 +225,6 @@ def test_gaps_and_undecodable_packets_are_logged_as_counted_summaries(caplog: py
     with caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.tracker"), \
             running_tracker(CONFIG, "flagtrack/quiet") as (cam_bus, service, stop_service):
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
-        time.sleep(0.4)
         publish(pub, [packets[k] for k in kept], seqs=kept, data={i: corrupt for i in range(0, 40, 4)})
         assert wait_for(lambda: service.packets == 40, timeout_s=20)
         stop_service()
@@ -242,7 +246,8 @@ def test_packets_a_full_queue_drops_are_counted_reported_and_logged(caplog: pyte
         service = TrackerService(trk_bus, TrackerServiceConfig(status_interval_s=0.2, queue_packets=10),
                                  lambda: Tracker(params, sensor_size=(640, 480)))
         status = cam_bus.subscribe(cam_bus.keys.tracker_status(), TrackerStatus, capacity=1000)
-        time.sleep(0.4)
+        wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"))
+        wait_subscribed(trk_bus, cam_bus.keys.tracker_status())
         publish(cam_bus.publisher(cam_bus.keys.camera_events("cam0")), packets_of(events, 60_000)[:60])
         assert wait_for(lambda: service.dropped_packets == 50)
         stop = threading.Event()
@@ -251,7 +256,7 @@ def test_packets_a_full_queue_drops_are_counted_reported_and_logged(caplog: pyte
         try:
             assert wait_for(lambda: service.packets == 10, timeout_s=20)
             reported = None
-            while (msg := status.recv(timeout_s=2.0)) is not None and reported is None:
+            while reported is None and (msg := status.recv(timeout_s=2.0)) is not None:
                 reported = msg if msg.dropped_packets else None
         finally:
             stop.set()
@@ -275,7 +280,7 @@ def test_the_tracker_queue_is_bounded_by_bytes_and_keeps_the_newest() -> None:
             Bus(BusConfig(namespace="flagtrack/bytes", connect=(endpoint,))) as cam_bus:
         service = TrackerService(trk_bus, TrackerServiceConfig(queue_bytes=100_000),
                                  lambda: Tracker(params, sensor_size=(640, 480)))
-        time.sleep(0.4)
+        wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"))
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
         sizes = []
         for seq, p in enumerate(packets):
@@ -311,7 +316,7 @@ def test_a_duplicated_or_late_packet_is_dropped_not_taken_for_a_restart(tmp_path
     with running_tracker(CONFIG, f"flagtrack/dup{stream_id}") as (cam_bus, service, stop_service):
         lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=100_000)
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
-        time.sleep(0.4)
+        wait_subscribed(service.bus, cam_bus.keys.centrelines())
         publish(pub, [packets[k] for k in order], seqs=order, end=True, stream_id=stream_id)
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
         messages = received(lines)
@@ -333,7 +338,6 @@ def test_a_restarted_camera_with_a_new_stream_id_is_a_new_stream_whatever_its_nu
     second = np.concatenate(list(line_events(FLAG, 0, 60_000, 640, 480)))
     with running_tracker(CONFIG, "flagtrack/newid") as (cam_bus, service, stop_service):
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
-        time.sleep(0.4)
         publish(pub, packets_of(first, 90_000)[:80], stream_id=111)
         assert wait_for(lambda: service.packets == 80, timeout_s=20)
         late_start = list(range(40, 60))
@@ -356,7 +360,7 @@ def test_a_packet_whose_time_offset_is_loops_off_is_dropped_not_tracked(tmp_path
     with running_tracker(CONFIG, "flagtrack/offset") as (cam_bus, service, stop_service):
         lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=100_000)
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
-        time.sleep(0.4)
+        wait_subscribed(service.bus, cam_bus.keys.centrelines())
         publish(pub, [*packets[:30], bad, *packets[31:]], end=True)
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
         messages = received(lines)

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import json
 import socket
-import time
 from collections.abc import Iterator
 
 import pytest
 
 from flagtrack.daemon.schema import EventPacket, TunnelCommand
 from flagtrack.daemon.transport import Bus, BusConfig, Channel, zenoh_config
+from tests.fakes.helpers import wait_subscribed, wait_until as wait_for  # (wait_for: imported from here too)
 
 
 def free_port() -> int:
@@ -35,21 +35,12 @@ def received(sub, timeout_s: float = 1.0) -> list:  # noqa: ANN001
     return messages
 
 
-def wait_for(predicate, timeout_s: float = 5.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return False
-
-
 def test_packets_cross_sessions_in_order_and_malformed_are_counted(two_buses: tuple[Bus, Bus]) -> None:
     a, b = two_buses
     key = a.keys.camera_events("cam0")
     sub = b.subscribe(key, EventPacket)
     pub = a.publisher(key)
-    time.sleep(0.3)  # let the subscription propagate
+    wait_subscribed(a, key)  # a sample put before the subscription reaches a's session is not delivered
     for seq in range(200):
         if seq == 50:
             pub.put_bytes(b"garbage")
@@ -84,7 +75,8 @@ def test_undeclare_alive_withdraws_one_services_tokens_while_the_session_stays(t
     assert wait_for(lambda: camera in watch.gone)
     assert not watch.is_alive(camera) and watch.is_alive(tracker) and not a.session.is_closed()
     assert a.undeclare_alive("camera/cam0") == 0  # ended already: nothing left to withdraw
-    time.sleep(0.2)
+    a.declare_alive("sentinel")  # a's liveliness changes arrive in order: what came before it has arrived
+    assert wait_for(lambda: watch.is_alive(a.keys.alive("sentinel")))
     assert watch.is_alive(tracker) and watch.gone == [camera]
 
 
@@ -116,7 +108,7 @@ def test_large_packets_cross_with_and_without_shared_memory(shared_memory: bool)
         key = a.keys.camera_events("cam0")
         sub = b.subscribe(key, EventPacket)
         pub = a.publisher(key)
-        time.sleep(0.3)
+        wait_subscribed(a, key)
         sent = [bytes([seq]) * 12_000 for seq in range(50)]
         for seq, data in enumerate(sent):
             pub.put(EventPacket("cam0", seq, seq, seq, 0, 640, 480, "evt3", 0, data=data))

@@ -3,7 +3,6 @@ against pyserial's ``loop://`` for write-only commands and the no-reply path."""
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 
 import pytest
@@ -15,6 +14,7 @@ from flagtrack.drivers.tunnel.ascii import AsciiProtocol, AsciiTunnel
 from flagtrack.drivers.serial.adapter import SerialAdapter
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
+from tests.fakes.helpers import wait_until
 
 FAST_SIM = SimParams(tau_s=0.02, ramp_mps2=500.0, max_speed_mps=12.0, watchdog_s=1.0, tick_s=0.002)
 
@@ -30,15 +30,6 @@ def link(sim: SimulatedTunnel) -> Iterator[AsciiTunnel]:
     driver = AsciiTunnel.open(sim.port, timeout_s=0.3)
     yield driver
     driver.close()
-
-
-def wait_until(predicate, timeout_s: float = 3.0) -> bool:  # noqa: ANN001 - tiny test helper
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
 
 
 def test_default_protocol_round_trip_on_a_pty(sim: SimulatedTunnel, link: AsciiTunnel) -> None:

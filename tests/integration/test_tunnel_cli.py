@@ -18,17 +18,9 @@ import pytest
 from flagtrack.drivers.tunnel.ascii import AsciiTunnel
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
+from tests.fakes.helpers import wait_until
 
 FLAGTRACK = [sys.executable, "-m", "flagtrack.daemon"]
-
-
-def wait_until(predicate, timeout_s: float = 5.0) -> bool:  # noqa: ANN001 - tiny test helper
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return predicate()
 
 
 @pytest.fixture
@@ -77,7 +69,7 @@ def test_sigterm_ramps_to_zero_through_the_driver(sim: SimulatedTunnel, tmp_path
 def test_sigkill_leaves_it_to_the_tunnel_watchdog(sim: SimulatedTunnel, tmp_path: Path) -> None:
     proc = start_set(rig_config(tmp_path, sim.port), "4")
     proc.kill()
-    proc.wait(timeout=5)
+    proc.communicate(timeout=5)  # (and close its pipes)
     assert sim.setpoint_mps == 4.0  # nobody told it to stop ...
     assert wait_until(lambda: sim.watchdog_trips == 1)  # ... its own watchdog did
     assert wait_until(lambda: sim.speed_mps < 0.05)
@@ -123,4 +115,5 @@ def test_sim_command_prints_a_pty_the_driver_can_use() -> None:
         proc.wait(timeout=5)
     finally:
         proc.kill()
+        proc.communicate(timeout=5)  # close its pipes
     assert proc.returncode == 0

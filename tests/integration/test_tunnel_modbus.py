@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 
 import pytest
@@ -12,20 +11,12 @@ from flagtrack.drivers.serial import modbus_rtu as rtu
 from flagtrack.drivers.tunnel.modbus import ModbusMap, ModbusTunnel
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
+from tests.fakes.helpers import wait_until
 
 pytest.importorskip("pymodbus")
 
 FAST_SIM = SimParams(protocol="modbus", tau_s=0.02, ramp_mps2=500.0, max_speed_mps=12.0, watchdog_s=1.0, tick_s=0.002)
 MAP = ModbusMap(fault_codes={1: "communication loss"}, mps_per_hz=0.2, max_hz=50.0)
-
-
-def wait_until(predicate, timeout_s: float = 3.0) -> bool:  # noqa: ANN001 - tiny test helper
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
 
 
 @pytest.fixture(params=["register", "coil"])

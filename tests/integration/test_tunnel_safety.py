@@ -17,6 +17,7 @@ from flagtrack.drivers.tunnel.modbus import ModbusTunnel
 from flagtrack.drivers.tunnel.safe import SafeTunnel, SafetyParams, TunnelAborted
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
+from tests.fakes.helpers import wait_until
 
 SIM = SimParams(tau_s=0.02, ramp_mps2=500.0, max_speed_mps=12.0, watchdog_s=0.6, tick_s=0.002)
 SAFETY = SafetyParams(
@@ -39,15 +40,6 @@ class RecordingLink:
 
     def __getattr__(self, name: str):  # noqa: ANN204 - delegate the rest of the link
         return getattr(self.link, name)
-
-
-def wait_until(predicate, timeout_s: float = 3.0) -> bool:  # noqa: ANN001 - tiny test helper
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
 
 
 @pytest.fixture(params=["ascii", "modbus"])

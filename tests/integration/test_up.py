@@ -16,12 +16,9 @@ import pytest
 
 from flagtrack.daemon.schema import CentrelineMessage
 from flagtrack.daemon.transport import Bus, BusConfig
-from flagtrack.drivers.formats import write_events
-from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
-from tests.fakes.fixtures import fake_nd  # noqa: F401 - fixture
+from tests.fakes.helpers import wait_until
 from tests.integration.test_transport import free_port
 
-FLAG = WavyFlag(length=200.0, root=(100.0, 240.0))
 TRACKER_ARGS = ["--root", "100", "240", "--length", "200", "--tau", "0.0003"]
 
 
@@ -33,14 +30,6 @@ def flagtrack(*args: str, **kwargs) -> subprocess.CompletedProcess:  # noqa: ANN
 def start(*args: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "flagtrack.daemon", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-
-
-@pytest.fixture(scope="module")
-def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("up") / "flag.raw"
-    events = np.concatenate(list(line_events(FLAG, 0, 200_000, 640, 480, QuickLineParams(noise_rate_hz=1e5))))
-    write_events(path, events, width=640, height=480, encoding="evt3")
-    return path
 
 
 def test_up_replay_gives_exactly_the_reconstruct_centrelines(recording: Path, tmp_path: Path) -> None:
@@ -93,20 +82,22 @@ recorder: {{directory: {tmp_path / 'rec'}, path: run}}
     return config
 
 
+def size(path: Path) -> int:
+    return path.stat().st_size if path.exists() else 0
+
+
 def test_sigint_stops_every_service_cleanly(tmp_path: Path) -> None:
     proc = start("up", "-c", str(sim_rig(tmp_path)))
-    recorded = tmp_path / "rec" / "run.raw"
-    deadline = time.monotonic() + 60
-    while not (recorded.exists() and recorded.stat().st_size > 10_000) and time.monotonic() < deadline:
-        time.sleep(0.2)
-    time.sleep(1.0)
+    recorded, rrd = tmp_path / "rec" / "run.raw", tmp_path / "live.rrd"
+    wait_until(lambda: size(recorded) > 10_000 and size(rrd) > 1000, 60, "the recorder and the viewer writing",
+               poll_s=0.2)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
     assert "stopping" in err and "did not stop" not in err
     info = flagtrack("events", "info", str(recorded), "--json")
     assert info.returncode == 0 and '"events"' in info.stdout
-    assert (tmp_path / "live.rrd").stat().st_size > 1000
+    assert rrd.stat().st_size > 1000
 
 
 STUBBORN = """
@@ -116,10 +107,11 @@ from flagtrack.daemon.services.runner import run_services
 class Stubborn:
     name = "stubborn"
     def run(self, stop):
+        print("ready", flush=True)  # the signal handlers are installed
         stop.wait()
+        print("asked to stop", flush=True)
         time.sleep(60)  # ignores the request to stop for a minute
 
-print("ready", flush=True)
 run_services([Stubborn()], shutdown_timeout_s=120)
 """
 
@@ -127,16 +119,16 @@ run_services([Stubborn()], shutdown_timeout_s=120)
 def test_second_signal_forces_exit() -> None:
     proc = subprocess.Popen([sys.executable, "-c", STUBBORN], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout.readline().strip() == "ready"
-    time.sleep(0.3)
     started = time.monotonic()
     proc.send_signal(signal.SIGTERM)
-    time.sleep(0.5)
+    assert proc.stdout.readline().strip() == "asked to stop"  # handled: a second signal is not merged into it
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130 and "stopping (again to force)" in err and "forcing exit" in err
     assert time.monotonic() - started < 10
 
 
+@pytest.mark.slow
 def test_camera_and_tracker_on_two_hosts_through_a_router(recording: Path, tmp_path: Path) -> None:
     port = free_port()
     host_cfg = tmp_path / "host.yaml"
@@ -149,7 +141,7 @@ tracker: {{root: [100, 240], length: 200, tau_s: 0.0003}}
     router = start("router", "--listen", f"tcp/127.0.0.1:{port}")
     procs = []
     try:
-        time.sleep(2.0)
+        assert "listening" in router.stderr.readline()
         procs = [start("tracker", "-c", str(host_cfg)), start("camera", "-c", str(host_cfg))]
         with Bus(BusConfig(namespace="flagtrack/tworouter", mode="client", connect=(f"tcp/127.0.0.1:{port}",))) as bus:
             sub = bus.subscribe(bus.keys.centrelines(), CentrelineMessage)
@@ -167,6 +159,7 @@ tracker: {{root: [100, 240], length: 200, tau_s: 0.0003}}
     assert [p.returncode for p in procs] == [130, 130]
 
 
+@pytest.mark.timeout(400)  # its child may compile for up to its own 300 s timeout
 def test_the_rig_does_its_slow_one_off_work_before_its_services_start() -> None:
     """A first run after installing compiles for tens of seconds: that must happen before the services
     start (else a supervisor in the same process gives up waiting for the tracker), so after the
@@ -345,19 +338,15 @@ services: [camera, tracker]
         camera, tracker = bus.keys.alive("camera/cam0"), bus.keys.alive("tracker")
         proc = start("up", "-c", str(config))
         try:
-            deadline = time.monotonic() + 60
-            while camera not in watch.gone and proc.poll() is None and time.monotonic() < deadline:
-                time.sleep(0.02)
+            wait_until(lambda: camera in watch.gone or proc.poll() is not None, 60, "the camera gone", poll_s=0.02)
             assert camera in watch.gone and not watch.is_alive(camera)
-            time.sleep(0.5)
+            time.sleep(0.5)  # a window to see what must not happen: nothing to wait for
             assert watch.is_alive(tracker) and proc.poll() is None  # the tracker runs on, its token stays
         finally:
             proc.send_signal(signal.SIGINT)
             _, err = proc.communicate(timeout=30)
         assert proc.returncode == 130, err
-        deadline = time.monotonic() + 10
-        while tracker not in watch.gone and time.monotonic() < deadline:
-            time.sleep(0.02)
+        wait_until(lambda: tracker in watch.gone, 10, "the tracker gone")
         assert watch.gone == [camera, tracker]
 
 

@@ -21,6 +21,7 @@ from flagtrack.daemon.services.runner import ServiceGroup
 from flagtrack.daemon.sweep.runlog import read_run
 from flagtrack.daemon.transport import Bus
 from flagtrack.daemon.validation.run import validate_run
+from tests.fakes.helpers import wait_until
 
 OFFSET_US = 3000.0  # the sensor clock runs 3 ms ahead of the camera's
 TAU_S = 0.001
@@ -62,9 +63,7 @@ def sweep(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
         group = ServiceGroup(services, stop_when_any_finishes=["supervisor"])
 
         def mute_during_the_last_point() -> None:
-            deadline = time.monotonic() + 90
-            while len(supervisor.points_done) < 2 and time.monotonic() < deadline:
-                time.sleep(0.02)
+            wait_until(lambda: len(supervisor.points_done) >= 2, 90, "two points done", poll_s=0.02)
             sensor.driver.muted = True  # the sensor stops answering
 
         threading.Thread(target=mute_during_the_last_point, daemon=True).start()

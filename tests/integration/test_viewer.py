@@ -14,6 +14,7 @@ from flagtrack.daemon.services.viewer import RerunLogger, ViewerConfig, ViewerSe
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.formats.packets import Packetizer
 from flagtrack.drivers.sim.quickline import WavyFlag, line_events
+from tests.fakes.helpers import wait_subscribed
 from tests.integration.test_transport import free_port, wait_for
 
 
@@ -26,7 +27,8 @@ def test_viewer_logs_events_and_centrelines_to_rrd(tmp_path: Path) -> None:
         stop = threading.Event()
         thread = threading.Thread(target=viewer.run, args=(stop,))
         thread.start()
-        time.sleep(0.5)
+        wait_subscribed(source, source.keys.camera_events("cam0"), source.keys.centrelines(),
+                        source.keys.event_rate("cam0"))
         events_pub = source.publisher(source.keys.camera_events("cam0"))
         lines_pub = source.publisher(source.keys.centrelines())
         rate_pub = source.publisher(source.keys.event_rate("cam0"))
@@ -37,7 +39,7 @@ def test_viewer_logs_events_and_centrelines_to_rrd(tmp_path: Path) -> None:
                 seq += 1
                 events_pub.put(EventPacket("cam0", seq, p.t_first_us, p.t_last_us, p.n_events, 640, 480,
                                            "evt3", time.time_ns(), t_offset_us=p.t_offset_us, data=p.data))
-            time.sleep(0.002)
+            time.sleep(0.002)  # paced as a camera sends them
         n_t, n_s = 20, 51
         batch = CentrelineBatch(np.arange(n_t) * 1e-3, np.linspace(0, 200, n_s), np.zeros((n_t, n_s)),
                                 np.zeros((n_t, n_s)), np.zeros((n_t, 11)), np.zeros((n_t, 11)), np.ones(n_t),
@@ -107,7 +109,8 @@ def test_messages_the_viewer_cannot_show_are_counted_and_it_goes_on(tmp_path: Pa
         thread = threading.Thread(target=viewer.run, args=(stop,))
         thread.start()
         try:
-            time.sleep(0.5)
+            wait_subscribed(source, source.keys.camera_events("cam0"), source.keys.centrelines(),
+                            source.keys.tunnel_state())
             events_pub = source.publisher(source.keys.camera_events("cam0"))
             lines_pub = source.publisher(source.keys.centrelines())
             tunnel_pub = source.publisher(source.keys.tunnel_state())
@@ -117,14 +120,16 @@ def test_messages_the_viewer_cannot_show_are_counted_and_it_goes_on(tmp_path: Pa
             good = CentrelineMessage.from_batch(centreline_batch(4, 51), source="tracker", seq=0, units="px",
                                                 source_ns=zeros)
             lines_pub.put_bytes(encode(dataclasses.replace(good, joints_x=good.joints_x[:, 0])))
-            time.sleep(0.3)
+            assert wait_for(lambda: viewer.subs["centrelines"].malformed == 1  # taken in, and the packet's frame
+                            and viewer.problems.totals.get("undecodable packets") == 1)  # drawn
+            frames = viewer.frames
             tunnel_pub.put(TunnelState(3.0, 3.0, "steady", t_wall_s=float("nan")))
             lines_pub.put(CentrelineMessage.from_batch(centreline_batch(20, 51), source="tracker", seq=1, units="px",
                                                        source_ns=np.zeros(20, dtype=np.int64)))
             lines_pub.put(CentrelineMessage.from_batch(centreline_batch(5, 7, 0.1), source="tracker", seq=2,
                                                        units="px", source_ns=np.zeros(5, dtype=np.int64)))
             assert wait_for(lambda: viewer.updates == 25 and viewer.unusable >= 1)
-            time.sleep(0.5)  # a frame or two after them
+            assert wait_for(lambda: viewer.frames > frames)  # the frame that draws them
             assert thread.is_alive()
         finally:
             stop.set()

@@ -7,9 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from flagtrack.daemon.rig.config import load_rig
 from flagtrack.daemon.rig.build import open_camera
-from tests.fakes.fixtures import fake_dv, fake_hal, fake_nd  # noqa: F401 - fixtures
+from flagtrack.daemon.rig.config import load_rig
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "cameras.md"
 BLOCKS = {re.search(r"adapter: (\w+)", b).group(1): b for b in re.findall(r"```yaml\n(.*?)```", DOC.read_text(), re.S)}

@@ -10,7 +10,6 @@ import yaml
 
 from flagtrack.daemon.errors import ConfigError, DriverError
 from flagtrack.drivers.camera import metavision
-from tests.fakes.fixtures import fake_hal, no_sdk  # noqa: F401 - fixtures
 from tests.fakes.helpers import read_until
 
 DOC_YAML = """

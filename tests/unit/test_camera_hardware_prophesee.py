@@ -11,7 +11,6 @@ import yaml
 
 from flagtrack.daemon.errors import ConfigError, DriverError
 from flagtrack.drivers.camera import prophesee
-from tests.fakes.fixtures import fake_nd, no_sdk  # noqa: F401 - fixtures
 from tests.fakes.helpers import read_until
 
 DOC_YAML = """

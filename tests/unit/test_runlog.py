@@ -8,7 +8,6 @@ import math
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -25,6 +24,7 @@ from flagtrack.daemon.sweep.runlog import (
     stored_sweep,
 )
 from flagtrack.daemon.sweep.summary import SUMMARY_COLUMNS, transition_speeds, write_summary
+from tests.fakes.helpers import wait_until
 
 CFG = SweepConfig(range=SpeedRange(3.0, 6.0, 0.5), settle_s=1, record_s=1)
 ONSET_MPS, DECAY_MPS = 5.0, 4.0
@@ -163,11 +163,11 @@ def test_killed_writer_leaves_a_readable_log(tmp_path: Path) -> None:
         "for i in itertools.count():\n"
         "    log.point(PointResult.planned(points[0], raw_bytes=i, error='x' * 2000))\n"
     )  # fmt: skip
-    proc = subprocess.Popen([sys.executable, "-c", script, str(tmp_path)], stdout=subprocess.PIPE, text=True)
-    assert proc.stdout is not None and proc.stdout.readline() == "started\n"
-    time.sleep(0.3)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait(timeout=5)
+    with subprocess.Popen([sys.executable, "-c", script, str(tmp_path)], stdout=subprocess.PIPE, text=True) as proc:
+        assert proc.stdout is not None and proc.stdout.readline() == "started\n"
+        wait_until(lambda: (tmp_path / RUN_LOG).read_bytes().count(b"\n") > 20, what="20 point records written")
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=5)
     record = read_run(tmp_path)
     assert len(record.points) > 0
     assert [p.raw_bytes for p in record.points] == list(range(len(record.points)))
@@ -242,6 +242,7 @@ def test_sensor_fields_round_trip_and_older_records_load(tmp_path: Path) -> None
     assert got[1].sensor_status is None and math.isnan(got[1].sensor_error_rms_over_l)
     assert got[2].sensor_status is None and got[2].sensor_samples == 0
     csv_path, _ = write_summary(tmp_path)
-    rows = list(csv.DictReader(open(csv_path, newline="")))
+    with open(csv_path, newline="") as handle:
+        rows = list(csv.DictReader(handle))
     assert rows[0]["sensor_error_rms_over_l"] == "0.004" and rows[1]["sensor_error_max_over_l"] == "NaN"
     assert (tmp_path / "validation.png").stat().st_size > 5000  # the sweep figure, as a point has sensor data

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -56,15 +57,18 @@ def test_commands_report_exit_codes_timeouts_and_missing_programs(tmp_path: Path
 
 def test_a_stop_request_while_a_command_runs_kills_it(tmp_path: Path) -> None:
     started = time.monotonic()
+    pid_file, marker = tmp_path / "pid", tmp_path / "finished"
 
     def idle(seconds: float) -> None:
-        time.sleep(seconds)
-        if time.monotonic() - started > 0.3:
+        time.sleep(seconds)  # as the supervisor's idle does
+        if pid_file.exists() and pid_file.read_text():  # the command runs: the stop request comes now
             raise KeyboardInterrupt("stop requested")
 
-    marker = tmp_path / "finished"
+    script = (f"import os, time; open({str(pid_file)!r}, 'w').write(str(os.getpid())); time.sleep(2); "
+              f"open({str(marker)!r}, 'w')")
     with pytest.raises(KeyboardInterrupt):
-        run_command(CommandAction((sys.executable, "-c", f"import time; time.sleep(2); open({str(marker)!r}, 'w')")),
-                    "command", {}, tmp_path, tmp_path / "d.log", idle=idle)
-    time.sleep(2.5)
+        run_command(CommandAction((sys.executable, "-c", script)), "command", {}, tmp_path, tmp_path / "d.log",
+                    idle=idle)
+    with pytest.raises(ProcessLookupError):  # killed and reaped, not even a zombie: it never writes its marker
+        os.kill(int(pid_file.read_text()), 0)
     assert not marker.exists() and time.monotonic() - started < 10

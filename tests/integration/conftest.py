@@ -1,0 +1,22 @@
+"""Fixtures shared by the integration tests."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flagtrack.drivers.formats import write_events
+from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
+
+FLAG = WavyFlag(length=200.0, root=(100.0, 240.0))
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 0.2 s EVT 3.0 recording of a wavy flag (root (100, 240), length 200) with 1e5 ev/s of noise."""
+    path = tmp_path_factory.mktemp("up") / "flag.raw"
+    events = np.concatenate(list(line_events(FLAG, 0, 200_000, 640, 480, QuickLineParams(noise_rate_hz=1e5))))
+    write_events(path, events, width=640, height=480, encoding="evt3")
+    return path
