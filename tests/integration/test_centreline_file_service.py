@@ -73,7 +73,7 @@ def test_the_recorder_and_the_centreline_file_write_the_same_attributes(tmp_path
         for thread in threads:
             thread.start()
         try:
-            time.sleep(0.4)
+            wait_subscribed(source, source.keys.centrelines())
             pub = source.publisher(source.keys.centrelines())
             for msg in (message(0, 4, 51), message(1, 5, 7), message(2, 3, 51, final=True)):
                 pub.put(msg)
