@@ -13,8 +13,14 @@ from flagtrack.drivers.formats import make_encoder
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
 
 
-def flapping_source(width: int, height: int, duration_us: int, seed: int = 0, noise_rate_hz: float = 20_000.0,
-                    trigger_period_us: int = 10_000) -> tuple[np.ndarray, np.ndarray]:
+def flapping_source(
+    width: int,
+    height: int,
+    duration_us: int,
+    seed: int = 0,
+    noise_rate_hz: float = 20_000.0,
+    trigger_period_us: int = 10_000,
+) -> tuple[np.ndarray, np.ndarray]:
     """Events of a flag flapping across the sensor plus noise, and external-trigger edges (channel 0).
 
     Returns:
@@ -30,8 +36,9 @@ def flapping_source(width: int, height: int, duration_us: int, seed: int = 0, no
     return events, triggers
 
 
-def encode(encoding: str, events: np.ndarray, triggers: np.ndarray, width: int, height: int,
-           legacy: bool = False) -> bytes:
+def encode(
+    encoding: str, events: np.ndarray, triggers: np.ndarray, width: int, height: int, legacy: bool = False
+) -> bytes:
     """The byte stream a camera in ``encoding`` (evt3, evt2, evt21) sends for these events (time offset 0).
 
     ``legacy``: EVT 2.1 in the IMX636 layout (the 32-bit halves of each word swapped).

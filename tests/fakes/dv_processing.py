@@ -24,9 +24,8 @@ import enum
 import types
 from datetime import timedelta
 
-import numpy as np
-
 import _fake_streams
+import numpy as np
 
 
 class TriggerType(enum.Enum):
@@ -214,8 +213,9 @@ class _Camera:
     def _make_batches(self) -> list[tuple[np.ndarray, np.ndarray]]:
         fake = self.fake
         if fake.events is None:
-            fake.events, fake.triggers = _fake_streams.flapping_source(self.WIDTH, self.HEIGHT, fake.duration_us,
-                                                                       seed=fake.seed)
+            fake.events, fake.triggers = _fake_streams.flapping_source(
+                self.WIDTH, self.HEIGHT, fake.duration_us, seed=fake.seed
+            )
         x, y, w, h = self._crop
         ev = fake.events
         ev = ev[(ev["x"] >= x) & (ev["x"] < x + w) & (ev["y"] >= y) & (ev["y"] < y + h)]
@@ -305,5 +305,8 @@ def _open(serialNumber: str | None = None) -> _Camera:  # noqa: N803
     return (DVXplorer if fake.model == "DVXplorer" else DAVIS)(fake)
 
 
-io = types.SimpleNamespace(camera=types.SimpleNamespace(
-    open=_open, discover=lambda: [_Descriptor(c.serial) for c in _fake.cameras], DVXplorer=DVXplorer, DAVIS=DAVIS))
+io = types.SimpleNamespace(
+    camera=types.SimpleNamespace(
+        open=_open, discover=lambda: [_Descriptor(c.serial) for c in _fake.cameras], DVXplorer=DVXplorer, DAVIS=DAVIS
+    )
+)

@@ -44,8 +44,9 @@ def wait_subscribed(bus: Bus, *keys: str, timeout_s: float = 10.0) -> None:
             probe.undeclare()
 
 
-def read_until(camera: Camera, done: Callable[[], bool], timeout_s: float = 20.0, read_timeout_s: float = 0.01
-               ) -> tuple[np.ndarray, np.ndarray, int]:
+def read_until(
+    camera: Camera, done: Callable[[], bool], timeout_s: float = 20.0, read_timeout_s: float = 0.01
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Read until ``done()`` and a read returns None; return (events, triggers, number of non-empty reads)."""
     events, triggers, reads = [empty_events()], [empty_triggers()], 0
     deadline = time.monotonic() + timeout_s

@@ -24,9 +24,8 @@ import dataclasses
 import enum
 from typing import Any
 
-import numpy as np
-
 import _fake_streams
+import numpy as np
 
 ERC_PERIOD_US = 200
 
@@ -43,13 +42,38 @@ class Sensor:
 
 
 SENSORS = {
-    "IMX636": Sensor("IMX636", 1280, 720, ("EVT3", "EVT21"),
-                     {"bias_diff_on": (0, -85, 140), "bias_diff_off": (0, -35, 190), "bias_fo": (0, -35, 55),
-                      "bias_hpf": (0, 0, 120), "bias_refr": (0, -20, 235)}, True, 0x31),
-    "Gen3.1": Sensor("Gen3.1", 640, 480, ("EVT2",),
-                     {"bias_diff": (299, 200, 400), "bias_diff_off": (221, 0, 298), "bias_diff_on": (384, 300, 1800),
-                      "bias_fo": (1477, 1250, 1800), "bias_hpf": (1499, 900, 1800), "bias_pr": (1250, 0, 1800),
-                      "bias_refr": (1500, 1300, 1800)}, False, 0x1C),
+    "IMX636": Sensor(
+        "IMX636",
+        1280,
+        720,
+        ("EVT3", "EVT21"),
+        {
+            "bias_diff_on": (0, -85, 140),
+            "bias_diff_off": (0, -35, 190),
+            "bias_fo": (0, -35, 55),
+            "bias_hpf": (0, 0, 120),
+            "bias_refr": (0, -20, 235),
+        },
+        True,
+        0x31,
+    ),
+    "Gen3.1": Sensor(
+        "Gen3.1",
+        640,
+        480,
+        ("EVT2",),
+        {
+            "bias_diff": (299, 200, 400),
+            "bias_diff_off": (221, 0, 298),
+            "bias_diff_on": (384, 300, 1800),
+            "bias_fo": (1477, 1250, 1800),
+            "bias_hpf": (1499, 900, 1800),
+            "bias_pr": (1250, 0, 1800),
+            "bias_refr": (1500, 1300, 1800),
+        },
+        False,
+        0x1C,
+    ),
 }
 
 
@@ -378,13 +402,18 @@ class Device:
         """The sensor's output under the settings in force, as the format's bytes."""
         camera, sensor = self.camera, self.camera.spec
         if camera.events is None:
-            camera.events, camera.triggers = _fake_streams.flapping_source(sensor.width, sensor.height,
-                                                                           camera.duration_us, seed=camera.seed)
+            camera.events, camera.triggers = _fake_streams.flapping_source(
+                sensor.width, sensor.height, camera.duration_us, seed=camera.seed
+            )
         events = camera.events
         window = self._roi.window
         if self._roi.enabled and window is not None:
-            inside = ((events["x"] >= window.x) & (events["x"] < window.x + window.width)
-                      & (events["y"] >= window.y) & (events["y"] < window.y + window.height))
+            inside = (
+                (events["x"] >= window.x)
+                & (events["x"] < window.x + window.width)
+                & (events["y"] >= window.y)
+                & (events["y"] < window.y + window.height)
+            )
             events = events[inside]
         if self._erc is not None and self._erc.is_enabled():
             slot = events["t"] // ERC_PERIOD_US
@@ -394,6 +423,7 @@ class Device:
         camera.sent_events, camera.sent_triggers = events, triggers
         encoding = {"EVT3": "evt3", "EVT2": "evt2", "EVT21": "evt21"}[self.format]
         legacy = "endianness=legacy" in camera.format_options or (
-            encoding == "evt21" and "endianness" not in camera.format_options and sensor.system_id < 0x37)
+            encoding == "evt21" and "endianness" not in camera.format_options and sensor.system_id < 0x37
+        )
         data = _fake_streams.encode(encoding, events, triggers, sensor.width, sensor.height, legacy=legacy)
         return _fake_streams.ByteFeed(data, seed=camera.seed, stall_after_bytes=camera.stall_after_bytes)

@@ -92,9 +92,11 @@ class SerialReplay:
                 if request.startswith(self._pending) and len(self._pending) < len(request):
                     break  # the rest of the request is still to come
                 if not self._pending.startswith(request):
-                    self._fail(f"pair {self.used}: the driver wrote {_show(self._pending[:len(request)])}, "
-                               f"expected {_show(request)}")
-                self._pending = self._pending[len(request):]
+                    self._fail(
+                        f"pair {self.used}: the driver wrote {_show(self._pending[: len(request)])}, "
+                        f"expected {_show(request)}"
+                    )
+                self._pending = self._pending[len(request) :]
                 self.used += 1
                 out += response
             return out
@@ -111,8 +113,10 @@ class SerialReplay:
             request = self.pairs[self.used][0]
             raise ReplayError(f"pair {self.used}: the driver wrote only {_show(self._pending)} of {_show(request)}")
         if self.used < len(self.pairs):
-            raise ReplayError(f"pair {self.used} of {len(self.pairs)} not used: the driver never wrote "
-                              f"{_show(self.pairs[self.used][0])}")
+            raise ReplayError(
+                f"pair {self.used} of {len(self.pairs)} not used: the driver never wrote "
+                f"{_show(self.pairs[self.used][0])}"
+            )
 
     def close(self) -> None:
         """Forget the URL and close the ports the driver left open."""

@@ -25,11 +25,19 @@ ADAPTERS = ("prophesee", "metavision", "inivation")
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
     if "device" in metafunc.fixturenames:
         names = [d for d in metafunc.config.getoption("--device") if d.split(":", 1)[0] in ADAPTERS]
-        metafunc.parametrize("device", names or [pytest.param("none", marks=pytest.mark.skip(
-            reason="no camera named: --device prophesee|metavision|inivation[:SERIAL]"))])
+        metafunc.parametrize(
+            "device",
+            names
+            or [
+                pytest.param(
+                    "none",
+                    marks=pytest.mark.skip(reason="no camera named: --device prophesee|metavision|inivation[:SERIAL]"),
+                )
+            ],
+        )
 
 
-def camera_for(device: str, **settings: object):  # noqa: ANN201 - a Camera
+def camera_for(device: str, **settings: object):
     adapter, _, serial = device.partition(":")
     module = importlib.import_module(f"flagtrack.drivers.camera.{adapter}")
     hardware = dict(settings)
@@ -38,7 +46,7 @@ def camera_for(device: str, **settings: object):  # noqa: ANN201 - a Camera
     return module.open_from_config(hardware)
 
 
-def stream(camera, seconds: float) -> tuple[np.ndarray, int]:  # noqa: ANN001
+def stream(camera, seconds: float) -> tuple[np.ndarray, int]:
     """Events read for ``seconds`` of wall time, and the number of non-empty reads."""
     parts, reads = [], 0
     stop = time.monotonic() + seconds
@@ -84,8 +92,12 @@ def test_settings_are_applied_and_read_back(device: str) -> None:
     finally:
         camera.close()
     assert len(events) > 100, "no events inside the ROI: is something moving in the middle of the view?"
-    inside = ((events["x"] >= roi["x"]) & (events["x"] < roi["x"] + roi["width"])
-              & (events["y"] >= roi["y"]) & (events["y"] < roi["y"] + roi["height"]))
+    inside = (
+        (events["x"] >= roi["x"])
+        & (events["x"] < roi["x"] + roi["width"])
+        & (events["y"] >= roi["y"])
+        & (events["y"] < roi["y"] + roi["height"])
+    )
     assert inside.all(), f"{np.count_nonzero(~inside)} events outside the ROI {roi}"
 
 

@@ -14,13 +14,42 @@ from flagtrack.daemon.cli import main
 @pytest.mark.slow
 def test_tiny_run_writes_tables_figures_and_report(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "bench"
-    code = main(["bench", "accuracy", "-o", str(out), "--quick", "--n", "2", "--sweep-kinematics", "1",
-                 "--cycles", "1.5", "--size", "320x240", "--jobs", "1", "--no-progress"])
+    code = main(
+        [
+            "bench",
+            "accuracy",
+            "-o",
+            str(out),
+            "--quick",
+            "--n",
+            "2",
+            "--sweep-kinematics",
+            "1",
+            "--cycles",
+            "1.5",
+            "--size",
+            "320x240",
+            "--jobs",
+            "1",
+            "--no-progress",
+        ]
+    )
     assert code == 0
     assert "family           paper" in capsys.readouterr().out
     names = {p.name for p in out.iterdir()}
-    assert {"family.csv", "leak.csv", "shot_noise.csv", "params_joints.csv", "params_tau.csv", "summary_family.csv",
-            "fig4_family.png", "fig5_defects.png", "fig6_params.png", "report.md", "run.json"} <= names
+    assert {
+        "family.csv",
+        "leak.csv",
+        "shot_noise.csv",
+        "params_joints.csv",
+        "params_tau.csv",
+        "summary_family.csv",
+        "fig4_family.png",
+        "fig5_defects.png",
+        "fig6_params.png",
+        "report.md",
+        "run.json",
+    } <= names
     assert "recordings" not in names  # simulated files are removed
     for name in names - {"report.md", "run.json"}:
         if name.endswith(".png"):
@@ -28,8 +57,14 @@ def test_tiny_run_writes_tables_figures_and_report(tmp_path: Path, capsys: pytes
     with open(out / "family.csv") as handle:
         family = list(csv.DictReader(handle))
     assert list(family[0]) == list(COLUMNS)
-    assert sorted(r["method"] for r in family) == ["paper", "paper", "robust", "robust", "robust-classic",
-                                                   "robust-classic"]
+    assert sorted(r["method"] for r in family) == [
+        "paper",
+        "paper",
+        "robust",
+        "robust",
+        "robust-classic",
+        "robust-classic",
+    ]
     assert all(0 < float(r["delta_rms_over_l"]) < 0.05 for r in family if r["method"] != "paper")
     with open(out / "shot_noise.csv") as handle:
         shot = list(csv.DictReader(handle))
@@ -39,8 +74,13 @@ def test_tiny_run_writes_tables_figures_and_report(tmp_path: Path, capsys: pytes
     with open(out / "params_tau.csv") as handle:
         assert {r["condition"] for r in csv.DictReader(handle)} == {"clean", "shot 20"}
     report = (out / "report.md").read_text()
-    for heading in ("(a) Kinematics family", "(b) Leak rate", "(c) Shot noise", "(d) Processing parameters",
-                    "Beyond the paper"):
+    for heading in (
+        "(a) Kinematics family",
+        "(b) Leak rate",
+        "(c) Shot noise",
+        "(d) Processing parameters",
+        "Beyond the paper",
+    ):
         assert heading in report
     assert "![family](fig4_family.png)" in report and "0.36-1.00" in report  # the paper's figures beside ours
     # the report and figures can be rewritten from the tables alone

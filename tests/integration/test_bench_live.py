@@ -12,9 +12,27 @@ import pytest
 
 @pytest.mark.slow
 def test_bench_live_reports_rate_latency_and_cpu_without_loss(tmp_path: Path) -> None:
-    out = subprocess.run([sys.executable, "-m", "flagtrack.daemon", "bench", "live", "--seconds", "0.3",
-                          "--latency-seconds", "1.0", "--latency-rate", "1.0", "--cache", str(tmp_path), "--json"],
-                         capture_output=True, text=True, timeout=240)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "flagtrack.daemon",
+            "bench",
+            "live",
+            "--seconds",
+            "0.3",
+            "--latency-seconds",
+            "1.0",
+            "--latency-rate",
+            "1.0",
+            "--cache",
+            str(tmp_path),
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
     assert out.returncode == 0, out.stderr
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result["events"] > 1_000_000  # 0.3 s of a flapping line at ~6 Mev/s

@@ -11,8 +11,8 @@ import pytest
 from flagtrack.calibration import load_mapping
 from flagtrack.daemon.cli import main
 from flagtrack.drivers.sim.optics import tilted_pinhole
-from flagtrack.drivers.sim.simulate import RecordingSpec, simulate_checkerboard, simulate_recording
 from flagtrack.drivers.sim.scenes import BlinkParams, CheckerboardSpec
+from flagtrack.drivers.sim.simulate import RecordingSpec, simulate_checkerboard, simulate_recording
 
 pytest.importorskip("cv2", reason="corner detection needs opencv-python-headless")
 
@@ -65,14 +65,18 @@ def test_map_prints_plane_coordinates(calibration: Path, capsys: pytest.CaptureF
     assert capsys.readouterr().out.count(" m\n") == 2
 
 
-@pytest.mark.parametrize("extra, message", [
-    (["--board", "9x6", "--square-mm", "20"], "shows 11x9 inner corners, not 9x6"),
-    (["--board", "11x9", "--square-mm", "20", "--degree", "9"], "a board with more corners per side or a lower"),
-    (["--board", "11x9", "--square-mm", "20", "--origin-corner", "12,0"], "outside the 11x9 grid"),
-    (["--board", "11x9"], "calibrating needs --square-mm"),
-])
-def test_calibrate_errors_are_one_clear_line(board: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                             extra: list[str], message: str) -> None:
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--board", "9x6", "--square-mm", "20"], "shows 11x9 inner corners, not 9x6"),
+        (["--board", "11x9", "--square-mm", "20", "--degree", "9"], "a board with more corners per side or a lower"),
+        (["--board", "11x9", "--square-mm", "20", "--origin-corner", "12,0"], "outside the 11x9 grid"),
+        (["--board", "11x9"], "calibrating needs --square-mm"),
+    ],
+)
+def test_calibrate_errors_are_one_clear_line(
+    board: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], message: str
+) -> None:
     assert main(["calibrate", str(board), *extra, "-o", str(tmp_path / "c.yaml")]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1
@@ -92,8 +96,9 @@ def test_end_to_end_tip_error_in_metres(calibration: Path, tmp_path: Path, capsy
     """Calibrate on the board, reconstruct a flag seen by the same camera in metres, compare with the truth."""
     flag = simulate_recording(RecordingSpec(seed=3, duration_s=0.15, tilted=True), tmp_path)
     config = tmp_path / "rig.yaml"
-    config.write_text(f"tracker:\n  calibration: {calibration}\n  root: [0.0, 0.0]\n  length: 0.18\n"
-                      f"  direction_deg: 0.0\n")
+    config.write_text(
+        f"tracker:\n  calibration: {calibration}\n  root: [0.0, 0.0]\n  length: 0.18\n  direction_deg: 0.0\n"
+    )
     out = tmp_path / "recon.h5"
     assert main(["reconstruct", flag.events_path, "-o", str(out), "-c", str(config), "--no-progress"]) == 0
     capsys.readouterr()

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from flagtrack.daemon.errors import DriverError
+from flagtrack.daemon.rig.build import open_camera
 from flagtrack.daemon.rig.config import load_rig
 from flagtrack.daemon.schema import CameraStatus, EventPacket
-from flagtrack.daemon.rig.build import open_camera
 from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.formats.packets import decode_packet
@@ -45,7 +45,7 @@ camera:
 }
 
 
-def plug(adapter: str, request: pytest.FixtureRequest):  # noqa: ANN201 - the fake camera record
+def plug(adapter: str, request: pytest.FixtureRequest):
     if adapter == "prophesee":
         nd = request.getfixturevalue("fake_nd")
         return nd._fake.plug(nd.FakeCamera(duration_us=150_000, seed=5))
@@ -57,15 +57,18 @@ def plug(adapter: str, request: pytest.FixtureRequest):  # noqa: ANN201 - the fa
 
 
 @pytest.mark.parametrize("adapter", ["prophesee", "metavision", "inivation"])
-def test_service_publishes_the_sensor_events_and_reports_the_stall(adapter: str, tmp_path: Path,
-                                                                    request: pytest.FixtureRequest) -> None:
+def test_service_publishes_the_sensor_events_and_reports_the_stall(
+    adapter: str, tmp_path: Path, request: pytest.FixtureRequest
+) -> None:
     fake = plug(adapter, request)
     rig_path = tmp_path / "rig.yaml"
     rig_path.write_text(RIGS[adapter])
     camera = open_camera(load_rig(rig_path).camera)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with Bus(BusConfig(namespace="flagtrack/hw", listen=(endpoint,))) as cam_bus, \
-            Bus(BusConfig(namespace="flagtrack/hw", connect=(endpoint,))) as sub_bus:
+    with (
+        Bus(BusConfig(namespace="flagtrack/hw", listen=(endpoint,))) as cam_bus,
+        Bus(BusConfig(namespace="flagtrack/hw", connect=(endpoint,))) as sub_bus,
+    ):
         packets_sub = sub_bus.subscribe(sub_bus.keys.camera_events("cam0"), EventPacket, capacity=1_000_000)
         status_sub = sub_bus.subscribe(sub_bus.keys.camera_status("cam0"), CameraStatus)
         wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"), cam_bus.keys.camera_status("cam0"))

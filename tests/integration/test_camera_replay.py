@@ -14,9 +14,9 @@ from flagtrack.daemon.schema import CameraStatus, EventPacket, EventRate
 from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.camera.base import EndOfStream
-from flagtrack.drivers.formats.packets import PacketParams, Packetizer, decode_packet
 from flagtrack.drivers.camera.replay import ReplayCamera, ReplayConfig
 from flagtrack.drivers.formats import make_decoder, read_events, write_events
+from flagtrack.drivers.formats.packets import Packetizer, PacketParams, decode_packet
 from flagtrack.drivers.sim.quickline import WavyFlag, line_events
 from tests.fakes.helpers import wait_subscribed
 from tests.integration.test_transport import free_port
@@ -24,8 +24,10 @@ from tests.integration.test_transport import free_port
 
 def replay_over_bus(path: Path, speed: float = 0.0) -> tuple[list[EventPacket], list[EventRate], list[CameraStatus]]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with Bus(BusConfig(namespace="flagtrack/replay", listen=(endpoint,))) as cam_bus, \
-            Bus(BusConfig(namespace="flagtrack/replay", connect=(endpoint,))) as sub_bus:
+    with (
+        Bus(BusConfig(namespace="flagtrack/replay", listen=(endpoint,))) as cam_bus,
+        Bus(BusConfig(namespace="flagtrack/replay", connect=(endpoint,))) as sub_bus,
+    ):
         keys = sub_bus.keys
         packets_sub = sub_bus.subscribe(keys.camera_events("cam0"), EventPacket, capacity=1_000_000)
         rate_sub = sub_bus.subscribe(keys.event_rate("cam0"), EventRate)

@@ -21,10 +21,19 @@ from tests.integration.test_transport import free_port
 
 def message(seq: int, n_t: int, n_s: int, final: bool = False) -> CentrelineMessage:
     x = np.arange(n_t * n_s, dtype=float).reshape(n_t, n_s) + 1000 * seq
-    batch = CentrelineBatch(seq + np.arange(n_t) * 1e-3, np.linspace(0, 200, n_s), x, -x, np.zeros((n_t, 11)),
-                            np.zeros((n_t, 11)), np.ones(n_t), np.ones(n_t, dtype=np.int64))
-    return CentrelineMessage.from_batch(batch, source="tracker", seq=seq, units="px",
-                                        source_ns=np.zeros(n_t, dtype=np.int64), final=final)
+    batch = CentrelineBatch(
+        seq + np.arange(n_t) * 1e-3,
+        np.linspace(0, 200, n_s),
+        x,
+        -x,
+        np.zeros((n_t, 11)),
+        np.zeros((n_t, 11)),
+        np.ones(n_t),
+        np.ones(n_t, dtype=np.int64),
+    )
+    return CentrelineMessage.from_batch(
+        batch, source="tracker", seq=seq, units="px", source_ns=np.zeros(n_t, dtype=np.int64), final=final
+    )
 
 
 def test_messages_that_do_not_fit_the_file_are_counted_and_the_stream_is_written(tmp_path: Path) -> None:
@@ -33,8 +42,10 @@ def test_messages_that_do_not_fit_the_file_are_counted_and_the_stream_is_written
     service still ends with the stream."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     path = tmp_path / "lines.h5"
-    with Bus(BusConfig(namespace="flagtrack/cf", listen=(endpoint,))) as bus, \
-            Bus(BusConfig(namespace="flagtrack/cf", connect=(endpoint,))) as source:
+    with (
+        Bus(BusConfig(namespace="flagtrack/cf", listen=(endpoint,))) as bus,
+        Bus(BusConfig(namespace="flagtrack/cf", connect=(endpoint,))) as source,
+    ):
         service = CentrelineFileService(bus, path, {"length": 200.0}, exit_after_final=True)
         thread = threading.Thread(target=service.run, args=(threading.Event(),))
         thread.start()
@@ -59,15 +70,26 @@ def test_the_recorder_and_the_centreline_file_write_the_same_attributes(tmp_path
     a sweep point) and ``up --centrelines``'s carry the same attributes, values included, but for
     ``input_file`` (the recorder's is its .raw file); both refuse the same message and hold the same
     updates."""
-    processing = {"length": 200.0, "alpha": 0.6, "root": [102.0, 240.0], "refine_deg": None,
-                  "schedule": [], "calibration_degree": 3, "calibration_yaml": "degree: 3\n"}
+    processing = {
+        "length": 200.0,
+        "alpha": 0.6,
+        "root": [102.0, 240.0],
+        "refine_deg": None,
+        "schedule": [],
+        "calibration_degree": 3,
+        "calibration_yaml": "degree: 3\n",
+    }
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with Bus(BusConfig(namespace="flagtrack/cs", listen=(endpoint,))) as bus, \
-            Bus(BusConfig(namespace="flagtrack/cs", connect=(endpoint,))) as source:
-        service = CentrelineFileService(bus, tmp_path / "live.h5", {**processing, "input_file": "flag.raw"},
-                                        exit_after_final=True)
-        recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, path="point_003", centrelines=True),
-                                   centreline_attrs=processing)
+    with (
+        Bus(BusConfig(namespace="flagtrack/cs", listen=(endpoint,))) as bus,
+        Bus(BusConfig(namespace="flagtrack/cs", connect=(endpoint,))) as source,
+    ):
+        service = CentrelineFileService(
+            bus, tmp_path / "live.h5", {**processing, "input_file": "flag.raw"}, exit_after_final=True
+        )
+        recorder = RecorderService(
+            bus, RecorderConfig(directory=tmp_path, path="point_003", centrelines=True), centreline_attrs=processing
+        )
         stop = threading.Event()
         threads = [threading.Thread(target=s.run, args=(stop,)) for s in (service, recorder)]
         for thread in threads:
@@ -92,8 +114,9 @@ def test_the_recorder_and_the_centreline_file_write_the_same_attributes(tmp_path
         np.testing.assert_array_equal(getattr(point, name), getattr(live, name), err_msg=name)
     assert len(point) == 7
     assert set(point_attrs) == set(live_attrs) == {*processing, "units", "source", "input_file", "flagtrack_version"}
-    assert {k: v for k, v in point_attrs.items() if k not in ("input_file", "root")} == \
-        {k: v for k, v in live_attrs.items() if k not in ("input_file", "root")}
+    assert {k: v for k, v in point_attrs.items() if k not in ("input_file", "root")} == {
+        k: v for k, v in live_attrs.items() if k not in ("input_file", "root")
+    }
     assert list(point_attrs["root"]) == list(live_attrs["root"]) == [102.0, 240.0]
     assert point_attrs["units"] == "px" and point_attrs["source"] == "tracker" and point_attrs["refine_deg"] is None
     assert point_attrs["calibration_yaml"] == "degree: 3\n"

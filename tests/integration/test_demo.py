@@ -9,14 +9,37 @@ from pathlib import Path
 
 import pytest
 
-KEYS = ["onset_mps_simulated", "decay_mps_simulated", "onset_mps_detected", "decay_mps_detected", "step_mps",
-        "points", "summary_csv", "log", "rrd"]
+KEYS = [
+    "onset_mps_simulated",
+    "decay_mps_simulated",
+    "onset_mps_detected",
+    "decay_mps_detected",
+    "step_mps",
+    "points",
+    "summary_csv",
+    "log",
+    "rrd",
+]
 
 
 @pytest.mark.slow
 def test_quick_demo_finds_onset_and_decay_within_one_step(tmp_path: Path) -> None:
-    result = subprocess.run([sys.executable, "-m", "flagtrack.daemon", "demo", "--quick", "--headless", "--json",
-                             "--out", str(tmp_path / "demo")], capture_output=True, text=True, timeout=240)
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "flagtrack.daemon",
+            "demo",
+            "--quick",
+            "--headless",
+            "--json",
+            "--out",
+            str(tmp_path / "demo"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout.strip().splitlines()[-1])
     assert list(summary) == KEYS

@@ -38,8 +38,10 @@ class Heartbeat:
 def buses() -> Iterator[tuple[Bus, Bus]]:
     """The services' session (listening) and an observer's session (connecting)."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with Bus(BusConfig(namespace="flagtrack/alive", listen=(endpoint,))) as services, \
-            Bus(BusConfig(namespace="flagtrack/alive", connect=(endpoint,))) as observer:
+    with (
+        Bus(BusConfig(namespace="flagtrack/alive", listen=(endpoint,))) as services,
+        Bus(BusConfig(namespace="flagtrack/alive", connect=(endpoint,))) as observer,
+    ):
         yield services, observer
 
 
@@ -51,8 +53,9 @@ def recording(path: Path) -> Path:
 
 
 @pytest.mark.parametrize("source", ["end_of_file", "failure"])
-def test_a_camera_that_ends_or_fails_is_seen_gone_while_the_session_stays(buses: tuple[Bus, Bus], tmp_path: Path,
-                                                                         source: str) -> None:
+def test_a_camera_that_ends_or_fails_is_seen_gone_while_the_session_stays(
+    buses: tuple[Bus, Bus], tmp_path: Path, source: str
+) -> None:
     bus, observer = buses
     if source == "end_of_file":
         path = recording(tmp_path / "flag.raw")

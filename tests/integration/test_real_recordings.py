@@ -95,25 +95,41 @@ def test_live_decoder_on_random_packets(name: str, shared_real: Path, reference_
     assert digest(np.concatenate(parts)) == reference_values[name]["sha256_t_i8_x_u2_y_u2_p_u1"]
 
 
-@pytest.mark.parametrize(("name", "encoding"), [("expelliarmus_evt3_sample.raw", "evt2"),
-                                                ("expelliarmus_evt2_test_sparklers.raw", "evt3"),
-                                                ("aestream_davis.aedat4", "evt3")])
-def test_rewritten_recordings_read_back_identical(name: str, encoding: str, shared_real: Path,
-                                                  reference_values: dict, tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("name", "encoding"),
+    [
+        ("expelliarmus_evt3_sample.raw", "evt2"),
+        ("expelliarmus_evt2_test_sparklers.raw", "evt3"),
+        ("aestream_davis.aedat4", "evt3"),
+    ],
+)
+def test_rewritten_recordings_read_back_identical(
+    name: str, encoding: str, shared_real: Path, reference_values: dict, tmp_path: Path
+) -> None:
     rec = read_events(shared_real / name)
     out = tmp_path / "re.raw"
     write_events(out, rec.events, width=rec.info.width, height=rec.info.height, encoding=encoding)
     assert digest(read_events(out, strict=True).events) == reference_values[name]["sha256_t_i8_x_u2_y_u2_p_u1"]
 
 
-def test_info_command_prints_the_reference_figures(shared_real: Path, reference_values: dict,
-                                                   capsys: pytest.CaptureFixture) -> None:
+def test_info_command_prints_the_reference_figures(
+    shared_real: Path, reference_values: dict, capsys: pytest.CaptureFixture
+) -> None:
     name = "expelliarmus_evt3_sample.raw"
     assert main(["events", "info", str(shared_real / name), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     ref = reference_values[name]
-    assert info == {"format": "raw", "encoding": "evt3", "width": 1280, "height": 720, "events": ref["events"],
-                    "on": ref["on"], "off": ref["off"], "t_first_us": ref["t_first_us"], "t_last_us": ref["t_last_us"]}
+    assert info == {
+        "format": "raw",
+        "encoding": "evt3",
+        "width": 1280,
+        "height": 720,
+        "events": ref["events"],
+        "on": ref["on"],
+        "off": ref["off"],
+        "t_first_us": ref["t_first_us"],
+        "t_last_us": ref["t_last_us"],
+    }
 
 
 @pytest.mark.parametrize("name", ["expelliarmus_evt2_sample.raw", "aestream_davis.aedat4", "tonic_sample_ncars.dat"])

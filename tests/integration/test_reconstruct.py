@@ -58,8 +58,22 @@ def test_layout_attributes_and_times(raw_file: Path, tmp_path: Path, events: np.
         assert f["x"].shape == f["y"].shape == (n_t, 51) and f["joints/x"].shape == (n_t, 11)
         assert f["x"].dtype == np.float64 and f["n_events"].dtype == np.int64
     batch, attrs = read_centrelines(out)
-    for key in ("root", "length", "direction_deg", "joints", "alpha", "angle_limit_deg", "tau_s", "dt_s", "ds",
-                "method", "min_events", "refine_deg", "denoise_window_us", "flagtrack_version"):
+    for key in (
+        "root",
+        "length",
+        "direction_deg",
+        "joints",
+        "alpha",
+        "angle_limit_deg",
+        "tau_s",
+        "dt_s",
+        "ds",
+        "method",
+        "min_events",
+        "refine_deg",
+        "denoise_window_us",
+        "flagtrack_version",
+    ):
         assert key in attrs, key
     assert attrs["units"] == "px" and attrs["input_file"] == str(raw_file) and attrs["ds"] == pytest.approx(3.6)
     assert attrs["events_in"] == len(events)
@@ -86,11 +100,30 @@ def test_file_equals_the_tracker_on_the_array(raw_file: Path, tmp_path: Path, ev
 
 def test_config_file_and_flags_that_override_it(raw_file: Path, tmp_path: Path) -> None:
     config = tmp_path / "rig.yaml"
-    config.write_text("viewer: {}\ntracker:\n  root: [120, 250]\n  length: 180\n  joints: 8\n  tau_s: 0.0005\n"
-                      "  method: paper\n")
+    config.write_text(
+        "viewer: {}\ntracker:\n  root: [120, 250]\n  length: 180\n  joints: 8\n  tau_s: 0.0005\n  method: paper\n"
+    )
     out = tmp_path / "out.h5"
-    assert main(["reconstruct", str(raw_file), "-o", str(out), "-c", str(config), "--joints", "12",
-                 "--t-start", "5.01", "--t-stop", "5.05", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(raw_file),
+                "-o",
+                str(out),
+                "-c",
+                str(config),
+                "--joints",
+                "12",
+                "--t-start",
+                "5.01",
+                "--t-stop",
+                "5.05",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     batch, attrs = read_centrelines(out)
     assert attrs["joints"] == 12 and attrs["method"] == "paper" and attrs["tau_s"] == 0.0005
     assert batch.joints_x.shape[1] == 13
@@ -98,8 +131,9 @@ def test_config_file_and_flags_that_override_it(raw_file: Path, tmp_path: Path) 
 
 
 @pytest.mark.parametrize("method", ["paper", "robust"])
-def test_npy_input_gives_the_raw_files_centrelines(raw_file: Path, events: np.ndarray, tmp_path: Path,
-                                                   method: str) -> None:
+def test_npy_input_gives_the_raw_files_centrelines(
+    raw_file: Path, events: np.ndarray, tmp_path: Path, method: str
+) -> None:
     path = tmp_path / "flag.npy"
     write_events(path, events, width=640, height=480)
     from_npy, from_raw = tmp_path / "npy.h5", tmp_path / "raw.h5"
@@ -122,22 +156,26 @@ def test_npy_input_gives_the_raw_files_centrelines(raw_file: Path, events: np.nd
         (["--root", "1", "2", "--length", "180", "--alpha", "3"], "alpha"),
     ],
 )
-def test_errors_are_one_line(raw_file: Path, tmp_path: Path, extra: list[str], words: str,
-                             capsys: pytest.CaptureFixture[str]) -> None:
+def test_errors_are_one_line(
+    raw_file: Path, tmp_path: Path, extra: list[str], words: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert main(["reconstruct", str(raw_file), "-o", str(tmp_path / "o.h5"), "--no-progress", *extra]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("flagtrack reconstruct: error:") and words in err and "\n" not in err
 
 
 @pytest.mark.filterwarnings("default::flagtrack.drivers.formats.codec.FormatWarning")  # shown, as outside tests
-def test_a_truncated_file_is_reconstructed_with_a_one_line_warning(raw_file: Path, tmp_path: Path,
-                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_truncated_file_is_reconstructed_with_a_one_line_warning(
+    raw_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     cut = tmp_path / "cut.raw"
     cut.write_bytes(raw_file.read_bytes()[:-1])  # the last word is incomplete
     assert main(["reconstruct", str(cut), "-o", str(tmp_path / "o.h5"), "--no-progress", *ARGS]) == 0
     warning = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
-    assert warning == [f"flagtrack reconstruct: warning: {cut}, byte {cut.stat().st_size - 1}: stream ends inside "
-                       "a 2-byte EVT 3.0 word (1 trailing bytes; truncated file?); kept the events before it"]
+    assert warning == [
+        f"flagtrack reconstruct: warning: {cut}, byte {cut.stat().st_size - 1}: stream ends inside "
+        "a 2-byte EVT 3.0 word (1 trailing bytes; truncated file?); kept the events before it"
+    ]
 
 
 def test_missing_input_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -152,8 +190,9 @@ FLAG_DOWN = WavyFlag(root=(320.0, 60.0), length=180.0, direction_deg=90.0)  # al
 
 @pytest.fixture(scope="module")
 def down_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    events = np.concatenate(list(line_events(FLAG_DOWN, 0, 30_000, 640, 480, QuickLineParams(events_per_px2=10),
-                                             seed=12)))
+    events = np.concatenate(
+        list(line_events(FLAG_DOWN, 0, 30_000, 640, 480, QuickLineParams(events_per_px2=10), seed=12))
+    )
     path = tmp_path_factory.mktemp("rec") / "down.raw"
     write_events(path, events, width=640, height=480, encoding="evt3")
     return path
@@ -216,9 +255,22 @@ def _run_on_a_terminal(raw_file: Path, out: Path, *extra: str, timeout_s: float 
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))
     try:
-        proc = subprocess.Popen([sys.executable, "-m", "flagtrack.daemon", "reconstruct", str(raw_file), "-o", str(out),
-                                 *TRACK_ARGS, *extra], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                stderr=slave)
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "flagtrack.daemon",
+                "reconstruct",
+                str(raw_file),
+                "-o",
+                str(out),
+                *TRACK_ARGS,
+                *extra,
+            ],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=slave,
+        )
     finally:
         os.close(slave)
     received = bytearray()

@@ -16,16 +16,34 @@ from flagtrack.drivers.sim.quickline import WavyFlag, line_events
 
 M_PER_PX = 0.0005
 CALIBRATION = {
-    "format": "flagtrack-calibration", "version": 1, "units": "m", "image_size": [640, 480], "degree": 1,
-    "forward": {"degree": 1, "centre": [0.0, 0.0], "scale": 1.0, "exponents": [[0, 0], [1, 0], [0, 1]],
-                "x": [0.0, M_PER_PX, 0.0], "y": [0.0, 0.0, M_PER_PX]},
-    "inverse": {"degree": 1, "centre": [0.0, 0.0], "scale": 1.0, "exponents": [[0, 0], [1, 0], [0, 1]],
-                "x": [0.0, 1 / M_PER_PX, 0.0], "y": [0.0, 0.0, 1 / M_PER_PX]},
+    "format": "flagtrack-calibration",
+    "version": 1,
+    "units": "m",
+    "image_size": [640, 480],
+    "degree": 1,
+    "forward": {
+        "degree": 1,
+        "centre": [0.0, 0.0],
+        "scale": 1.0,
+        "exponents": [[0, 0], [1, 0], [0, 1]],
+        "x": [0.0, M_PER_PX, 0.0],
+        "y": [0.0, 0.0, M_PER_PX],
+    },
+    "inverse": {
+        "degree": 1,
+        "centre": [0.0, 0.0],
+        "scale": 1.0,
+        "exponents": [[0, 0], [1, 0], [0, 1]],
+        "x": [0.0, 1 / M_PER_PX, 0.0],
+        "y": [0.0, 0.0, 1 / M_PER_PX],
+    },
 }
 
 
 def flagtrack(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "flagtrack.daemon", *args], capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "flagtrack.daemon", *args], capture_output=True, text=True, timeout=120
+    )
 
 
 @pytest.fixture(scope="module")
@@ -39,9 +57,23 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_calibrated_reconstruction_is_the_pixel_one_in_metres(recording: Path, tmp_path: Path) -> None:
     px, m = tmp_path / "px.h5", tmp_path / "m.h5"
-    assert flagtrack("reconstruct", str(recording), "-o", str(px), "--root", "100", "240", "--length", "200").returncode == 0
-    result = flagtrack("reconstruct", str(recording), "-o", str(m), "--calibration", str(recording.parent / "cal.yaml"),
-                       "--root", str(100 * M_PER_PX), str(240 * M_PER_PX), "--length", str(200 * M_PER_PX))
+    assert (
+        flagtrack("reconstruct", str(recording), "-o", str(px), "--root", "100", "240", "--length", "200").returncode
+        == 0
+    )
+    result = flagtrack(
+        "reconstruct",
+        str(recording),
+        "-o",
+        str(m),
+        "--calibration",
+        str(recording.parent / "cal.yaml"),
+        "--root",
+        str(100 * M_PER_PX),
+        str(240 * M_PER_PX),
+        "--length",
+        str(200 * M_PER_PX),
+    )
     assert result.returncode == 0, result.stderr
     with h5py.File(px) as a, h5py.File(m) as b:
         assert a.attrs["units"] == "px" and b.attrs["units"] == "m" and b.attrs["calibration_degree"] == 1
@@ -54,8 +86,13 @@ def test_relative_calibration_path_in_a_config_is_taken_from_the_config_folder(r
     config = recording.parent / "track.yaml"
     config.write_text(yaml.safe_dump({"tracker": {"calibration": "cal.yaml", "root": [0.05, 0.12], "length": 0.1}}))
     out = tmp_path / "m.h5"
-    result = subprocess.run([sys.executable, "-m", "flagtrack.daemon", "reconstruct", str(recording), "-o", str(out),
-                             "-c", str(config)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    result = subprocess.run(
+        [sys.executable, "-m", "flagtrack.daemon", "reconstruct", str(recording), "-o", str(out), "-c", str(config)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )
     assert result.returncode == 0, result.stderr
     with h5py.File(out) as f:
         assert f.attrs["units"] == "m"
@@ -64,8 +101,19 @@ def test_relative_calibration_path_in_a_config_is_taken_from_the_config_folder(r
 def test_a_broken_calibration_file_is_one_clear_line(recording: Path, tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text("format: something-else\n")
-    result = flagtrack("reconstruct", str(recording), "-o", str(tmp_path / "x.h5"), "--calibration", str(bad),
-                       "--root", "0", "0", "--length", "0.1")
+    result = flagtrack(
+        "reconstruct",
+        str(recording),
+        "-o",
+        str(tmp_path / "x.h5"),
+        "--calibration",
+        str(bad),
+        "--root",
+        "0",
+        "0",
+        "--length",
+        "0.1",
+    )
     assert result.returncode == 2 and str(bad) in result.stderr and "not a calibration file" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
 
@@ -74,13 +122,21 @@ def test_every_centreline_file_says_how_it_was_made(recording: Path, tmp_path: P
     """The recorder's centreline file (one per sweep point), `up --centrelines` and `reconstruct` carry
     the same processing attributes, calibration included, and the same centrelines."""
     rig = tmp_path / "rig.yaml"
-    rig.write_text(yaml.safe_dump({
-        "camera": {"adapter": "replay", "replay": {"path": str(recording), "speed": 0.0}},
-        "tracker": {"calibration": str(recording.parent / "cal.yaml"), "root": [0.05, 0.12], "length": 0.1,
-                    "tau_s": 0.0003},
-        "recorder": {"directory": str(tmp_path / "rec"), "path": "point1", "centrelines": True},
-        "services": ["camera", "tracker", "recorder"],
-    }))
+    rig.write_text(
+        yaml.safe_dump(
+            {
+                "camera": {"adapter": "replay", "replay": {"path": str(recording), "speed": 0.0}},
+                "tracker": {
+                    "calibration": str(recording.parent / "cal.yaml"),
+                    "root": [0.05, 0.12],
+                    "length": 0.1,
+                    "tau_s": 0.0003,
+                },
+                "recorder": {"directory": str(tmp_path / "rec"), "path": "point1", "centrelines": True},
+                "services": ["camera", "tracker", "recorder"],
+            }
+        )
+    )
     up = flagtrack("up", "-c", str(rig), "--exit-at-eof", "--centrelines", str(tmp_path / "up.h5"))
     assert up.returncode == 0, up.stderr
     rec = flagtrack("reconstruct", str(recording), "-c", str(rig), "-o", str(tmp_path / "offline.h5"))

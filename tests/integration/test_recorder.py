@@ -43,10 +43,12 @@ def data_bytes(path: Path) -> int:
     return len(data) - end
 
 
-def run_rig(source: Path, rec_cfg: RecorderConfig, speed: float, during=None) -> RecorderService:  # noqa: ANN001
+def run_rig(source: Path, rec_cfg: RecorderConfig, speed: float, during=None) -> RecorderService:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with Bus(BusConfig(namespace="flagtrack/rec", listen=(endpoint,))) as rec_bus, \
-            Bus(BusConfig(namespace="flagtrack/rec", connect=(endpoint,))) as cam_bus:
+    with (
+        Bus(BusConfig(namespace="flagtrack/rec", listen=(endpoint,))) as rec_bus,
+        Bus(BusConfig(namespace="flagtrack/rec", connect=(endpoint,))) as cam_bus,
+    ):
         recorder = RecorderService(rec_bus, rec_cfg, {"test": True})
         stop = threading.Event()
         thread = threading.Thread(target=recorder.run, args=(stop,))
@@ -98,7 +100,7 @@ def test_rotate_on_command_splits_without_losing_events(tmp_path: Path) -> None:
     assert len(a) > 0 and len(b) > 0
     joined = np.concatenate([a, b])
     # recording started after the first packets: what was recorded is one contiguous run, ending at the end
-    np.testing.assert_array_equal(joined, events[len(events) - len(joined):])
+    np.testing.assert_array_equal(joined, events[len(events) - len(joined) :])
     assert [s.request_id for s in statuses[:3]] == ["1", "2", "2"]
     assert [s.state for s in statuses[:3]] == ["recording", "idle", "recording"]
 
@@ -143,27 +145,43 @@ def test_malformed_packets_are_counted_not_written(tmp_path: Path) -> None:
 
 
 def packets_of(events: np.ndarray, t_until_us: int) -> list:
-    from flagtrack.drivers.formats.packets import PacketParams, Packetizer
+    from flagtrack.drivers.formats.packets import Packetizer, PacketParams
 
     packetizer = Packetizer("evt3", 640, 480, PacketParams(packet_us=1000))
     return packetizer.push(events, None, t_until_us=t_until_us) + packetizer.flush()
 
 
-def publish(pub, packets: list, first_seq: int = 0, end: bool = False, **fields) -> None:  # noqa: ANN001, ANN003
+def publish(pub, packets: list, first_seq: int = 0, end: bool = False, **fields) -> None:
     for i, packet in enumerate(packets):
-        pub.put(EventPacket(fields.get("camera_id", "cam0"), first_seq + i, packet.t_first_us, packet.t_last_us,
-                            packet.n_events, 640, 480, "evt3", time.time_ns(),
-                            fields.get("t_offset_us", packet.t_offset_us),
-                            end_of_stream=end and i == len(packets) - 1, data=packet.data))
+        pub.put(
+            EventPacket(
+                fields.get("camera_id", "cam0"),
+                first_seq + i,
+                packet.t_first_us,
+                packet.t_last_us,
+                packet.n_events,
+                640,
+                480,
+                "evt3",
+                time.time_ns(),
+                fields.get("t_offset_us", packet.t_offset_us),
+                end_of_stream=end and i == len(packets) - 1,
+                data=packet.data,
+            )
+        )
 
 
 def recorder_lines(caplog: pytest.LogCaptureFixture) -> list[str]:
-    return [r.getMessage() for r in caplog.records if r.name == "flagtrack.daemon.services.recorder"
-            and r.levelno >= logging.WARNING]
+    return [
+        r.getMessage()
+        for r in caplog.records
+        if r.name == "flagtrack.daemon.services.recorder" and r.levelno >= logging.WARNING
+    ]
 
 
-def test_packets_and_commands_that_cannot_be_carried_out_stop_nothing(tmp_path: Path,
-                                                                      caplog: pytest.LogCaptureFixture) -> None:
+def test_packets_and_commands_that_cannot_be_carried_out_stop_nothing(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     """A first packet whose time offset is not a whole loop (stream_preamble refused it, uncaught), one
     whose camera id cannot go in a RAW header, 50 undecodable messages and a start command to a path
     that cannot be written: each counted and logged in a few lines; the recording goes on, exact."""
@@ -172,8 +190,10 @@ def test_packets_and_commands_that_cannot_be_carried_out_stop_nothing(tmp_path: 
     blocked = tmp_path / "a-file"
     blocked.write_text("not a folder")
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.recorder"), \
-            Bus(BusConfig(namespace="flagtrack/rec", listen=(endpoint,))) as bus:
+    with (
+        caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.recorder"),
+        Bus(BusConfig(namespace="flagtrack/rec", listen=(endpoint,))) as bus,
+    ):
         recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, path="m"))
         statuses = bus.subscribe(bus.keys.recorder_status(), RecorderStatus)
         stop = threading.Event()
@@ -188,8 +208,9 @@ def test_packets_and_commands_that_cannot_be_carried_out_stop_nothing(tmp_path: 
                 pub.put_bytes(b"FT\x01\x01garbage")
             publish(pub, packets)
             assert wait_for(lambda: recorder.current is not None and recorder.current.packets == len(packets))
-            bus.publisher(bus.keys.recorder_command()).put(RecorderCommand("start", path=str(blocked / "x"),
-                                                                           request_id="bad"))
+            bus.publisher(bus.keys.recorder_command()).put(
+                RecorderCommand("start", path=str(blocked / "x"), request_id="bad")
+            )
             replies = []
             while len(replies) < 2 and (msg := statuses.recv(timeout_s=5.0)) is not None:
                 replies += [msg] if msg.request_id == "bad" else []
@@ -207,7 +228,7 @@ def test_packets_and_commands_that_cannot_be_carried_out_stop_nothing(tmp_path: 
     assert any("time offset 123" in line for line in lines) and any("(52 in all)" in line for line in lines)
 
 
-def offline(path: Path, config) -> CentrelineBatch:  # noqa: ANN001
+def offline(path: Path, config) -> CentrelineBatch:
     from tests.integration.test_tracker_service import offline as reconstruct
 
     return reconstruct(path, config)
@@ -231,11 +252,16 @@ def test_a_restarted_camera_goes_to_a_new_file_and_the_last_centrelines_are_kept
     want = offline(source, CONFIG)
     params = CONFIG.tracker_params()
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with Bus(BusConfig(namespace="flagtrack/rs", listen=(endpoint,))) as svc_bus, \
-            Bus(BusConfig(namespace="flagtrack/rs", connect=(endpoint,))) as cam_bus:
+    with (
+        Bus(BusConfig(namespace="flagtrack/rs", listen=(endpoint,))) as svc_bus,
+        Bus(BusConfig(namespace="flagtrack/rs", connect=(endpoint,))) as cam_bus,
+    ):
         tracker = TrackerService(svc_bus, TrackerServiceConfig(), lambda: Tracker(params, sensor_size=(640, 480)))
-        recorder = RecorderService(svc_bus, RecorderConfig(directory=tmp_path / "out", path="run", centrelines=True),
-                                   exit_at_end_of_stream=True)
+        recorder = RecorderService(
+            svc_bus,
+            RecorderConfig(directory=tmp_path / "out", path="run", centrelines=True),
+            exit_at_end_of_stream=True,
+        )
         lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=100_000)
         stop = threading.Event()
         threads = [threading.Thread(target=s.run, args=(stop,)) for s in (tracker, recorder)]
@@ -293,10 +319,35 @@ def test_up_replay_exit_at_eof_records_every_centreline(tmp_path: Path) -> None:
     rig = tmp_path / "rig.yaml"
     rig.write_text("rig: drain\nservices: [camera, tracker, recorder]\nrecorder: {centrelines: true}\n")
     live, base = tmp_path / "live.h5", tmp_path / "rec" / "run"
-    up = subprocess.run([sys.executable, "-m", "flagtrack.daemon", "up", "-c", str(rig), "--replay", str(source),
-                         "--speed", "0", "--exit-at-eof", "--centrelines", str(live), "--record", str(base),
-                         "--root", "100", "240", "--length", "200", "--tau", "0.00025"],
-                        capture_output=True, text=True, timeout=300)
+    up = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "flagtrack.daemon",
+            "up",
+            "-c",
+            str(rig),
+            "--replay",
+            str(source),
+            "--speed",
+            "0",
+            "--exit-at-eof",
+            "--centrelines",
+            str(live),
+            "--record",
+            str(base),
+            "--root",
+            "100",
+            "240",
+            "--length",
+            "200",
+            "--tau",
+            "0.00025",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert up.returncode == 0, up.stderr
     want, _ = read_centrelines(live)
     got, attrs = read_centrelines(tmp_path / "rec" / "run_centrelines.h5")
@@ -305,7 +356,9 @@ def test_up_replay_exit_at_eof_records_every_centreline(tmp_path: Path) -> None:
         np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
     np.testing.assert_allclose(got.x, offline(source, CONFIG).x, rtol=0, atol=1e-9)
     sidecar = json.loads((tmp_path / "rec" / "run.json").read_text())
-    assert sidecar["stopped"] and sidecar["events"] == len(events) and sidecar["centrelines_file"] == "run_centrelines.h5"
+    assert (
+        sidecar["stopped"] and sidecar["events"] == len(events) and sidecar["centrelines_file"] == "run_centrelines.h5"
+    )
 
 
 def test_centrelines_of_another_tracker_setup_are_refused_not_mixed_in(tmp_path: Path) -> None:
@@ -325,15 +378,18 @@ def test_centrelines_of_another_tracker_setup_are_refused_not_mixed_in(tmp_path:
     np.testing.assert_array_equal(got.t_s, np.r_[np.arange(4) * 1e-3, 2 + np.arange(3) * 1e-3])
 
 
-def test_packets_a_full_queue_drops_are_in_the_sidecar_and_logged(tmp_path: Path,
-                                                                   caplog: pytest.LogCaptureFixture) -> None:
+def test_packets_a_full_queue_drops_are_in_the_sidecar_and_logged(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     """60 packets come while the recorder's loop is not reading and its queue holds 10: the newest 10
     are recorded, the 50 dropped are in the sidecar (dropped_packets) and in one warning."""
     events = np.concatenate(list(line_events(WavyFlag(), 0, 60_000, 640, 480)))
     packets = packets_of(events, 60_000)[:60]
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.recorder"), \
-            Bus(BusConfig(namespace="flagtrack/rfull", listen=(endpoint,))) as bus:
+    with (
+        caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.recorder"),
+        Bus(BusConfig(namespace="flagtrack/rfull", listen=(endpoint,))) as bus,
+    ):
         recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, max_queue_packets=10))
         recorder.start("q", centrelines=False)
         wait_subscribed(bus, bus.keys.camera_events("cam0"))
@@ -351,9 +407,10 @@ def test_packets_a_full_queue_drops_are_in_the_sidecar_and_logged(tmp_path: Path
     sidecar = json.loads((tmp_path / "q.json").read_text())
     assert sidecar["dropped_packets"] == 50 and sidecar["packets"] == 10 and sidecar["stopped"]
     n_kept = sum(p.n_events for p in packets[-10:])  # the queue keeps the newest
-    np.testing.assert_array_equal(read_events(tmp_path / "q.raw", strict=True).events, events[len(events) - n_kept:])
+    np.testing.assert_array_equal(read_events(tmp_path / "q.raw", strict=True).events, events[len(events) - n_kept :])
     assert [line for line in recorder_lines(caplog) if "dropped by the full queue" in line] == [
-        "recorder: the queue dropped 50 packet(s) in all (the disk falls behind) [packets dropped by the full queue: 50]"]
+        "recorder: the queue dropped 50 packet(s) in all (the disk falls behind) [packets dropped by the full queue: 50]"
+    ]
 
 
 def test_the_recorder_queue_is_bounded_by_bytes(tmp_path: Path) -> None:
@@ -371,8 +428,19 @@ def test_the_recorder_queue_is_bounded_by_bytes(tmp_path: Path) -> None:
         pub = bus.publisher(bus.keys.camera_events("cam0"))
         sizes = []
         for seq, p in enumerate(packets):
-            message = EventPacket("cam0", seq, p.t_first_us, p.t_last_us, p.n_events, 640, 480, "evt3",
-                                  time.time_ns(), p.t_offset_us, data=p.data)
+            message = EventPacket(
+                "cam0",
+                seq,
+                p.t_first_us,
+                p.t_last_us,
+                p.n_events,
+                640,
+                480,
+                "evt3",
+                time.time_ns(),
+                p.t_offset_us,
+                data=p.data,
+            )
             sizes.append(len(encode(message)))
             pub.put(message)
         kept = int(np.searchsorted(np.cumsum(sizes[::-1]), 100_000, side="right"))
@@ -410,12 +478,40 @@ def test_a_duplicated_packet_is_dropped_and_the_file_stays_one_stream(tmp_path: 
             pub = bus.publisher(bus.keys.camera_events("cam0"))
             for seq in [*range(32), 30, *range(32, 50)]:
                 p = packets[seq]
-                pub.put(EventPacket("cam0", seq, p.t_first_us, p.t_last_us, p.n_events, 640, 480, "evt3",
-                                    time.time_ns(), p.t_offset_us, stream_id=42, data=p.data))
+                pub.put(
+                    EventPacket(
+                        "cam0",
+                        seq,
+                        p.t_first_us,
+                        p.t_last_us,
+                        p.n_events,
+                        640,
+                        480,
+                        "evt3",
+                        time.time_ns(),
+                        p.t_offset_us,
+                        stream_id=42,
+                        data=p.data,
+                    )
+                )
             assert wait_for(lambda: recorder.late_packets == 1 and recorder.current.packets == 50)
             p = packets[0]
-            pub.put(EventPacket("cam0", 3, p.t_first_us, p.t_last_us, p.n_events, 640, 480, "evt3",
-                                time.time_ns(), p.t_offset_us, stream_id=43, data=p.data))
+            pub.put(
+                EventPacket(
+                    "cam0",
+                    3,
+                    p.t_first_us,
+                    p.t_last_us,
+                    p.n_events,
+                    640,
+                    480,
+                    "evt3",
+                    time.time_ns(),
+                    p.t_offset_us,
+                    stream_id=43,
+                    data=p.data,
+                )
+            )
             assert wait_for(lambda: recorder.current.part == 2)
         finally:
             stop.set()

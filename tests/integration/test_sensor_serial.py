@@ -10,16 +10,16 @@ import time
 import numpy as np
 import pytest
 
-from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.errors import ConfigError, DriverError
+from flagtrack.daemon.rig.build import build_services
 from flagtrack.daemon.rig.config import RigConfig
 from flagtrack.daemon.schema import SensorSamples
-from flagtrack.daemon.rig.build import build_services
 from flagtrack.daemon.services.runner import ServiceGroup
 from flagtrack.daemon.transport import Bus
-from flagtrack.drivers.sensor.setup import SensorConfig, open_sensor
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.drivers.sensor.device import DeviceParams, SimulatedSensorDevice
 from flagtrack.drivers.sensor.modbus import ModbusSensorMap
+from flagtrack.drivers.sensor.setup import SensorConfig, open_sensor
 from tests.fakes.helpers import wait_until
 
 
@@ -31,7 +31,7 @@ def sensor_config(port: str, **values: object) -> SensorConfig:
     return from_mapping(SensorConfig, {"driver": "ascii", "port": port, "timeout_s": 0.05, **values})
 
 
-def gather(sensor, duration_s: float):  # noqa: ANN001, ANN201
+def gather(sensor, duration_s: float):
     t, v, pulses, missing = [], [], [], 0
     end = time.monotonic() + duration_s
     while time.monotonic() < end:
@@ -91,13 +91,31 @@ def test_ascii_out_of_range_readings_are_missing_samples_not_failures() -> None:
 @pytest.mark.parametrize(("words", "signed", "order"), [(1, False, "big"), (2, True, "little")])
 def test_modbus_register_reading_with_scale_and_offset(words: int, signed: bool, order: str) -> None:
     pytest.importorskip("pymodbus")
-    modbus_map = {"device_id": 7, "register": 40, "kind": "holding", "words": words, "signed": signed,
-                  "word_order": order, "scale": 0.001 if words == 2 else 0.01, "offset": -50.0 if signed else 0.0}
+    modbus_map = {
+        "device_id": 7,
+        "register": 40,
+        "kind": "holding",
+        "words": words,
+        "signed": signed,
+        "word_order": order,
+        "scale": 0.001 if words == 2 else 0.01,
+        "offset": -50.0 if signed else 0.0,
+    }
     map_obj = from_mapping(ModbusSensorMap, modbus_map)
     shifted = (lambda t: wave(t) - 130.0) if signed else wave  # signed: readings below zero
     with SimulatedSensorDevice(DeviceParams(protocol="modbus", modbus=map_obj), shifted) as device:
-        sensor = open_sensor(from_mapping(SensorConfig, {"driver": "modbus", "port": device.port, "modbus": modbus_map,
-                                                         "poll": {"rate_hz": 100}, "timeout_s": 0.1}))
+        sensor = open_sensor(
+            from_mapping(
+                SensorConfig,
+                {
+                    "driver": "modbus",
+                    "port": device.port,
+                    "modbus": modbus_map,
+                    "poll": {"rate_hz": 100},
+                    "timeout_s": 0.1,
+                },
+            )
+        )
         info = sensor.open()
         try:
             _, values, _, missing = gather(sensor, 0.5)
@@ -138,12 +156,22 @@ def test_config_errors_name_the_key() -> None:
 
 def test_the_sensor_service_survives_a_silent_sensor_and_recovers() -> None:
     with SimulatedSensorDevice(DeviceParams(), wave) as device:
-        rig = from_mapping(RigConfig, {
-            "rig": f"sensor{time.monotonic_ns() % 10**9}",
-            "sensor": {"id": "ls1", "driver": "ascii", "port": device.port, "timeout_s": 0.05, "reopen_s": 0.2,
-                       "poll": {"rate_hz": 200, "fail_after_s": 0.3, "retry_s": 0.02}, "publish_interval_s": 0.05},
-            "services": ["sensor"],
-        })
+        rig = from_mapping(
+            RigConfig,
+            {
+                "rig": f"sensor{time.monotonic_ns() % 10**9}",
+                "sensor": {
+                    "id": "ls1",
+                    "driver": "ascii",
+                    "port": device.port,
+                    "timeout_s": 0.05,
+                    "reopen_s": 0.2,
+                    "poll": {"rate_hz": 200, "fail_after_s": 0.3, "retry_s": 0.02},
+                    "publish_interval_s": 0.05,
+                },
+                "services": ["sensor"],
+            },
+        )
         with Bus(rig.bus_config) as bus:
             sub = bus.subscribe(bus.keys.sensor_samples("ls1"), SensorSamples)
             services = build_services(rig, bus, ["sensor"])

@@ -26,8 +26,12 @@ SPEED = 0.1  # the 0.2 s recording replayed over 2 s: the tracker's 1 s status w
 
 def _wait_alive(bus: Bus, services: list[str], timeout_s: float) -> bool:
     watch = bus.watch_liveliness()
-    return wait_until(lambda: all(watch.is_alive(bus.keys.alive(name)) for name in services), timeout_s,
-                      f"{', '.join(services)} alive", poll_s=0.1)
+    return wait_until(
+        lambda: all(watch.is_alive(bus.keys.alive(name)) for name in services),
+        timeout_s,
+        f"{', '.join(services)} alive",
+        poll_s=0.1,
+    )
 
 
 @pytest.mark.slow
@@ -39,8 +43,8 @@ rig: alone
 bus: {{mode: client, connect: ["tcp/127.0.0.1:{port}"]}}
 camera: {{adapter: replay, replay: {{path: {recording}, speed: {SPEED}}}}}
 tracker: {{root: [100, 240], length: 200, tau_s: {TAU_S}}}
-recorder: {{directory: {tmp_path / 'rec'}, path: run, centrelines: true}}
-viewer: {{sink: rrd, rrd_path: {tmp_path / 'view.rrd'}}}
+recorder: {{directory: {tmp_path / "rec"}, path: run, centrelines: true}}
+viewer: {{sink: rrd, rrd_path: {tmp_path / "view.rrd"}}}
 """)
     router = start("router", "--listen", f"tcp/127.0.0.1:{port}")
     services, camera = [], None
@@ -54,8 +58,9 @@ viewer: {{sink: rrd, rrd_path: {tmp_path / 'view.rrd'}}}
             wait_subscribed(bus, bus.keys.camera_events("cam0"), bus.keys.centrelines())  # theirs reached the router
             camera = start("camera", "-c", str(rig))
             deadline = time.monotonic() + 60
-            while time.monotonic() < deadline and (camera.poll() is None or len(statuses) < 3
-                                                   or statuses[-1].events_per_s > 0):
+            while time.monotonic() < deadline and (
+                camera.poll() is None or len(statuses) < 3 or statuses[-1].events_per_s > 0
+            ):
                 msg = status.recv(timeout_s=0.5)  # until the camera is done and a status saw no events
                 if msg is not None:
                     statuses.append(msg)

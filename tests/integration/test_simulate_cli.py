@@ -13,14 +13,31 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.drivers.formats import read_events
 from flagtrack.drivers.formats.centreline import read_centrelines, write_centrelines
 from flagtrack.drivers.sim.kinematics import FlagKinematics, sample_kinematics
-from flagtrack.drivers.sim.simulate import RecordingSpec, optics_and_kinematics
 from flagtrack.drivers.sim.render import LaserLineScene
 from flagtrack.drivers.sim.scenes import simulate_events
+from flagtrack.drivers.sim.simulate import RecordingSpec, optics_and_kinematics
 
 
 def test_simulate_two_recordings_on_two_processes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["simulate", str(tmp_path), "--seed", "5", "--n", "2", "--duration", "0.02", "--jobs", "2",
-                 "--shot-noise", "0.5"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                str(tmp_path),
+                "--seed",
+                "5",
+                "--n",
+                "2",
+                "--duration",
+                "0.02",
+                "--jobs",
+                "2",
+                "--shot-noise",
+                "0.5",
+            ]
+        )
+        == 0
+    )
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert [Path(row["events"]).name for row in lines] == ["sim_00005.raw", "sim_00006.raw"]
     for seed in (5, 6):
@@ -32,8 +49,10 @@ def test_simulate_two_recordings_on_two_processes(tmp_path: Path, capsys: pytest
     spec = RecordingSpec(seed=5, duration_s=0.02)
     optics, kin = optics_and_kinematics(spec)
     from flagtrack.drivers.sim.dvs import DvsParams
-    direct = np.concatenate(list(simulate_events(LaserLineScene(kin, optics, 640, 480), 0, 20_000,
-                                                 DvsParams(shot_noise_hz=0.5), seed=5)))
+
+    direct = np.concatenate(
+        list(simulate_events(LaserLineScene(kin, optics, 640, 480), 0, 20_000, DvsParams(shot_noise_hz=0.5), seed=5))
+    )
     np.testing.assert_array_equal(recording.events, direct)
     truth, attrs = read_centrelines(tmp_path / "sim_00005_truth.h5")
     assert attrs["units"] == "px" and attrs["length"] == pytest.approx(300.0)
@@ -56,8 +75,16 @@ def test_metrics_compare_prints_the_keys_in_order(tmp_path: Path, capsys: pytest
     s_rec = np.linspace(0.0, 300.0, 51)
     x, y = kin.positions(t_rec, s_rec)
     n = len(t_rec)
-    recon = CentrelineBatch(t_s=t_rec, s=s_rec, x=x + 3.0, y=y + 4.0, joints_x=x[:, ::5], joints_y=y[:, ::5],
-                            delta_rms=np.ones(n), n_events=np.ones(n, np.int64))
+    recon = CentrelineBatch(
+        t_s=t_rec,
+        s=s_rec,
+        x=x + 3.0,
+        y=y + 4.0,
+        joints_x=x[:, ::5],
+        joints_y=y[:, ::5],
+        delta_rms=np.ones(n),
+        n_events=np.ones(n, np.int64),
+    )
     recon_path = tmp_path / "recon.h5"
     write_centrelines(recon_path, recon, {"units": "px", "length": 300.0})
     assert main(["metrics", "compare", str(recon_path), str(truth_path), "--json"]) == 0
@@ -79,6 +106,8 @@ def test_simulate_checkerboard(tmp_path: Path, capsys: pytest.CaptureFixture[str
     params = json.loads((tmp_path / "checkerboard.json").read_text())
     corners = np.array(params["corners_px"])
     assert corners.shape == (54, 2) and params["units"] == "m"
-    assert corners[:, 0].min() > 0 and corners[:, 0].max() < 639 and corners[:, 1].min() > 0 and corners[:, 1].max() < 479
+    assert (
+        corners[:, 0].min() > 0 and corners[:, 0].max() < 639 and corners[:, 1].min() > 0 and corners[:, 1].max() < 479
+    )
     events = read_events(tmp_path / "checkerboard.raw").events
     assert len(events) == params["n_events"] > 1000

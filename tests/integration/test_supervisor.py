@@ -13,16 +13,16 @@ from typing import Any
 import numpy as np
 import pytest
 
-from flagtrack.daemon.typed_yaml import from_mapping
-from flagtrack.daemon.rig.config import RigConfig
 from flagtrack.daemon.rig.build import build_services
+from flagtrack.daemon.rig.config import RigConfig
 from flagtrack.daemon.services.runner import ServiceGroup
 from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step
-from flagtrack.daemon.services.supervisor.section import FeedbackConfig
 from flagtrack.daemon.services.supervisor.monitor import point_state
+from flagtrack.daemon.services.supervisor.section import FeedbackConfig
 from flagtrack.daemon.sweep.runlog import completed_points, read_run
 from flagtrack.daemon.sweep.summary import SUMMARY_COLUMNS
 from flagtrack.daemon.transport import Bus
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.drivers.formats import read_events
 from tests.fakes.helpers import wait_until
 
@@ -30,26 +30,51 @@ SPEEDS = [4.0, 5.5]
 
 
 def rig(tmp_path: Path, **supervisor: Any) -> RigConfig:
-    return from_mapping(RigConfig, {
-        "rig": f"sup{time.monotonic_ns() % 10**9}",
-        "camera": {"adapter": "simulated", "packet_us": 4000,  # a light twin: the rig shares 2 cores with the tests
-                   "simulated": {"events_per_px2": 0.5, "noise_rate_hz": 5000, "max_lag_s": 1.0,
-                                 "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4, "tau_amp_s": 0.15}}},
-        "tracker": {"root": [150, 240], "length": 300, "tau_s": 0.002},
-        "recorder": {"directory": str(tmp_path / "rec")},
-        "tunnel": {"driver": "simulated",
-                   "safety": {"max_speed_mps": 8, "max_ramp_mps2": 4.0, "ramp_period_s": 0.05, "tolerance_mps": 0.15,
-                              "settle_timeout_s": 3.0, "poll_period_s": 0.05, "keepalive_s": 0.25, "watchdog_s": 1.0},
-                   "sim": {"tau_s": 0.1, "ramp_mps2": 6.0, "watchdog_s": 1.0}},
-        "supervisor": {"mode": "sweep", "runs_dir": str(tmp_path / "runs"), "run_name": "run",
-                       "onset": {"learn_s": 1.0}, "silence_timeout_s": 2.0,
-                       "sweep": {"speeds": SPEEDS, "branches": ["up", "down"], "settle_s": 0.5, "record_s": 1.0},
-                       **supervisor},
-        "services": ["camera", "tracker", "recorder", "supervisor"],
-    })
+    return from_mapping(
+        RigConfig,
+        {
+            "rig": f"sup{time.monotonic_ns() % 10**9}",
+            "camera": {
+                "adapter": "simulated",
+                "packet_us": 4000,  # a light twin: the rig shares 2 cores with the tests
+                "simulated": {
+                    "events_per_px2": 0.5,
+                    "noise_rate_hz": 5000,
+                    "max_lag_s": 1.0,
+                    "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4, "tau_amp_s": 0.15},
+                },
+            },
+            "tracker": {"root": [150, 240], "length": 300, "tau_s": 0.002},
+            "recorder": {"directory": str(tmp_path / "rec")},
+            "tunnel": {
+                "driver": "simulated",
+                "safety": {
+                    "max_speed_mps": 8,
+                    "max_ramp_mps2": 4.0,
+                    "ramp_period_s": 0.05,
+                    "tolerance_mps": 0.15,
+                    "settle_timeout_s": 3.0,
+                    "poll_period_s": 0.05,
+                    "keepalive_s": 0.25,
+                    "watchdog_s": 1.0,
+                },
+                "sim": {"tau_s": 0.1, "ramp_mps2": 6.0, "watchdog_s": 1.0},
+            },
+            "supervisor": {
+                "mode": "sweep",
+                "runs_dir": str(tmp_path / "runs"),
+                "run_name": "run",
+                "onset": {"learn_s": 1.0},
+                "silence_timeout_s": 2.0,
+                "sweep": {"speeds": SPEEDS, "branches": ["up", "down"], "settle_s": 0.5, "record_s": 1.0},
+                **supervisor,
+            },
+            "services": ["camera", "tracker", "recorder", "supervisor"],
+        },
+    )
 
 
-def run(config: RigConfig, during=None, resume_dir: Path | None = None, timeout_s: float = 90.0):  # noqa: ANN001, ANN201
+def run(config: RigConfig, during=None, resume_dir: Path | None = None, timeout_s: float = 90.0):
     """Run the rig until the supervisor ends; ``during(services, group)`` runs alongside (fault injection)."""
     with Bus(config.bus_config) as bus:
         services = build_services(config, bus, list(config.services), resume_dir=resume_dir)
@@ -80,19 +105,36 @@ def test_a_sweep_records_every_point_and_ends_at_zero(tmp_path: Path) -> None:
         raw = tmp_path / "runs" / "run" / p.raw_file
         assert raw.stat().st_size == p.raw_bytes and len(read_events(raw).events) > 0
     header = (tmp_path / "runs" / "run" / "summary.csv").read_text().splitlines()[0].split(",")
-    assert header[:9] == ["speed_mps", "branch", "state", "amplitude_over_l", "frequency_hz", "twi",
-                          "delta_rms_over_l", "event_rate_mev_s", "raw_bytes"] == list(SUMMARY_COLUMNS[:9])
+    assert (
+        header[:9]
+        == [
+            "speed_mps",
+            "branch",
+            "state",
+            "amplitude_over_l",
+            "frequency_hz",
+            "twi",
+            "delta_rms_over_l",
+            "event_rate_mev_s",
+            "raw_bytes",
+        ]
+        == list(SUMMARY_COLUMNS[:9])
+    )
     assert (tmp_path / "runs" / "run" / "amplitude.png").stat().st_size > 5000
     assert simulator.setpoint_mps == 0.0
 
 
-def fault_after_first_point(action):  # noqa: ANN001, ANN201
+def fault_after_first_point(action):
     def during(services: list, group: ServiceGroup) -> None:
         supervisor = services[0]
         simulator = supervisor.tunnel.simulator
-        wait_until(lambda: supervisor.points_done and simulator.setpoint_mps > SPEEDS[0], 60,
-                   "the first point done and the ramp to the second begun")
+        wait_until(
+            lambda: supervisor.points_done and simulator.setpoint_mps > SPEEDS[0],
+            60,
+            "the first point done and the ramp to the second begun",
+        )
         action(services, group)
+
     return during
 
 
@@ -106,7 +148,9 @@ def fault_after_first_point(action):  # noqa: ANN001, ANN201
         ("sigterm", "stopped by SIGTERM"),
     ],
 )
-def test_faults_end_at_zero_with_finished_points_kept_and_a_resumable_run(tmp_path: Path, fault: str, words: str) -> None:
+def test_faults_end_at_zero_with_finished_points_kept_and_a_resumable_run(
+    tmp_path: Path, fault: str, words: str
+) -> None:
     def inject(services: list, group: ServiceGroup) -> None:
         simulator = services[0].tunnel.simulator
         if fault == "mute":
@@ -160,10 +204,23 @@ def test_feedback_controller_respects_rate_and_bounds() -> None:
 @pytest.mark.slow
 def test_feedback_holds_the_target_amplitude_on_the_simulated_rig(tmp_path: Path) -> None:
     # open loop, 5.2 m/s gives A/L ~ 0.25; the target needs ~4.65 m/s (on the flapping branch)
-    config = rig(tmp_path, mode="feedback", sweep=None,
-                 feedback={"target_amplitude_over_l": 0.18, "start_speed_mps": 5.2, "kp_mps": 2.0, "ki_mps_per_s": 2.0,
-                           "period_s": 0.5, "window_s": 0.4, "max_step_mps": 0.2, "min_speed_mps": 4.5,
-                           "max_speed_mps": 7.0, "duration_s": 25.0})
+    config = rig(
+        tmp_path,
+        mode="feedback",
+        sweep=None,
+        feedback={
+            "target_amplitude_over_l": 0.18,
+            "start_speed_mps": 5.2,
+            "kp_mps": 2.0,
+            "ki_mps_per_s": 2.0,
+            "period_s": 0.5,
+            "window_s": 0.4,
+            "max_step_mps": 0.2,
+            "min_speed_mps": 4.5,
+            "max_speed_mps": 7.0,
+            "duration_s": 25.0,
+        },
+    )
     supervisor, report, simulator = run(config)
     assert supervisor.stop_reason == "finished" and not report.errors
     trace = np.array(supervisor.feedback_trace)
@@ -177,13 +234,38 @@ def test_feedback_holds_the_target_amplitude_on_the_simulated_rig(tmp_path: Path
 @pytest.mark.slow
 def test_point_actions_run_with_placeholders_and_a_required_failure_stops_at_zero(tmp_path: Path) -> None:
     write_raw_path = "import pathlib, sys; pathlib.Path(sys.argv[1]).write_text(sys.argv[2] + ' ' + sys.argv[3])"
-    config = rig(tmp_path, sweep={"speeds": [4.0], "branches": ["up"], "settle_s": 0.3, "record_s": 0.5, "actions": [
-        {"name": "pause", "when": "before_record", "params": {"seconds": 0.1}},
-        {"name": "command", "params": {"argv": [sys.executable, "-c", write_raw_path, "{point_dir}/{point_id}.seen",
-                                                "{raw}", "{speed_mps}"]}},
-        {"name": "command", "params": {"argv": [sys.executable, "-c", "print('bad data'); raise SystemExit(3)"],
-                                       "required": True}},
-    ]})
+    config = rig(
+        tmp_path,
+        sweep={
+            "speeds": [4.0],
+            "branches": ["up"],
+            "settle_s": 0.3,
+            "record_s": 0.5,
+            "actions": [
+                {"name": "pause", "when": "before_record", "params": {"seconds": 0.1}},
+                {
+                    "name": "command",
+                    "params": {
+                        "argv": [
+                            sys.executable,
+                            "-c",
+                            write_raw_path,
+                            "{point_dir}/{point_id}.seen",
+                            "{raw}",
+                            "{speed_mps}",
+                        ]
+                    },
+                },
+                {
+                    "name": "command",
+                    "params": {
+                        "argv": [sys.executable, "-c", "print('bad data'); raise SystemExit(3)"],
+                        "required": True,
+                    },
+                },
+            ],
+        },
+    )
     supervisor, _, simulator = run(config)
     run_dir = tmp_path / "runs" / "run"
     (point,) = read_run(run_dir).latest_points().values()

@@ -44,10 +44,13 @@ def running_tracker(config: TrackingConfig, namespace: str) -> Iterator[tuple[Bu
     tracker's session (``wait_subscribed(service.bus, ...)``) before publishing."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     params = config.tracker_params()
-    with Bus(BusConfig(namespace=namespace, listen=(endpoint,))) as trk_bus, \
-            Bus(BusConfig(namespace=namespace, connect=(endpoint,))) as cam_bus:
-        service = TrackerService(trk_bus, TrackerServiceConfig(status_interval_s=0.2),
-                                 lambda: Tracker(params, sensor_size=(640, 480)))
+    with (
+        Bus(BusConfig(namespace=namespace, listen=(endpoint,))) as trk_bus,
+        Bus(BusConfig(namespace=namespace, connect=(endpoint,))) as cam_bus,
+    ):
+        service = TrackerService(
+            trk_bus, TrackerServiceConfig(status_interval_s=0.2), lambda: Tracker(params, sensor_size=(640, 480))
+        )
         stop = threading.Event()
         thread = threading.Thread(target=service.run, args=(stop,))
         thread.start()
@@ -70,7 +73,9 @@ def live(path: Path, config: TrackingConfig, speed: float = 0.0) -> tuple[Centre
         lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000)
         status = cam_bus.subscribe(cam_bus.keys.tracker_status(), TrackerStatus)
         wait_subscribed(service.bus, cam_bus.keys.centrelines(), cam_bus.keys.tracker_status())
-        CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(ReplayConfig(path, speed=speed))).run(threading.Event())
+        CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(ReplayConfig(path, speed=speed))).run(
+            threading.Event()
+        )
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
         messages = received(lines)
         stop_service()
@@ -86,7 +91,9 @@ def test_replay_through_the_bus_equals_offline_reconstruct(tmp_path: Path, metho
     events = np.concatenate(list(line_events(FLAG, 0, 150_000, 640, 480, QuickLineParams(noise_rate_hz=2e5))))
     path = tmp_path / "flag.raw"
     write_events(path, events, width=640, height=480, encoding="evt3")
-    config = CONFIG.with_overrides(method=__import__("flagtrack.daemon.tracking.section", fromlist=["Method"]).Method(method))
+    config = CONFIG.with_overrides(
+        method=__import__("flagtrack.daemon.tracking.section", fromlist=["Method"]).Method(method)
+    )
     want = offline(path, config)
     got, statuses, service = live(path, config)
     assert len(want) > 500 and len(got) == len(want)
@@ -100,7 +107,7 @@ def test_bad_packets_and_gaps_are_counted_and_tracking_goes_on(tmp_path: Path) -
     """A message that is not a packet, a packet whose EVT bytes are corrupt and a lost packet are
     counted, and the packets around them are still tracked."""
     from flagtrack.daemon.schema import EventPacket
-    from flagtrack.drivers.formats.packets import PacketParams, Packetizer
+    from flagtrack.drivers.formats.packets import Packetizer, PacketParams
 
     events = np.concatenate(list(line_events(FLAG, 0, 40_000, 640, 480)))
     packets = Packetizer("evt3", 640, 480, PacketParams(packet_us=1000)).push(events, None, t_until_us=40_000)
@@ -114,8 +121,21 @@ def test_bad_packets_and_gaps_are_counted_and_tracking_goes_on(tmp_path: Path) -
                 pub.put_bytes(b"not a packet")
             data = corrupt if seq == 20 else packet.data
             if seq != 30:  # lost on the way
-                pub.put(EventPacket("cam0", seq, packet.t_first_us, packet.t_last_us, packet.n_events, 640, 480,
-                                    "evt3", time.time_ns(), packet.t_offset_us, data=data))
+                pub.put(
+                    EventPacket(
+                        "cam0",
+                        seq,
+                        packet.t_first_us,
+                        packet.t_last_us,
+                        packet.n_events,
+                        640,
+                        480,
+                        "evt3",
+                        time.time_ns(),
+                        packet.t_offset_us,
+                        data=data,
+                    )
+                )
         assert wait_for(lambda: service.packets == len(packets) - 1, timeout_s=20)
         updates = 0
         while (msg := lines.recv(timeout_s=1.0)) is not None:
@@ -139,7 +159,7 @@ def test_the_window_ending_with_a_packet_is_published_with_that_packet() -> None
     """The packet's horizon completes the window that ends where the packet ends: its centreline
     does not wait for the next packet (a millisecond later, live)."""
     from flagtrack.daemon.schema import EventPacket
-    from flagtrack.drivers.formats.packets import PacketParams, Packetizer
+    from flagtrack.drivers.formats.packets import Packetizer, PacketParams
 
     events = np.concatenate(list(line_events(FLAG, 0, 6_000, 640, 480)))
     events["t"] -= events["t"][0]  # windows of 250 µs from t = 0: every fourth ends with a 1 ms packet
@@ -149,9 +169,22 @@ def test_the_window_ending_with_a_packet_is_published_with_that_packet() -> None
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
         wait_subscribed(service.bus, cam_bus.keys.centrelines())
         for seq, packet in enumerate(packets[:5]):
-            pub.put(EventPacket("cam0", seq, packet.t_first_us, packet.t_last_us, packet.n_events, 640, 480,
-                                "evt3", time.time_ns(), packet.t_offset_us, data=packet.data))
-            assert wait_for(lambda: service.packets == seq + 1, timeout_s=10)
+            pub.put(
+                EventPacket(
+                    "cam0",
+                    seq,
+                    packet.t_first_us,
+                    packet.t_last_us,
+                    packet.n_events,
+                    640,
+                    480,
+                    "evt3",
+                    time.time_ns(),
+                    packet.t_offset_us,
+                    data=packet.data,
+                )
+            )
+            assert wait_for(lambda seq=seq: service.packets == seq + 1, timeout_s=10)
             t_s: list[float] = []
             deadline = time.monotonic() + 10
             while len(t_s) < 4 and time.monotonic() < deadline:  # this packet's four windows
@@ -163,21 +196,35 @@ def test_the_window_ending_with_a_packet_is_published_with_that_packet() -> None
             assert len(t_s) == 4 and t_s[-1] * 1e6 == pytest.approx(packet.t_last_us + 1 - 125)
 
 
-def publish(pub, packets: list, seqs: list[int] | None = None, end: bool = False, data: dict | None = None,  # noqa: ANN001
-            stream_id: int = 0) -> None:
+def publish(
+    pub, packets: list, seqs: list[int] | None = None, end: bool = False, data: dict | None = None, stream_id: int = 0
+) -> None:
     """Publish packetizer packets as camera cam0 would (``seqs``: their numbers; ``end``: the last ends
     the stream; ``data``: replaced EVT bytes by index; ``stream_id`` 0: as an older peer, without)."""
     from flagtrack.daemon.schema import EventPacket
 
     for i, packet in enumerate(packets):
-        pub.put(EventPacket("cam0", i if seqs is None else seqs[i], packet.t_first_us, packet.t_last_us,
-                            packet.n_events, 640, 480, "evt3", time.time_ns(), packet.t_offset_us,
-                            end_of_stream=end and i == len(packets) - 1, stream_id=stream_id,
-                            data=(data or {}).get(i, packet.data)))
+        pub.put(
+            EventPacket(
+                "cam0",
+                i if seqs is None else seqs[i],
+                packet.t_first_us,
+                packet.t_last_us,
+                packet.n_events,
+                640,
+                480,
+                "evt3",
+                time.time_ns(),
+                packet.t_offset_us,
+                end_of_stream=end and i == len(packets) - 1,
+                stream_id=stream_id,
+                data=(data or {}).get(i, packet.data),
+            )
+        )
 
 
 def packets_of(events: np.ndarray, t_until_us: int) -> list:
-    from flagtrack.drivers.formats.packets import PacketParams, Packetizer
+    from flagtrack.drivers.formats.packets import Packetizer, PacketParams
 
     packetizer = Packetizer("evt3", 640, 480, PacketParams(packet_us=1000))
     return packetizer.push(events, None, t_until_us=t_until_us) + packetizer.flush()
@@ -222,8 +269,10 @@ def test_gaps_and_undecodable_packets_are_logged_as_counted_summaries(caplog: py
     packets = packets_of(events, 60_000)[:60]
     corrupt = np.full(8, 0x9000, dtype="<u2").tobytes()  # a reserved EVT 3.0 word type
     kept = [k for k in range(60) if k % 3 != 1]  # 20 lost on the way
-    with caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.tracker"), \
-            running_tracker(CONFIG, "flagtrack/quiet") as (cam_bus, service, stop_service):
+    with (
+        caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.tracker"),
+        running_tracker(CONFIG, "flagtrack/quiet") as (cam_bus, service, stop_service),
+    ):
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
         publish(pub, [packets[k] for k in kept], seqs=kept, data={i: corrupt for i in range(0, 40, 4)})
         assert wait_for(lambda: service.packets == 40, timeout_s=20)
@@ -240,11 +289,16 @@ def test_packets_a_full_queue_drops_are_counted_reported_and_logged(caplog: pyte
     events = np.concatenate(list(line_events(FLAG, 0, 60_000, 640, 480)))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     params = CONFIG.tracker_params()
-    with caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.tracker"), \
-            Bus(BusConfig(namespace="flagtrack/full", listen=(endpoint,))) as trk_bus, \
-            Bus(BusConfig(namespace="flagtrack/full", connect=(endpoint,))) as cam_bus:
-        service = TrackerService(trk_bus, TrackerServiceConfig(status_interval_s=0.2, queue_packets=10),
-                                 lambda: Tracker(params, sensor_size=(640, 480)))
+    with (
+        caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.tracker"),
+        Bus(BusConfig(namespace="flagtrack/full", listen=(endpoint,))) as trk_bus,
+        Bus(BusConfig(namespace="flagtrack/full", connect=(endpoint,))) as cam_bus,
+    ):
+        service = TrackerService(
+            trk_bus,
+            TrackerServiceConfig(status_interval_s=0.2, queue_packets=10),
+            lambda: Tracker(params, sensor_size=(640, 480)),
+        )
         status = cam_bus.subscribe(cam_bus.keys.tracker_status(), TrackerStatus, capacity=1000)
         wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"))
         wait_subscribed(trk_bus, cam_bus.keys.tracker_status())
@@ -276,16 +330,31 @@ def test_the_tracker_queue_is_bounded_by_bytes_and_keeps_the_newest() -> None:
     packets = packets_of(events, 60_000)[:60]
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     params = CONFIG.tracker_params()
-    with Bus(BusConfig(namespace="flagtrack/bytes", listen=(endpoint,))) as trk_bus, \
-            Bus(BusConfig(namespace="flagtrack/bytes", connect=(endpoint,))) as cam_bus:
-        service = TrackerService(trk_bus, TrackerServiceConfig(queue_bytes=100_000),
-                                 lambda: Tracker(params, sensor_size=(640, 480)))
+    with (
+        Bus(BusConfig(namespace="flagtrack/bytes", listen=(endpoint,))) as trk_bus,
+        Bus(BusConfig(namespace="flagtrack/bytes", connect=(endpoint,))) as cam_bus,
+    ):
+        service = TrackerService(
+            trk_bus, TrackerServiceConfig(queue_bytes=100_000), lambda: Tracker(params, sensor_size=(640, 480))
+        )
         wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"))
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
         sizes = []
         for seq, p in enumerate(packets):
-            message = EventPacket("cam0", seq, p.t_first_us, p.t_last_us, p.n_events, 640, 480, "evt3",
-                                  time.time_ns(), p.t_offset_us, end_of_stream=seq == 59, data=p.data)
+            message = EventPacket(
+                "cam0",
+                seq,
+                p.t_first_us,
+                p.t_last_us,
+                p.n_events,
+                640,
+                480,
+                "evt3",
+                time.time_ns(),
+                p.t_offset_us,
+                end_of_stream=seq == 59,
+                data=p.data,
+            )
             sizes.append(len(encode(message)))
             pub.put(message)
         kept = int(np.searchsorted(np.cumsum(sizes[::-1]), 100_000, side="right"))
@@ -327,7 +396,7 @@ def test_a_duplicated_or_late_packet_is_dropped_not_taken_for_a_restart(tmp_path
     assert {m.stream for m in messages} == {0}
     before_swap = want.t_s < packets[45].t_first_us * 1e-6 - CONFIG.tau_s  # windows the lost packet 45 cannot reach
     assert before_swap.sum() > 150
-    np.testing.assert_allclose(got.x[:before_swap.sum()], want.x[before_swap], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got.x[: before_swap.sum()], want.x[before_swap], rtol=0, atol=1e-9)
     assert abs(len(got) - len(want)) <= 8  # the lost millisecond's windows may differ, the rest goes on
 
 

@@ -10,7 +10,8 @@ import pytest
 
 from flagtrack.daemon.schema import EventPacket, TunnelCommand
 from flagtrack.daemon.transport import Bus, BusConfig, Channel, zenoh_config
-from tests.fakes.helpers import wait_subscribed, wait_until as wait_for  # (wait_for: imported from here too)
+from tests.fakes.helpers import wait_subscribed  # (wait_for: imported from here too)
+from tests.fakes.helpers import wait_until as wait_for
 
 
 def free_port() -> int:
@@ -22,12 +23,14 @@ def free_port() -> int:
 @pytest.fixture()
 def two_buses() -> Iterator[tuple[Bus, Bus]]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with Bus(BusConfig(namespace="flagtrack/test", listen=(endpoint,))) as a, \
-            Bus(BusConfig(namespace="flagtrack/test", connect=(endpoint,))) as b:
+    with (
+        Bus(BusConfig(namespace="flagtrack/test", listen=(endpoint,))) as a,
+        Bus(BusConfig(namespace="flagtrack/test", connect=(endpoint,))) as b,
+    ):
         yield a, b
 
 
-def received(sub, timeout_s: float = 1.0) -> list:  # noqa: ANN001
+def received(sub, timeout_s: float = 1.0) -> list:
     """Every message ``sub`` gets until none comes for ``timeout_s``."""
     messages = []
     while (msg := sub.recv(timeout_s=timeout_s)) is not None:

@@ -8,10 +8,10 @@ from collections.abc import Iterator
 import pytest
 import serial
 
-from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.errors import ConfigError, DriverError
-from flagtrack.drivers.tunnel.ascii import AsciiProtocol, AsciiTunnel
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.drivers.serial.adapter import SerialAdapter
+from flagtrack.drivers.tunnel.ascii import AsciiProtocol, AsciiTunnel
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
 from tests.fakes.helpers import wait_until
@@ -78,7 +78,9 @@ def test_watchdog_reports_fault_then_clears_on_new_setpoint(sim: SimulatedTunnel
 
 def loop_link(protocol: AsciiProtocol) -> tuple[AsciiTunnel, serial.SerialBase]:
     port = serial.serial_for_url("loop://", timeout=0.1)
-    return AsciiTunnel(SerialAdapter("loop://", timeout_s=0.1, eol=protocol.eol.encode(), port_obj=port), protocol), port
+    return AsciiTunnel(
+        SerialAdapter("loop://", timeout_s=0.1, eol=protocol.eol.encode(), port_obj=port), protocol
+    ), port
 
 
 def test_write_only_commands_send_exact_bytes_on_loop() -> None:

@@ -12,9 +12,9 @@ import pytest
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.tunnel.ascii import AsciiTunnel
 from flagtrack.drivers.tunnel.base import TunnelLink
-from flagtrack.drivers.tunnel.setup import TunnelConfig, open_tunnel
 from flagtrack.drivers.tunnel.modbus import ModbusTunnel
 from flagtrack.drivers.tunnel.safe import SafeTunnel, SafetyParams, TunnelAborted
+from flagtrack.drivers.tunnel.setup import TunnelConfig, open_tunnel
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
 from tests.fakes.helpers import wait_until
@@ -38,7 +38,7 @@ class RecordingLink:
         self.setpoints.append((time.monotonic(), speed_mps))
         self.link.write_setpoint_mps(speed_mps)
 
-    def __getattr__(self, name: str):  # noqa: ANN204 - delegate the rest of the link
+    def __getattr__(self, name: str):
         return getattr(self.link, name)
 
 
@@ -142,10 +142,9 @@ def test_start_reads_the_current_speed_and_ramps_from_it() -> None:
 
 def test_exception_inside_the_with_block_ramps_to_zero(sim: SimulatedTunnel) -> None:
     tunnel, _ = make_tunnel(sim)
-    with pytest.raises(RuntimeError, match="analysis crashed"):
-        with tunnel:
-            tunnel.set_speed_mps(3.0)
-            raise RuntimeError("analysis crashed")
+    with pytest.raises(RuntimeError, match="analysis crashed"), tunnel:
+        tunnel.set_speed_mps(3.0)
+        raise RuntimeError("analysis crashed")
     assert sim.setpoint_mps == 0.0
     assert wait_until(lambda: sim.speed_mps < 0.05)
 

@@ -22,20 +22,33 @@ from tests.integration.test_transport import free_port
 TRACKER_ARGS = ["--root", "100", "240", "--length", "200", "--tau", "0.0003"]
 
 
-def flagtrack(*args: str, **kwargs) -> subprocess.CompletedProcess:  # noqa: ANN003
-    return subprocess.run([sys.executable, "-m", "flagtrack.daemon", *args], capture_output=True, text=True,
-                          timeout=120, **kwargs)
+def flagtrack(*args: str, **kwargs) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "flagtrack.daemon", *args], capture_output=True, text=True, timeout=120, **kwargs
+    )
 
 
 def start(*args: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "flagtrack.daemon", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "flagtrack.daemon", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
 
 
 def test_up_replay_gives_exactly_the_reconstruct_centrelines(recording: Path, tmp_path: Path) -> None:
     live, offline, rrd = tmp_path / "live.h5", tmp_path / "offline.h5", tmp_path / "view.rrd"
-    up = flagtrack("up", "--replay", str(recording), "--speed", "0", "--exit-at-eof", "--centrelines", str(live),
-                   "--rrd", str(rrd), *TRACKER_ARGS)
+    up = flagtrack(
+        "up",
+        "--replay",
+        str(recording),
+        "--speed",
+        "0",
+        "--exit-at-eof",
+        "--centrelines",
+        str(live),
+        "--rrd",
+        str(rrd),
+        *TRACKER_ARGS,
+    )
     assert up.returncode == 0, up.stderr
     rec = flagtrack("reconstruct", str(recording), "-o", str(offline), *TRACKER_ARGS)
     assert rec.returncode == 0, rec.stderr
@@ -56,8 +69,10 @@ def test_up_replay_gives_exactly_the_reconstruct_centrelines(recording: Path, tm
         ("camra: {}\n", "'camra'"),
         ("services: [camera, teleporter]\ntracker: {root: [1, 2], length: 100}\n", "teleporter"),
         ("camera: {adapter: replay}\ntracker: {root: [1, 2], length: 100}\n", "replay"),
-        ("camera: {adapter: replay, replay: {path: x.raw, encoding: evt21}}\ntracker: {root: [1, 2], length: 100}\n",
-         "'camera.replay': encoding must be evt2 or evt3"),
+        (
+            "camera: {adapter: replay, replay: {path: x.raw, encoding: evt21}}\ntracker: {root: [1, 2], length: 100}\n",
+            "'camera.replay': encoding must be evt2 or evt3",
+        ),
     ],
 )
 def test_bad_rig_config_is_one_clear_line(tmp_path: Path, yaml_text: str, words: str) -> None:
@@ -76,8 +91,8 @@ rig: t{os.getpid()}
 bus: {{listen: ["tcp/127.0.0.1:{free_port()}"]}}
 camera: {{adapter: simulated, simulated: {{speed_mps: 6.0}}}}
 tracker: {{root: [150, 240], length: 300, tau_s: 0.0005}}
-viewer: {{sink: rrd, rrd_path: {tmp_path / 'live.rrd'}}}
-recorder: {{directory: {tmp_path / 'rec'}, path: run}}
+viewer: {{sink: rrd, rrd_path: {tmp_path / "live.rrd"}}}
+recorder: {{directory: {tmp_path / "rec"}, path: run}}
 {extra}""")
     return config
 
@@ -89,8 +104,9 @@ def size(path: Path) -> int:
 def test_sigint_stops_every_service_cleanly(tmp_path: Path) -> None:
     proc = start("up", "-c", str(sim_rig(tmp_path)))
     recorded, rrd = tmp_path / "rec" / "run.raw", tmp_path / "live.rrd"
-    wait_until(lambda: size(recorded) > 10_000 and size(rrd) > 1000, 60, "the recorder and the viewer writing",
-               poll_s=0.2)
+    wait_until(
+        lambda: size(recorded) > 10_000 and size(rrd) > 1000, 60, "the recorder and the viewer writing", poll_s=0.2
+    )
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
@@ -206,34 +222,70 @@ TRACKER = "tracker: {root: [100, 240], length: 200}\n"
 TRACKER_FORMAT = TRACKER.replace("{", "{{").replace("}", "}}")
 # (command, rig text with {tmp} for the test's folder, the key the error must name, words it must say)
 BAD_FILES = [
-    ("up", "camera: {{adapter: replay, replay: {{path: {tmp}/nope.raw}}}}\n" + TRACKER_FORMAT
-     + "viewer: {{sink: rrd, rrd_path: {tmp}/out/live.rrd}}\nservices: [viewer, camera, tracker]\n",
-     "camera.replay.path", "no such file"),
+    (
+        "up",
+        "camera: {{adapter: replay, replay: {{path: {tmp}/nope.raw}}}}\n"
+        + TRACKER_FORMAT
+        + "viewer: {{sink: rrd, rrd_path: {tmp}/out/live.rrd}}\nservices: [viewer, camera, tracker]\n",
+        "camera.replay.path",
+        "no such file",
+    ),
     ("camera", "camera: {{adapter: replay, replay: {{path: {tmp}/nope.raw}}}}\n", "camera.replay.path", "no such file"),
-    ("up", "camera: {{adapter: simulated}}\ntracker: {{root: [100, 240], length: 200, calibration: cal/none.yaml}}\n"
-     "services: [camera, tracker]\n", "tracker.calibration", "no such file"),
-    ("tracker", "tracker: {{root: [100, 240], length: 200, calibration: {tmp}}}\n", "tracker.calibration",
-     "is a folder"),
+    (
+        "up",
+        "camera: {{adapter: simulated}}\ntracker: {{root: [100, 240], length: 200, calibration: cal/none.yaml}}\n"
+        "services: [camera, tracker]\n",
+        "tracker.calibration",
+        "no such file",
+    ),
+    (
+        "tracker",
+        "tracker: {{root: [100, 240], length: 200, calibration: {tmp}}}\n",
+        "tracker.calibration",
+        "is a folder",
+    ),
     ("up", "recorder: {{directory: {tmp}/blocker/rec}}\nservices: [recorder]\n", "recorder.directory", "is a file"),
     ("recorder", "recorder: {{directory: {tmp}, path: blocker/run}}\n", "recorder.path", "is a file"),
     ("up", "viewer: {{sink: rrd, rrd_path: {tmp}}}\nservices: [viewer]\n", "viewer.rrd_path", "is a folder"),
     ("viewer", "viewer: {{sink: rrd, rrd_path: {tmp}/blocker/live.rrd}}\n", "viewer.rrd_path", "is a file"),
-    ("up", "tunnel: {{driver: simulated}}\nsupervisor: {{runs_dir: {tmp}/blocker/runs}}\nservices: [supervisor]\n",
-     "supervisor.runs_dir", "is a file"),
-    ("up", "camera: {{adapter: prophesee, hardware: {{biases: {{dif_on: 3}}}}}}\nservices: [camera]\n",
-     "camera.hardware.biases.dif_on", "no Prophesee-sensor camera has a bias"),
-    ("camera", "camera: {{adapter: metavision, hardware: {{biases: {{bias_fu: 3}}}}}}\n",
-     "camera.hardware.biases.bias_fu", "not a HAL bias name"),
-    ("camera", "camera: {{adapter: inivation, hardware: {{davis_biases: {{On: [9, 2]}}}}}}\n",
-     "camera.hardware.davis_biases.On", "must be in [0..7, 0..255]"),
-    ("up", "camera: {{adapter: prophesee, hardware: {{roi: {{x: -1, y: 0, width: 10, height: 10}}}}}}\n"
-     "services: [camera]\n", "camera.hardware.roi", "must be >= 0"),
+    (
+        "up",
+        "tunnel: {{driver: simulated}}\nsupervisor: {{runs_dir: {tmp}/blocker/runs}}\nservices: [supervisor]\n",
+        "supervisor.runs_dir",
+        "is a file",
+    ),
+    (
+        "up",
+        "camera: {{adapter: prophesee, hardware: {{biases: {{dif_on: 3}}}}}}\nservices: [camera]\n",
+        "camera.hardware.biases.dif_on",
+        "no Prophesee-sensor camera has a bias",
+    ),
+    (
+        "camera",
+        "camera: {{adapter: metavision, hardware: {{biases: {{bias_fu: 3}}}}}}\n",
+        "camera.hardware.biases.bias_fu",
+        "not a HAL bias name",
+    ),
+    (
+        "camera",
+        "camera: {{adapter: inivation, hardware: {{davis_biases: {{On: [9, 2]}}}}}}\n",
+        "camera.hardware.davis_biases.On",
+        "must be in [0..7, 0..255]",
+    ),
+    (
+        "up",
+        "camera: {{adapter: prophesee, hardware: {{roi: {{x: -1, y: 0, width: 10, height: 10}}}}}}\n"
+        "services: [camera]\n",
+        "camera.hardware.roi",
+        "must be >= 0",
+    ),
 ]
 
 
 @pytest.mark.parametrize(("command", "yaml_text", "key", "words"), BAD_FILES)
-def test_bad_paths_and_camera_settings_are_one_line_before_anything_opens(tmp_path: Path, command: str,
-                                                                          yaml_text: str, key: str, words: str) -> None:
+def test_bad_paths_and_camera_settings_are_one_line_before_anything_opens(
+    tmp_path: Path, command: str, yaml_text: str, key: str, words: str
+) -> None:
     (tmp_path / "blocker").write_text("a file where a folder should be")
     config = tmp_path / "rig.yaml"
     config.write_text(yaml_text.format(tmp=tmp_path))
@@ -251,8 +303,9 @@ def test_files_are_checked_for_the_services_that_run_only(tmp_path: Path) -> Non
     from flagtrack.daemon.rig.config import load_rig
 
     config = tmp_path / "rig.yaml"
-    config.write_text(f"camera: {{adapter: replay, replay: {{path: {tmp_path}/nope.raw}}}}\n{TRACKER}"
-                      "services: [camera, tracker]\n")
+    config.write_text(
+        f"camera: {{adapter: replay, replay: {{path: {tmp_path}/nope.raw}}}}\n{TRACKER}services: [camera, tracker]\n"
+    )
     assert load_rig(config, services=["tracker"]).camera.replay.path == tmp_path / "nope.raw"
     with pytest.raises(ConfigError, match="no such file") as info:
         load_rig(config)
@@ -261,8 +314,17 @@ def test_files_are_checked_for_the_services_that_run_only(tmp_path: Path) -> Non
 
 def test_up_checks_its_centrelines_output_before_anything_opens(recording: Path, tmp_path: Path) -> None:
     (tmp_path / "blocker").write_text("")
-    result = flagtrack("up", "--replay", str(recording), "--exit-at-eof", "--centrelines",
-                       str(tmp_path / "blocker" / "c.h5"), "--rrd", str(tmp_path / "v.rrd"), *TRACKER_ARGS)
+    result = flagtrack(
+        "up",
+        "--replay",
+        str(recording),
+        "--exit-at-eof",
+        "--centrelines",
+        str(tmp_path / "blocker" / "c.h5"),
+        "--rrd",
+        str(tmp_path / "v.rrd"),
+        *TRACKER_ARGS,
+    )
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 2 and len(lines) == 1 and "key '--centrelines'" in lines[0], result.stderr
     assert not (tmp_path / "v.rrd").exists()
@@ -274,21 +336,32 @@ def hardware_rig(tmp_path: Path, hardware: str, services: str) -> Path:
 rig: hw{os.getpid()}
 bus: {{listen: ["tcp/127.0.0.1:{free_port()}"]}}
 camera: {{id: cam0, adapter: prophesee, hardware: {hardware}}}
-viewer: {{sink: rrd, rrd_path: {tmp_path / 'live.rrd'}}}
-recorder: {{directory: {tmp_path / 'rec'}, path: run}}
+viewer: {{sink: rrd, rrd_path: {tmp_path / "live.rrd"}}}
+recorder: {{directory: {tmp_path / "rec"}, path: run}}
 services: {services}
 """)
     return config
 
 
-@pytest.mark.parametrize(("plugged", "hardware", "words"), [
-    (True, '{serial: "V1", roi: {x: 600, y: 0, width: 100, height: 10}}',
-     "key 'camera.hardware.roi': region {'x': 600, 'y': 0, 'width': 100, 'height': 10} does not fit the 640x480"),
-    (True, '{serial: "V1", biases: {inv: 3}}', "key 'camera.hardware.biases.inv': CenturyArks VGA has no bias 'inv'"),
-    (False, '{serial: "V1"}', "camera 'V1': no such Prophesee-sensor camera found"),
-])
+@pytest.mark.parametrize(
+    ("plugged", "hardware", "words"),
+    [
+        (
+            True,
+            '{serial: "V1", roi: {x: 600, y: 0, width: 100, height: 10}}',
+            "key 'camera.hardware.roi': region {'x': 600, 'y': 0, 'width': 100, 'height': 10} does not fit the 640x480",
+        ),
+        (
+            True,
+            '{serial: "V1", biases: {inv: 3}}',
+            "key 'camera.hardware.biases.inv': CenturyArks VGA has no bias 'inv'",
+        ),
+        (False, '{serial: "V1"}', "camera 'V1': no such Prophesee-sensor camera found"),
+    ],
+)
 def test_what_only_the_device_can_refuse_stops_up_before_the_rest_opens(
-        fake_nd, tmp_path: Path, capsys: pytest.CaptureFixture, plugged: bool, hardware: str, words: str) -> None:
+    fake_nd, tmp_path: Path, capsys: pytest.CaptureFixture, plugged: bool, hardware: str, words: str
+) -> None:
     """The hardware camera opens before the bus and the other services: one line, exit 2, no .rrd."""
     from flagtrack.daemon.cli import main
 
@@ -302,8 +375,9 @@ def test_what_only_the_device_can_refuse_stops_up_before_the_rest_opens(
     assert not (tmp_path / "live.rrd").exists() and not (tmp_path / "rec").exists()
 
 
-def test_the_camera_opened_first_is_the_one_the_service_streams(fake_nd, tmp_path: Path,
-                                                                capsys: pytest.CaptureFixture) -> None:
+def test_the_camera_opened_first_is_the_one_the_service_streams(
+    fake_nd, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     """`up` hands the device it opened to the camera service: every event the sensor produced up to
     the last packet is recorded, then the stall ends the rig (exit 1) and the device is closed once."""
     from flagtrack.daemon.cli import main
@@ -353,8 +427,10 @@ services: [camera, tracker]
 def test_router_stops_on_the_first_signal_and_is_forced_by_a_second(tmp_path: Path) -> None:
     """`flagtrack router` as the other services: one signal closes it (exit 0), a second one while it
     closes forces it out (exit 130)."""
-    for signals, code, words in (((signal.SIGTERM,), 0, "flagtrack router: stopped"),
-                                 ((signal.SIGTERM, signal.SIGINT), 130, "forcing exit")):
+    for signals, code, words in (
+        ((signal.SIGTERM,), 0, "flagtrack router: stopped"),
+        ((signal.SIGTERM, signal.SIGINT), 130, "forcing exit"),
+    ):
         port = free_port()
         router = start("router", "--listen", f"tcp/127.0.0.1:{port}")
         try:

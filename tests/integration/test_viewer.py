@@ -21,14 +21,17 @@ from tests.integration.test_transport import free_port, wait_for
 def test_viewer_logs_events_and_centrelines_to_rrd(tmp_path: Path) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     rrd = tmp_path / "view.rrd"
-    with Bus(BusConfig(namespace="flagtrack/view", listen=(endpoint,))) as bus, \
-            Bus(BusConfig(namespace="flagtrack/view", connect=(endpoint,))) as source:
+    with (
+        Bus(BusConfig(namespace="flagtrack/view", listen=(endpoint,))) as bus,
+        Bus(BusConfig(namespace="flagtrack/view", connect=(endpoint,))) as source,
+    ):
         viewer = ViewerService(bus, ViewerConfig(sink="rrd", rrd_path=rrd, geometry_rate_hz=1000.0))
         stop = threading.Event()
         thread = threading.Thread(target=viewer.run, args=(stop,))
         thread.start()
-        wait_subscribed(source, source.keys.camera_events("cam0"), source.keys.centrelines(),
-                        source.keys.event_rate("cam0"))
+        wait_subscribed(
+            source, source.keys.camera_events("cam0"), source.keys.centrelines(), source.keys.event_rate("cam0")
+        )
         events_pub = source.publisher(source.keys.camera_events("cam0"))
         lines_pub = source.publisher(source.keys.centrelines())
         rate_pub = source.publisher(source.keys.event_rate("cam0"))
@@ -37,15 +40,38 @@ def test_viewer_logs_events_and_centrelines_to_rrd(tmp_path: Path) -> None:
         for chunk in line_events(WavyFlag(), 0, 50_000, 640, 480, chunk_us=1000):
             for p in packetizer.push(chunk):
                 seq += 1
-                events_pub.put(EventPacket("cam0", seq, p.t_first_us, p.t_last_us, p.n_events, 640, 480,
-                                           "evt3", time.time_ns(), t_offset_us=p.t_offset_us, data=p.data))
+                events_pub.put(
+                    EventPacket(
+                        "cam0",
+                        seq,
+                        p.t_first_us,
+                        p.t_last_us,
+                        p.n_events,
+                        640,
+                        480,
+                        "evt3",
+                        time.time_ns(),
+                        t_offset_us=p.t_offset_us,
+                        data=p.data,
+                    )
+                )
             time.sleep(0.002)  # paced as a camera sends them
         n_t, n_s = 20, 51
-        batch = CentrelineBatch(np.arange(n_t) * 1e-3, np.linspace(0, 200, n_s), np.zeros((n_t, n_s)),
-                                np.zeros((n_t, n_s)), np.zeros((n_t, 11)), np.zeros((n_t, 11)), np.ones(n_t),
-                                np.ones(n_t, dtype=np.int64))
-        lines_pub.put(CentrelineMessage.from_batch(batch, source="tracker", seq=0, units="px",
-                                                   source_ns=np.zeros(n_t, dtype=np.int64)))
+        batch = CentrelineBatch(
+            np.arange(n_t) * 1e-3,
+            np.linspace(0, 200, n_s),
+            np.zeros((n_t, n_s)),
+            np.zeros((n_t, n_s)),
+            np.zeros((n_t, 11)),
+            np.zeros((n_t, 11)),
+            np.ones(n_t),
+            np.ones(n_t, dtype=np.int64),
+        )
+        lines_pub.put(
+            CentrelineMessage.from_batch(
+                batch, source="tracker", seq=0, units="px", source_ns=np.zeros(n_t, dtype=np.int64)
+            )
+        )
         rate_pub.put(EventRate("cam0", 50_000, 0.1, 1000, 1e4, 0.5))
         assert wait_for(lambda: viewer.updates == n_t and viewer.frames > 0)
         stop.set()
@@ -70,10 +96,21 @@ def test_the_rrd_holds_each_update_centreline_at_its_time(tmp_path: Path) -> Non
     logger = RerunLogger(rec, cfg)
     n_t, n_s = 5, 7
     x = np.arange(n_t * n_s, dtype=float).reshape(n_t, n_s)
-    batch = CentrelineBatch(1.0 + np.arange(n_t) * 1e-3, np.linspace(0, 200, n_s), x, -2 * x, np.zeros((n_t, 11)),
-                            np.zeros((n_t, 11)), np.ones(n_t), np.ones(n_t, dtype=np.int64))
-    logger.centrelines(CentrelineMessage.from_batch(batch, source="tracker", seq=0, units="px",
-                                                    source_ns=np.zeros(n_t, dtype=np.int64)))
+    batch = CentrelineBatch(
+        1.0 + np.arange(n_t) * 1e-3,
+        np.linspace(0, 200, n_s),
+        x,
+        -2 * x,
+        np.zeros((n_t, 11)),
+        np.zeros((n_t, 11)),
+        np.ones(n_t),
+        np.ones(n_t, dtype=np.int64),
+    )
+    logger.centrelines(
+        CentrelineMessage.from_batch(
+            batch, source="tracker", seq=0, units="px", source_ns=np.zeros(n_t, dtype=np.int64)
+        )
+    )
     assert logger.frame(0.0, force=True)
     rec.flush()
     rec.disconnect()
@@ -87,8 +124,16 @@ def test_the_rrd_holds_each_update_centreline_at_its_time(tmp_path: Path) -> Non
 
 def centreline_batch(n_t: int, n_s: int, t0_s: float = 0.0) -> CentrelineBatch:
     x = np.arange(n_t * n_s, dtype=float).reshape(n_t, n_s)
-    return CentrelineBatch(t0_s + np.arange(n_t) * 1e-3, np.linspace(0, 200, n_s), x, -x, np.zeros((n_t, 11)),
-                           np.zeros((n_t, 11)), np.ones(n_t), np.ones(n_t, dtype=np.int64))
+    return CentrelineBatch(
+        t0_s + np.arange(n_t) * 1e-3,
+        np.linspace(0, 200, n_s),
+        x,
+        -x,
+        np.zeros((n_t, 11)),
+        np.zeros((n_t, 11)),
+        np.ones(n_t),
+        np.ones(n_t, dtype=np.int64),
+    )
 
 
 def test_messages_the_viewer_cannot_show_are_counted_and_it_goes_on(tmp_path: Path) -> None:
@@ -97,37 +142,60 @@ def test_messages_the_viewer_cannot_show_are_counted_and_it_goes_on(tmp_path: Pa
     setups (51 and 7 samples) in one frame: the viewer counts what it cannot show and logs the rest."""
     import dataclasses
 
-    from flagtrack.daemon.schema import TunnelState, encode
     from rerun.chunk import RrdReader
+
+    from flagtrack.daemon.schema import TunnelState, encode
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     rrd = tmp_path / "bad.rrd"
-    with Bus(BusConfig(namespace="flagtrack/vbad", listen=(endpoint,))) as bus, \
-            Bus(BusConfig(namespace="flagtrack/vbad", connect=(endpoint,))) as source:
+    with (
+        Bus(BusConfig(namespace="flagtrack/vbad", listen=(endpoint,))) as bus,
+        Bus(BusConfig(namespace="flagtrack/vbad", connect=(endpoint,))) as source,
+    ):
         viewer = ViewerService(bus, ViewerConfig(sink="rrd", rrd_path=rrd, geometry_rate_hz=5.0))
         stop = threading.Event()
         thread = threading.Thread(target=viewer.run, args=(stop,))
         thread.start()
         try:
-            wait_subscribed(source, source.keys.camera_events("cam0"), source.keys.centrelines(),
-                            source.keys.tunnel_state())
+            wait_subscribed(
+                source, source.keys.camera_events("cam0"), source.keys.centrelines(), source.keys.tunnel_state()
+            )
             events_pub = source.publisher(source.keys.camera_events("cam0"))
             lines_pub = source.publisher(source.keys.centrelines())
             tunnel_pub = source.publisher(source.keys.tunnel_state())
             corrupt = np.full(8, 0x9000, dtype="<u2").tobytes()  # a reserved EVT 3.0 word type
             events_pub.put(EventPacket("cam0", 0, 0, 999, 8, 640, 480, "evt3", time.time_ns(), data=corrupt))
             zeros = np.zeros(4, dtype=np.int64)
-            good = CentrelineMessage.from_batch(centreline_batch(4, 51), source="tracker", seq=0, units="px",
-                                                source_ns=zeros)
+            good = CentrelineMessage.from_batch(
+                centreline_batch(4, 51), source="tracker", seq=0, units="px", source_ns=zeros
+            )
             lines_pub.put_bytes(encode(dataclasses.replace(good, joints_x=good.joints_x[:, 0])))
-            assert wait_for(lambda: viewer.subs["centrelines"].malformed == 1  # taken in, and the packet's frame
-                            and viewer.problems.totals.get("undecodable packets") == 1)  # drawn
+            assert wait_for(
+                lambda: (
+                    viewer.subs["centrelines"].malformed == 1  # taken in, and the packet's frame
+                    and viewer.problems.totals.get("undecodable packets") == 1
+                )
+            )  # drawn
             frames = viewer.frames
             tunnel_pub.put(TunnelState(3.0, 3.0, "steady", t_wall_s=float("nan")))
-            lines_pub.put(CentrelineMessage.from_batch(centreline_batch(20, 51), source="tracker", seq=1, units="px",
-                                                       source_ns=np.zeros(20, dtype=np.int64)))
-            lines_pub.put(CentrelineMessage.from_batch(centreline_batch(5, 7, 0.1), source="tracker", seq=2,
-                                                       units="px", source_ns=np.zeros(5, dtype=np.int64)))
+            lines_pub.put(
+                CentrelineMessage.from_batch(
+                    centreline_batch(20, 51),
+                    source="tracker",
+                    seq=1,
+                    units="px",
+                    source_ns=np.zeros(20, dtype=np.int64),
+                )
+            )
+            lines_pub.put(
+                CentrelineMessage.from_batch(
+                    centreline_batch(5, 7, 0.1),
+                    source="tracker",
+                    seq=2,
+                    units="px",
+                    source_ns=np.zeros(5, dtype=np.int64),
+                )
+            )
             assert wait_for(lambda: viewer.updates == 25 and viewer.unusable >= 1)
             assert wait_for(lambda: viewer.frames > frames)  # the frame that draws them
             assert thread.is_alive()
@@ -137,6 +205,10 @@ def test_messages_the_viewer_cannot_show_are_counted_and_it_goes_on(tmp_path: Pa
     assert not thread.is_alive()
     assert viewer.subs["centrelines"].malformed == 1 and viewer.unusable == 1
     assert viewer.problems.totals == {"undecodable packets": 1, "messages that could not be shown": 1}
-    strips = [strip for chunk in RrdReader(rrd).stream() if chunk.entity_path == "/tracker/centreline"
-              for strip in chunk.to_record_batch().column("LineStrips2D:strips").to_pylist()]
+    strips = [
+        strip
+        for chunk in RrdReader(rrd).stream()
+        if chunk.entity_path == "/tracker/centreline"
+        for strip in chunk.to_record_batch().column("LineStrips2D:strips").to_pylist()
+    ]
     assert sorted(len(strip[0]) for strip in strips) == [7] * 5 + [51] * 20

@@ -45,16 +45,35 @@ def logged(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, dict[str
     packetizer = Packetizer("evt3", 640, 480)
     events = np.concatenate(list(line_events(WavyFlag(), 990_000, 1_010_000, 640, 480, chunk_us=1000)))
     for seq, p in enumerate(packetizer.push(events) + packetizer.flush()):
-        logger.events(EventPacket("cam0", seq, p.t_first_us, p.t_last_us, p.n_events, 640, 480, "evt3",
-                                  SENT_NS + (p.t_last_us - 1_010_000) * 1000, t_offset_us=p.t_offset_us, data=p.data))
+        logger.events(
+            EventPacket(
+                "cam0",
+                seq,
+                p.t_first_us,
+                p.t_last_us,
+                p.n_events,
+                640,
+                480,
+                "evt3",
+                SENT_NS + (p.t_last_us - 1_010_000) * 1000,
+                t_offset_us=p.t_offset_us,
+                data=p.data,
+            )
+        )
     t_s = 1.0 + np.arange(N_T) * 1e-3
     x = np.tile(np.linspace(100, 300, N_S), (N_T, 1))
     y = 240 + np.arange(N_T)[:, None] * np.linspace(0, 1, N_S)[None, :]
     joints = np.tile(np.linspace(100, 300, N_J + 1), (N_T, 1))
     delta, used = 0.5 + np.arange(N_T) * 0.1, 1000 + np.arange(N_T)
-    logger.centrelines(CentrelineMessage.from_batch(
-        CentrelineBatch(t_s, np.linspace(0, 200, N_S), x, y, joints, joints * 0 + 240, delta, used),
-        source="tracker", seq=0, units="px", source_ns=np.zeros(N_T, dtype=np.int64)))
+    logger.centrelines(
+        CentrelineMessage.from_batch(
+            CentrelineBatch(t_s, np.linspace(0, 200, N_S), x, y, joints, joints * 0 + 240, delta, used),
+            source="tracker",
+            seq=0,
+            units="px",
+            source_ns=np.zeros(N_T, dtype=np.int64),
+        )
+    )
     assert logger.frame(0.0, force=True)
     logger.rate(EventRate("cam0", 1_010_000, 0.1, 123, 4.5e6, 0.2))
     logger.tunnel(TunnelState(speed_mps=5.25, setpoint_mps=5.5, state="running", t_wall_s=SENT_NS * 1e-9))
@@ -72,8 +91,9 @@ def test_joints_are_one_point_set_per_update(logged: tuple) -> None:
     np.testing.assert_allclose(np.array(joints["camera"]) * 1e-9, truth["t_s"], atol=1e-9)
 
 
-@pytest.mark.parametrize(("entity", "key"), [("/plots/delta_rms", "delta"), ("/plots/events_per_update", "used"),
-                                             ("/plots/tip_y", "tip_y")])
+@pytest.mark.parametrize(
+    ("entity", "key"), [("/plots/delta_rms", "delta"), ("/plots/events_per_update", "used"), ("/plots/tip_y", "tip_y")]
+)
 def test_per_update_scalars_hold_the_values(logged: tuple, entity: str, key: str) -> None:
     columns, truth = logged
     values = np.array([v[0] for v in columns[entity]["Scalars:scalars"]])

@@ -34,8 +34,11 @@ class Rotation:
     amp_rad: float = 0.4
 
     def positions(self, t_s: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        theta = np.deg2rad(self.direction_deg) + self.amp_rad * np.sin(
-            2 * np.pi * self.frequency_hz * np.atleast_1d(np.asarray(t_s, dtype=np.float64)))[:, None]
+        theta = (
+            np.deg2rad(self.direction_deg)
+            + self.amp_rad
+            * np.sin(2 * np.pi * self.frequency_hz * np.atleast_1d(np.asarray(t_s, dtype=np.float64)))[:, None]
+        )
         s_row = np.asarray(s, dtype=np.float64)[None, :]
         return self.root[0] + s_row * np.cos(theta), self.root[1] + s_row * np.sin(theta)
 
@@ -51,8 +54,9 @@ KINEMATICS: dict[str, LineKinematics] = {
 HOT_RATE_HZ = (1000.0, 5000.0)
 
 
-def swept_pixels(kin: LineKinematics, n_root: int, n_tip: int, rng: np.random.Generator,
-                 max_offset_px: float = 3.0) -> np.ndarray:
+def swept_pixels(
+    kin: LineKinematics, n_root: int, n_tip: int, rng: np.random.Generator, max_offset_px: float = 3.0
+) -> np.ndarray:
     """(n_root + n_tip, 2) int64 pixels (x, y) on and next to the path the line sweeps.
 
     ``n_root`` pixels near the root (arc length 0.05-0.2 L: inside the search areas of the first
@@ -77,8 +81,9 @@ def swept_pixels(kin: LineKinematics, n_root: int, n_tip: int, rng: np.random.Ge
     return np.array(pixels, dtype=np.int64)
 
 
-def hot_pixels(events: np.ndarray, pixels: np.ndarray, rate_hz: tuple[float, float], rng: np.random.Generator
-               ) -> np.ndarray:
+def hot_pixels(
+    events: np.ndarray, pixels: np.ndarray, rate_hz: tuple[float, float], rng: np.random.Generator
+) -> np.ndarray:
     """Add Poisson trains at ``pixels`` ((n, 2) x, y), each at a rate drawn in ``rate_hz``."""
     t0, t1 = int(events["t"][0]), int(events["t"][-1]) + 1
     parts = [events]
@@ -95,8 +100,9 @@ def hot_pixels(events: np.ndarray, pixels: np.ndarray, rate_hz: tuple[float, flo
     return merged[np.argsort(merged["t"], kind="stable")]
 
 
-def background_noise(events: np.ndarray, n: int, rng: np.random.Generator, width: int = WIDTH,
-                     height: int = HEIGHT) -> np.ndarray:
+def background_noise(
+    events: np.ndarray, n: int, rng: np.random.Generator, width: int = WIDTH, height: int = HEIGHT
+) -> np.ndarray:
     """Add ``n`` events at uniform random times (over the events' span), pixels and polarities."""
     noise = np.empty(n, dtype=EVENT_DTYPE)
     noise["t"] = rng.integers(int(events["t"][0]), int(events["t"][-1]) + 1, n)
@@ -107,8 +113,14 @@ def background_noise(events: np.ndarray, n: int, rng: np.random.Generator, width
     return merged[np.argsort(merged["t"], kind="stable")]
 
 
-def threshold_spread(events: np.ndarray, keep_mean: float, keep_sd: float, rng: np.random.Generator,
-                     width: int = WIDTH, height: int = HEIGHT) -> np.ndarray:
+def threshold_spread(
+    events: np.ndarray,
+    keep_mean: float,
+    keep_sd: float,
+    rng: np.random.Generator,
+    width: int = WIDTH,
+    height: int = HEIGHT,
+) -> np.ndarray:
     """Keep each event with its pixel's probability, drawn once per pixel ~ N(keep_mean, keep_sd) in [0, 1]."""
     keep_p = np.clip(rng.normal(keep_mean, keep_sd, (height, width)), 0.0, 1.0)
     p = keep_p[events["y"].astype(np.int64) % height, events["x"].astype(np.int64) % width]
@@ -116,7 +128,9 @@ def threshold_spread(events: np.ndarray, keep_mean: float, keep_sd: float, rng: 
 
 
 @njit
-def _refractory_mask(t: np.ndarray, x: np.ndarray, y: np.ndarray, period_us: int, width: int, height: int) -> np.ndarray:
+def _refractory_mask(
+    t: np.ndarray, x: np.ndarray, y: np.ndarray, period_us: int, width: int, height: int
+) -> np.ndarray:
     last = np.full(width * height, -(1 << 62), dtype=np.int64)
     keep = np.zeros(len(t), dtype=np.bool_)
     for i in range(len(t)):
@@ -157,8 +171,9 @@ def sensor_defects(events: np.ndarray, pixels: np.ndarray, rng: np.random.Genera
 CONDITIONS = ("clean", "noisy", "defects", "noisy+defects")
 
 
-def recording(name: str, condition: str, duration_s: float = 0.15, events_per_px2: float = 20.0,
-              seed: int = 1) -> tuple[LineKinematics, np.ndarray]:
+def recording(
+    name: str, condition: str, duration_s: float = 0.15, events_per_px2: float = 20.0, seed: int = 1
+) -> tuple[LineKinematics, np.ndarray]:
     """A test recording: kinematics ``name`` under ``condition`` (one of :data:`CONDITIONS`).
 
     ``noisy``: 10 % of the line events dropped and as many uniform noise events as there are
@@ -175,8 +190,11 @@ def recording(name: str, condition: str, duration_s: float = 0.15, events_per_px
     n_clean = 0
     if condition in ("noisy", "noisy+defects"):
         n_clean = sum(len(e) for e in line_events(kin, 0, t1, WIDTH, HEIGHT, params, seed=seed))
-        params = QuickLineParams(events_per_px2=events_per_px2, drop_fraction=0.1,
-                                 noise_rate_hz=n_clean / duration_s if condition == "noisy" else 0.0)
+        params = QuickLineParams(
+            events_per_px2=events_per_px2,
+            drop_fraction=0.1,
+            noise_rate_hz=n_clean / duration_s if condition == "noisy" else 0.0,
+        )
     events = np.concatenate(list(line_events(kin, 0, t1, WIDTH, HEIGHT, params, seed=seed)))
     if condition in ("defects", "noisy+defects"):
         rng = np.random.default_rng(seed + 1000)
@@ -200,4 +218,4 @@ def tip_and_shape_errors(batch: CentrelineBatch, kin: LineKinematics) -> tuple[f
     tip = np.hypot(batch.x[:, -1] - x_ref[:, -1], batch.y[:, -1] - y_ref[:, -1])
     d2 = (batch.x - x_ref) ** 2 + (batch.y - y_ref) ** 2
     eps = np.sqrt(np.trapezoid(d2, batch.s, axis=1) / length)
-    return float(np.sqrt(np.mean(tip ** 2)) / length), float(eps.max() / length)
+    return float(np.sqrt(np.mean(tip**2)) / length), float(eps.max() / length)

@@ -13,15 +13,47 @@ from flagtrack.daemon.bench.accuracy_suite.evaluate import loss_time_cycles
 from flagtrack.daemon.bench.accuracy_suite.report import sweep_section, targets_section
 
 
-def _row(part: str, kinematics: int, level: float, method: str, delta: float, *, joints: int = 10,
-         tau: float = 5e-3, n_events: int = 1000, t_loss: float = math.nan) -> dict:
-    return {"name": f"{part}_{kinematics}_{level:g}", "part": part, "kinematics": kinematics, "seed": kinematics,
-            "level": level, "frequency_hz": 10.0, "wavelength_over_l": 2.0, "w_travel": 0.5,
-            "peak_to_peak_over_l": 0.5, "duration_s": 1.0, "leak_rate_hz": 0.0, "shot_noise_hz": 0.0,
-            "n_events": n_events, "method": method, "joints": joints, "tau_over_t": tau, "events_kept": n_events,
-            "track_wall_s": 0.1, "delta_rms_over_l": delta, "max_eps_rms_over_l": 2 * delta, "twi": 0.5,
-            "twi_ref": 0.5 + delta, "twi_abs_error": delta, "twi_rel_error": delta / (0.5 + delta),
-            "t_loss_cycles": t_loss, "evaluated_cycles": 10.0, "max_delta_over_l": 3 * delta}
+def _row(
+    part: str,
+    kinematics: int,
+    level: float,
+    method: str,
+    delta: float,
+    *,
+    joints: int = 10,
+    tau: float = 5e-3,
+    n_events: int = 1000,
+    t_loss: float = math.nan,
+) -> dict:
+    return {
+        "name": f"{part}_{kinematics}_{level:g}",
+        "part": part,
+        "kinematics": kinematics,
+        "seed": kinematics,
+        "level": level,
+        "frequency_hz": 10.0,
+        "wavelength_over_l": 2.0,
+        "w_travel": 0.5,
+        "peak_to_peak_over_l": 0.5,
+        "duration_s": 1.0,
+        "leak_rate_hz": 0.0,
+        "shot_noise_hz": 0.0,
+        "n_events": n_events,
+        "method": method,
+        "joints": joints,
+        "tau_over_t": tau,
+        "events_kept": n_events,
+        "track_wall_s": 0.1,
+        "delta_rms_over_l": delta,
+        "max_eps_rms_over_l": 2 * delta,
+        "twi": 0.5,
+        "twi_ref": 0.5 + delta,
+        "twi_abs_error": delta,
+        "twi_rel_error": delta / (0.5 + delta),
+        "t_loss_cycles": t_loss,
+        "evaluated_cycles": 10.0,
+        "max_delta_over_l": 3 * delta,
+    }
 
 
 def test_seeds_depend_only_on_the_benchmark_seed() -> None:
@@ -31,14 +63,15 @@ def test_seeds_depend_only_on_the_benchmark_seed() -> None:
     assert a == b and len({t.seed for t in a}) == preset.n_family
     assert {t.seed for t in plan.family_tasks(8, preset, ("paper",))}.isdisjoint({t.seed for t in a})
     clean = plan.sweep_clean_tasks(7, preset, ("paper",), params=False)
-    assert [t.seed for t in clean] == [t.seed for t in a[:preset.n_sweep]]  # the family's first kinematics
+    assert [t.seed for t in clean] == [t.seed for t in a[: preset.n_sweep]]  # the family's first kinematics
 
 
 def test_shot_levels_add_the_papers_share_of_noise_events() -> None:
     preset = plan.Preset(shot_levels=(20.0, 37.0))
     clean = plan.sweep_clean_tasks(0, preset, ("paper", "robust"), params=True)[0]
-    tasks = plan.shot_tasks(clean, clean_events=3_000_000, duration_s=0.5, preset=preset,
-                            methods=("paper", "robust"), params=True)
+    tasks = plan.shot_tasks(
+        clean, clean_events=3_000_000, duration_s=0.5, preset=preset, methods=("paper", "robust"), params=True
+    )
     pixels = clean.width * clean.height
     # level 37 doubles the events: as many noise events as clean ones over the recording
     assert tasks[1].shot_noise_hz * 0.5 * pixels == pytest.approx(3_000_000)
@@ -68,11 +101,15 @@ def test_loss_time_is_the_first_crossing_in_cycles() -> None:
 
 
 def test_tables_split_by_part_with_noise_ratio() -> None:
-    rows = [_row("family", 0, 0, "paper", 0.004), _row("clean", 0, 0, "paper", 0.002, n_events=1000),
-            _row("leak", 0, 1.2, "paper", 0.3, n_events=3000, t_loss=2.5),
-            _row("shot", 0, 20, "paper", 0.003, n_events=1540),
-            _row("shot", 0, 70, "paper", 0.02, n_events=2900),
-            _row("clean", 0, 0, "paper", 0.005, joints=4), _row("shot", 0, 20, "paper", 0.009, tau=1e-3)]
+    rows = [
+        _row("family", 0, 0, "paper", 0.004),
+        _row("clean", 0, 0, "paper", 0.002, n_events=1000),
+        _row("leak", 0, 1.2, "paper", 0.3, n_events=3000, t_loss=2.5),
+        _row("shot", 0, 20, "paper", 0.003, n_events=1540),
+        _row("shot", 0, 70, "paper", 0.02, n_events=2900),
+        _row("clean", 0, 0, "paper", 0.005, joints=4),
+        _row("shot", 0, 20, "paper", 0.009, tau=1e-3),
+    ]
     parts = tables.split_parts(rows)
     assert [r["level"] for r in parts["leak"]] == [0, 1.2]
     assert [r["n_over_n0"] for r in parts["shot_noise"]] == pytest.approx([1.0, 1.54, 2.9])
@@ -104,8 +141,12 @@ def test_family_summary_gives_distributions_per_method() -> None:
 def test_sweep_summary_and_tolerated_level() -> None:
     rows = tables.with_noise_ratio(
         [_row("clean", k, 0, "robust", 0.002) for k in range(2)]
-        + [_row("leak", k, lv, "robust", d, t_loss=(1.5 if d > 0.1 else math.nan))
-           for k in range(2) for lv, d in ((1.2, 0.004 + k * 0.004), (2.4, 0.009 + k * 0.002), (3.6, 0.2))])
+        + [
+            _row("leak", k, lv, "robust", d, t_loss=(1.5 if d > 0.1 else math.nan))
+            for k in range(2)
+            for lv, d in ((1.2, 0.004 + k * 0.004), (2.4, 0.009 + k * 0.002), (3.6, 0.2))
+        ]
+    )
     summary = tables.sweep_summary(rows)
     assert [e["level"] for e in summary] == [0.0, 1.2, 2.4, 3.6]
     assert summary[2]["delta_rms_over_l_max"] == pytest.approx(0.011)

@@ -60,7 +60,7 @@ def test_fit_recovers_a_polynomial_and_leave_one_out_matches_refits() -> None:
     for k in (0, 17, 59):
         keep = np.arange(60) != k
         refit = Polynomial2D.fit(x[keep], y[keep], noisy_x[keep], ty[keep], 3, truth.centre, truth.scale)
-        assert loo_x[k] == pytest.approx(refit(x[k:k + 1], y[k:k + 1])[0][0] - noisy_x[k], abs=1e-9)
+        assert loo_x[k] == pytest.approx(refit(x[k : k + 1], y[k : k + 1])[0][0] - noisy_x[k], abs=1e-9)
 
 
 def test_jacobian_matches_finite_differences() -> None:
@@ -81,14 +81,18 @@ def test_fit_rejects_too_few_points_and_bad_coefficients() -> None:
         Polynomial2D(2, (0.0, 0.0), 1.0, (1.0,) * 5, (1.0,) * 6)
 
 
-@pytest.mark.parametrize("frame, origin_ij, x_step_ij, y_step_ij", [
-    (GridFrame(), (0, 0), (1, 0), (0, -1)),
-    (GridFrame("bottom-left", Direction.RIGHT), (0, 5), (1, 0), (0, -1)),
-    (GridFrame("top-right", Direction.DOWN), (8, 0), (0, 1), (1, 0)),
-    (GridFrame("3,2", Direction.LEFT, Direction.UP), (3, 2), (-1, 0), (0, -1)),
-])
-def test_frame_puts_the_origin_and_axes_where_asked(frame: GridFrame, origin_ij: tuple[int, int],
-                                                    x_step_ij: tuple[int, int], y_step_ij: tuple[int, int]) -> None:
+@pytest.mark.parametrize(
+    "frame, origin_ij, x_step_ij, y_step_ij",
+    [
+        (GridFrame(), (0, 0), (1, 0), (0, -1)),
+        (GridFrame("bottom-left", Direction.RIGHT), (0, 5), (1, 0), (0, -1)),
+        (GridFrame("top-right", Direction.DOWN), (8, 0), (0, 1), (1, 0)),
+        (GridFrame("3,2", Direction.LEFT, Direction.UP), (3, 2), (-1, 0), (0, -1)),
+    ],
+)
+def test_frame_puts_the_origin_and_axes_where_asked(
+    frame: GridFrame, origin_ij: tuple[int, int], x_step_ij: tuple[int, int], y_step_ij: tuple[int, int]
+) -> None:
     plane = GridFrame(frame.origin_corner, frame.x_axis, frame.y_axis, (0.001, -0.002)).plane_coordinates(9, 6, 0.02)
     i0, j0 = origin_ij
     assert plane[j0, i0] == pytest.approx([0.001, -0.002])
@@ -111,15 +115,14 @@ def test_frame_errors_name_the_problem() -> None:
         GridFrame("9,0").origin_index(9, 6)
 
 
-def _tilted_calibration(degree: int = 3):  # noqa: ANN202
+def _tilted_calibration(degree: int = 3):
     """A calibration fitted on the exact corners of a 11x9 board seen by the paper's tilted camera."""
     optics = tilted_pinhole()
     board = BoardSpec((11, 9), 0.02)
     frame = GridFrame("1,4", Direction.RIGHT)
     plane = frame.plane_coordinates(11, 9, 0.02)
     u, v = optics.project(plane[..., 0], plane[..., 1])
-    grid = CornerGrid(px=np.stack([u, v], axis=-1), coarse_px=np.stack([u, v], axis=-1),
-                      refined=np.ones((9, 11), bool))
+    grid = CornerGrid(px=np.stack([u, v], axis=-1), coarse_px=np.stack([u, v], axis=-1), refined=np.ones((9, 11), bool))
     return calibrate_corners(grid, board, frame, degree, (640, 480)), optics
 
 
@@ -183,8 +186,9 @@ def _bad_files() -> list[tuple[str, object, type, str]]:
 
 
 @pytest.mark.parametrize("name, content, error, message", _bad_files(), ids=[case[0] for case in _bad_files()])
-def test_bad_calibration_files_are_clear_errors(tmp_path: Path, name: str, content: object, error: type,
-                                                message: str) -> None:
+def test_bad_calibration_files_are_clear_errors(
+    tmp_path: Path, name: str, content: object, error: type, message: str
+) -> None:
     path = _write(tmp_path, content)
     with pytest.raises(error, match=message) as info:
         load_mapping(path)

@@ -25,9 +25,17 @@ def _events(t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray) -> np.nd
     return ev
 
 
-def blink_stream(period_us: int = 40_000, n_periods: float = 3.0, first_on_us: int = 7_000, ramp_us: int = 400,
-                 flicker_hz: float = 0.0, flicker_depth: int = 0, leak_hz: float = 0.0, noise_hz: float = 0.0,
-                 seed: int = 0) -> np.ndarray:
+def blink_stream(
+    period_us: int = 40_000,
+    n_periods: float = 3.0,
+    first_on_us: int = 7_000,
+    ramp_us: int = 400,
+    flicker_hz: float = 0.0,
+    flicker_depth: int = 0,
+    leak_hz: float = 0.0,
+    noise_hz: float = 0.0,
+    seed: int = 0,
+) -> np.ndarray:
     """Events of a board blinking on a dark screen, with optional screen flicker, leak and noise.
 
     The board (lit mask) switches on at ``first_on_us + k period`` and off half a period later;
@@ -69,8 +77,9 @@ def _contrast(image: np.ndarray) -> tuple[float, float]:
     return float(np.median(image[lit])), float(np.abs(image[~lit]).mean())
 
 
-@pytest.mark.parametrize("period_us, first_on_us, min_period_us", [(40_000, 7_000, 40_000),
-                                                                   (100_000, 60_000, 40_000), (25_000, 0, 20_000)])
+@pytest.mark.parametrize(
+    "period_us, first_on_us, min_period_us", [(40_000, 7_000, 40_000), (100_000, 60_000, 40_000), (25_000, 0, 20_000)]
+)
 def test_period_and_switch_times_are_found(period_us: int, first_on_us: int, min_period_us: int) -> None:
     events = blink_stream(period_us=period_us, n_periods=3.2, first_on_us=first_on_us)
     timing = detect_blink(events["t"], events["p"], BlinkSearch(min_period_us=min_period_us))
@@ -123,8 +132,9 @@ def test_no_blinking_is_a_clear_error(seed: int, duration_us: int) -> None:
     """Random events (a random walk of the level) are not taken for a blink."""
     rng = np.random.default_rng(seed)
     n = 200_000
-    events = _events(np.sort(rng.uniform(0, duration_us, n)), rng.integers(0, W, n), rng.integers(0, H, n),
-                     rng.integers(0, 2, n))
+    events = _events(
+        np.sort(rng.uniform(0, duration_us, n)), rng.integers(0, W, n), rng.integers(0, H, n), rng.integers(0, 2, n)
+    )
     with pytest.raises(CalibrationError, match="no blinking pattern found"):
         detect_blink(events["t"], events["p"])
 

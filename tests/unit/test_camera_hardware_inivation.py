@@ -36,7 +36,12 @@ def test_events_and_triggers_arrive_exactly_in_camera_time(fake_dv) -> None:
     camera = inivation.open_from_config({"trigger_in": True})
     info = camera.open()
     assert (info.adapter, info.width, info.height, info.encoding, info.serial) == (
-        "inivation", 640, 480, "evt3", "DXA00093")
+        "inivation",
+        640,
+        480,
+        "evt3",
+        "DXA00093",
+    )
     assert info.settings["timestamp_offset_us"] == fake.timestamp_offset_us
     events, triggers, reads = read_until(camera, lambda: _all_handed(camera))
     assert reads > 5 and len(events) > 5000
@@ -72,28 +77,35 @@ def test_davis_biases_are_set_and_read_back(fake_dv) -> None:
     assert info.settings["trigger_in"] is False and info.settings["readout_fps"] is None
 
 
-@pytest.mark.parametrize("model, hardware, key, match", [
-    ("DAVIS", {"contrast_threshold_on": 5}, "camera.hardware.contrast_threshold_on", "no such setting"),
-    ("DVXplorer", {"davis_biases": {"On": [1, 2]}}, "camera.hardware.davis_biases.On", "no Davis346BiasCF"),
-    ("DAVIS", {"davis_biases": {"Onn": [1, 2]}}, "camera.hardware.davis_biases.Onn", "known: Diff, On, Off"),
-    ("DAVIS", {"davis_biases": {"On": [9, 2]}}, "camera.hardware.davis_biases.On", "refused"),
-    ("DVXplorer", {"readout_fps": "FAST"}, "camera.hardware.readout_fps", "known: CONSTANT_100"),
-    ("DVXplorer", {"roi": {"x": 600, "y": 0, "width": 100, "height": 10}}, "camera.hardware.roi", "does not fit"),
-])
-def test_settings_the_camera_lacks_or_refuses_name_the_key(fake_dv, model: str, hardware: dict, key: str,
-                                                          match: str) -> None:
+@pytest.mark.parametrize(
+    "model, hardware, key, match",
+    [
+        ("DAVIS", {"contrast_threshold_on": 5}, "camera.hardware.contrast_threshold_on", "no such setting"),
+        ("DVXplorer", {"davis_biases": {"On": [1, 2]}}, "camera.hardware.davis_biases.On", "no Davis346BiasCF"),
+        ("DAVIS", {"davis_biases": {"Onn": [1, 2]}}, "camera.hardware.davis_biases.Onn", "known: Diff, On, Off"),
+        ("DAVIS", {"davis_biases": {"On": [9, 2]}}, "camera.hardware.davis_biases.On", "refused"),
+        ("DVXplorer", {"readout_fps": "FAST"}, "camera.hardware.readout_fps", "known: CONSTANT_100"),
+        ("DVXplorer", {"roi": {"x": 600, "y": 0, "width": 100, "height": 10}}, "camera.hardware.roi", "does not fit"),
+    ],
+)
+def test_settings_the_camera_lacks_or_refuses_name_the_key(
+    fake_dv, model: str, hardware: dict, key: str, match: str
+) -> None:
     fake_dv._fake.plug(fake_dv.FakeDvCamera(model=model))
     with pytest.raises(ConfigError, match=match) as err:
         inivation.open_from_config(hardware).open()
     assert err.value.key == key
 
 
-@pytest.mark.parametrize("hardware, key", [
-    ({"serial_number": "x"}, "camera.hardware.serial_number"),
-    ({"davis_biases": {"On": [1]}}, "camera.hardware.davis_biases.On"),
-    ({"contrast_threshold_on": "high"}, "camera.hardware.contrast_threshold_on"),
-    ({"stall_timeout_s": -0.5}, "camera.hardware.stall_timeout_s"),
-])
+@pytest.mark.parametrize(
+    "hardware, key",
+    [
+        ({"serial_number": "x"}, "camera.hardware.serial_number"),
+        ({"davis_biases": {"On": [1]}}, "camera.hardware.davis_biases.On"),
+        ({"contrast_threshold_on": "high"}, "camera.hardware.contrast_threshold_on"),
+        ({"stall_timeout_s": -0.5}, "camera.hardware.stall_timeout_s"),
+    ],
+)
 def test_bad_hardware_keys_name_the_key(hardware: dict, key: str) -> None:
     with pytest.raises(ConfigError) as err:
         inivation.open_from_config(hardware)

@@ -26,16 +26,21 @@ camera:
 """
 
 
-@pytest.mark.parametrize("sensor, fmt, options, raw_type, encoding, published", [
-    ("IMX636", "EVT3", "", "numpy", "EVT3", "evt3"),
-    ("IMX636", "EVT21", "", "vector", "EVT21", "evt2"),  # old format string: OpenEB's rule says legacy
-    ("IMX636", "EVT21", "endianness=little", "numpy", "EVT21;endianness=little", "evt2"),
-    ("Gen3.1", None, "", "vector", "EVT2", "evt2"),
-])
-def test_events_decode_exactly_in_every_format(fake_hal, sensor: str, fmt: str | None, options: str,
-                                               raw_type: str, encoding: str, published: str) -> None:
-    cam = fake_hal._fake.plug(fake_hal.FakeHalCamera(sensor=sensor, format_options=options, raw_type=raw_type,
-                                                     duration_us=60_000, seed=7))
+@pytest.mark.parametrize(
+    "sensor, fmt, options, raw_type, encoding, published",
+    [
+        ("IMX636", "EVT3", "", "numpy", "EVT3", "evt3"),
+        ("IMX636", "EVT21", "", "vector", "EVT21", "evt2"),  # old format string: OpenEB's rule says legacy
+        ("IMX636", "EVT21", "endianness=little", "numpy", "EVT21;endianness=little", "evt2"),
+        ("Gen3.1", None, "", "vector", "EVT2", "evt2"),
+    ],
+)
+def test_events_decode_exactly_in_every_format(
+    fake_hal, sensor: str, fmt: str | None, options: str, raw_type: str, encoding: str, published: str
+) -> None:
+    cam = fake_hal._fake.plug(
+        fake_hal.FakeHalCamera(sensor=sensor, format_options=options, raw_type=raw_type, duration_us=60_000, seed=7)
+    )
     camera = metavision.open_from_config({"format": fmt} if fmt else {})
     info = camera.open()
     size = (1280, 720) if sensor == "IMX636" else (640, 480)
@@ -76,12 +81,15 @@ def test_trigger_input_off_by_default_on_the_fake_hal(fake_hal) -> None:
     assert len(triggers) == 0
 
 
-@pytest.mark.parametrize("hardware, key, match", [
-    ({"biases": {"bias_diff_on": 500}}, "camera.hardware.biases.bias_diff_on", r"allowed: -85\.\.140"),
-    ({"biases": {"bias_pr": 5}}, "camera.hardware.biases.bias_pr", "unknown bias"),
-    ({"roi": {"x": 1200, "y": 0, "width": 100, "height": 10}}, "camera.hardware.roi", "does not fit"),
-    ({"rate_limiter_events_per_s": 2_000_000_000}, "camera.hardware.rate_limiter_events_per_s", "refused"),
-])
+@pytest.mark.parametrize(
+    "hardware, key, match",
+    [
+        ({"biases": {"bias_diff_on": 500}}, "camera.hardware.biases.bias_diff_on", r"allowed: -85\.\.140"),
+        ({"biases": {"bias_pr": 5}}, "camera.hardware.biases.bias_pr", "unknown bias"),
+        ({"roi": {"x": 1200, "y": 0, "width": 100, "height": 10}}, "camera.hardware.roi", "does not fit"),
+        ({"rate_limiter_events_per_s": 2_000_000_000}, "camera.hardware.rate_limiter_events_per_s", "refused"),
+    ],
+)
 def test_values_the_camera_refuses_name_the_key(fake_hal, hardware: dict, key: str, match: str) -> None:
     fake_hal._fake.plug(fake_hal.FakeHalCamera())
     with pytest.raises(ConfigError, match=match) as err:
@@ -96,13 +104,16 @@ def test_a_camera_without_erc_refuses_a_rate_limit(fake_hal) -> None:
     assert err.value.key == "camera.hardware.rate_limiter_events_per_s"
 
 
-@pytest.mark.parametrize("hardware, key", [
-    ({"seriall": "x"}, "camera.hardware.seriall"),
-    ({"biases": {"bias_fo": 1.5}}, "camera.hardware.biases.bias_fo"),
-    ({"rate_limiter_events_per_s": -5}, "camera.hardware.rate_limiter_events_per_s"),
-    ({"evt21_endianness": "big"}, "camera.hardware.evt21_endianness"),
-    ({"roi": {"x": 0, "y": 0, "width": 10}}, "camera.hardware.roi.height"),
-])
+@pytest.mark.parametrize(
+    "hardware, key",
+    [
+        ({"seriall": "x"}, "camera.hardware.seriall"),
+        ({"biases": {"bias_fo": 1.5}}, "camera.hardware.biases.bias_fo"),
+        ({"rate_limiter_events_per_s": -5}, "camera.hardware.rate_limiter_events_per_s"),
+        ({"evt21_endianness": "big"}, "camera.hardware.evt21_endianness"),
+        ({"roi": {"x": 0, "y": 0, "width": 10}}, "camera.hardware.roi.height"),
+    ],
+)
 def test_bad_hardware_keys_name_the_key(hardware: dict, key: str) -> None:
     with pytest.raises(ConfigError) as err:
         metavision.open_from_config(hardware)

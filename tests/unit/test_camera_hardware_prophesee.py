@@ -32,7 +32,12 @@ def test_events_and_triggers_decode_exactly_from_buffers_cut_anywhere(fake_nd) -
     camera = prophesee.open_from_config({})
     info = camera.open()
     assert (info.adapter, info.width, info.height, info.encoding, info.serial) == (
-        "prophesee", 1280, 720, "evt3", "00050423")
+        "prophesee",
+        1280,
+        720,
+        "evt3",
+        "00050423",
+    )
     events, triggers, reads = read_until(camera, lambda: cam.feed is not None and cam.feed.exhausted)
     camera.close()
     assert len(cam.sent_events) > 10_000 and reads > 20
@@ -82,30 +87,38 @@ def test_roi_masks_are_the_complement_of_the_region() -> None:
     assert list(np.flatnonzero(bits == 0)) == [3, 4, 5, 6, 7] + list(range(70, 128))
 
 
-@pytest.mark.parametrize("hardware, key", [
-    ({"serail": "x"}, "camera.hardware.serail"),
-    (yaml.safe_load("serial: 00050423"), "camera.hardware.serial"),  # unquoted: YAML reads an (octal) number
-    ({"biases": {"diff_on": "high"}}, "camera.hardware.biases.diff_on"),
-    ({"biases": [1, 2]}, "camera.hardware.biases"),
-    ({"roi": {"x": 0, "width": 4, "height": 4}}, "camera.hardware.roi.y"),
-    ({"roi": {"x": 0, "y": 0, "width": 0, "height": 4}}, "camera.hardware.roi"),
-    ({"rate_limiter": {"reference_period_us": 0, "maximum_events_per_period": 5}},
-     "camera.hardware.rate_limiter.reference_period_us"),
-    ({"trigger_in": "yes"}, "camera.hardware.trigger_in"),
-    ({"encoding": "evt4"}, "camera.hardware.encoding"),
-    ({"stall_timeout_s": -1}, "camera.hardware.stall_timeout_s"),
-])
+@pytest.mark.parametrize(
+    "hardware, key",
+    [
+        ({"serail": "x"}, "camera.hardware.serail"),
+        (yaml.safe_load("serial: 00050423"), "camera.hardware.serial"),  # unquoted: YAML reads an (octal) number
+        ({"biases": {"diff_on": "high"}}, "camera.hardware.biases.diff_on"),
+        ({"biases": [1, 2]}, "camera.hardware.biases"),
+        ({"roi": {"x": 0, "width": 4, "height": 4}}, "camera.hardware.roi.y"),
+        ({"roi": {"x": 0, "y": 0, "width": 0, "height": 4}}, "camera.hardware.roi"),
+        (
+            {"rate_limiter": {"reference_period_us": 0, "maximum_events_per_period": 5}},
+            "camera.hardware.rate_limiter.reference_period_us",
+        ),
+        ({"trigger_in": "yes"}, "camera.hardware.trigger_in"),
+        ({"encoding": "evt4"}, "camera.hardware.encoding"),
+        ({"stall_timeout_s": -1}, "camera.hardware.stall_timeout_s"),
+    ],
+)
 def test_bad_hardware_keys_name_the_key(hardware: dict, key: str) -> None:
     with pytest.raises(ConfigError) as err:
         prophesee.open_from_config(hardware)
     assert err.value.key == key and key in str(err.value)
 
 
-@pytest.mark.parametrize("hardware, key", [
-    ({"biases": {"bogus": 1}}, "camera.hardware.biases.bogus"),
-    ({"roi": {"x": 600, "y": 0, "width": 100, "height": 10}}, "camera.hardware.roi"),
-    ({"trigger_in": True}, "camera.hardware.trigger_in"),
-])
+@pytest.mark.parametrize(
+    "hardware, key",
+    [
+        ({"biases": {"bogus": 1}}, "camera.hardware.biases.bogus"),
+        ({"roi": {"x": 600, "y": 0, "width": 100, "height": 10}}, "camera.hardware.roi"),
+        ({"trigger_in": True}, "camera.hardware.trigger_in"),
+    ],
+)
 def test_settings_the_model_lacks_name_the_key_and_release_the_device(fake_nd, hardware: dict, key: str) -> None:
     cam = fake_nd._fake.plug(fake_nd.FakeCamera(name=fake_nd.Name.CENTURYARKS_VGA, serial="V1"))
     with pytest.raises(ConfigError) as err:

@@ -16,10 +16,14 @@ from flagtrack.drivers.formats.centreline import CentrelineWriter, read_centreli
 def make_batch(n_t: int, n_s: int = 51, n_j: int = 10, t0: float = 0.0) -> CentrelineBatch:
     rng = np.random.default_rng(n_t)
     return CentrelineBatch(
-        t_s=t0 + np.arange(n_t) * 1e-3, s=np.linspace(0, 1, n_s),
-        x=rng.normal(size=(n_t, n_s)), y=rng.normal(size=(n_t, n_s)),
-        joints_x=rng.normal(size=(n_t, n_j + 1)), joints_y=rng.normal(size=(n_t, n_j + 1)),
-        delta_rms=rng.random(n_t), n_events=rng.integers(0, 100, n_t),
+        t_s=t0 + np.arange(n_t) * 1e-3,
+        s=np.linspace(0, 1, n_s),
+        x=rng.normal(size=(n_t, n_s)),
+        y=rng.normal(size=(n_t, n_s)),
+        joints_x=rng.normal(size=(n_t, n_j + 1)),
+        joints_y=rng.normal(size=(n_t, n_j + 1)),
+        delta_rms=rng.random(n_t),
+        n_events=rng.integers(0, 100, n_t),
     )
 
 
@@ -42,8 +46,9 @@ def test_appends_round_trip_exactly(tmp_path: Path) -> None:
 def test_shape_mismatch_is_refused() -> None:
     batch = make_batch(3)
     with pytest.raises(ValueError, match="x has shape"):
-        CentrelineBatch(batch.t_s, batch.s, batch.x[:, :3], batch.y, batch.joints_x, batch.joints_y,
-                        batch.delta_rms, batch.n_events)
+        CentrelineBatch(
+            batch.t_s, batch.s, batch.x[:, :3], batch.y, batch.joints_x, batch.joints_y, batch.delta_rms, batch.n_events
+        )
 
 
 def test_not_a_centreline_file(tmp_path: Path) -> None:

@@ -50,8 +50,9 @@ def test_a_batch_of_another_shape_is_refused_and_nothing_of_it_written(tmp_path:
     a, c = make_batch(4), make_batch(3, t0=2.0)
     with CentrelineSink(path, {"units": "px"}) as sink:
         sink.add(a)
-        with pytest.raises(CentrelineShapeError, match="7 samples and 11 joints does not fit the file's 51 "
-                                                       "samples and 11 joints") as refused:
+        with pytest.raises(
+            CentrelineShapeError, match="7 samples and 11 joints does not fit the file's 51 samples and 11 joints"
+        ) as refused:
             sink.add(make_batch(5, n_s=7, t0=1.0))
         assert isinstance(refused.value, FormatError) and str(path) in str(refused.value)
         assert refused.value.got == (7, 11) and refused.value.want == (51, 11)
@@ -107,8 +108,9 @@ def test_every_file_carries_the_processing_parameters_units_input_and_version(tm
     mapping's units), values known only at the end (before and after the file opens)."""
     processing = {"alpha": 0.6, "root": [1.0, 2.0], "refine_deg": None, "units": "m"}
     calibration = {"calibration_degree": 3, "calibration_yaml": "degree: 3\n"}
-    attrs = centreline_attrs(processing, units="m", input_file="/data/run.raw", calibration=calibration,
-                             input_format="raw")
+    attrs = centreline_attrs(
+        processing, units="m", input_file="/data/run.raw", calibration=calibration, input_format="raw"
+    )
     assert attrs == {**processing, **calibration, "input_format": "raw", "input_file": "/data/run.raw"}
     path = tmp_path / "c.h5"
     with CentrelineSink(path, {**processing, **calibration, "input_file": "run.raw"}) as sink:
@@ -117,8 +119,20 @@ def test_every_file_carries_the_processing_parameters_units_input_and_version(tm
         sink.add(make_batch(3), units="furlong", source="other")
         sink.set_attrs({"events_in": 10, "events_kept": 7})
     _, got = read_centrelines(path)
-    assert set(got) == {"alpha", "root", "refine_deg", "units", "input_file", "source", "flagtrack_version",
-                        "calibration_degree", "calibration_yaml", "early", "events_in", "events_kept"}
+    assert set(got) == {
+        "alpha",
+        "root",
+        "refine_deg",
+        "units",
+        "input_file",
+        "source",
+        "flagtrack_version",
+        "calibration_degree",
+        "calibration_yaml",
+        "early",
+        "events_in",
+        "events_kept",
+    }
     assert got["units"] == "px" and got["source"] == "tracker" and got["input_file"] == "run.raw"
     assert got["alpha"] == 0.6 and list(got["root"]) == [1.0, 2.0] and got["refine_deg"] is None
     assert got["calibration_yaml"] == "degree: 3\n" and got["events_kept"] == 7
@@ -175,8 +189,10 @@ def test_an_atomic_sink_shows_its_file_only_once_closed(tmp_path: Path) -> None:
     assert_series_equal(read_centrelines(path)[0], a)
     assert [p.name for p in path.parent.iterdir()] == ["c.h5"]
 
-    with pytest.raises(RuntimeError, match="tracker failed"), \
-            CentrelineSink(path, {"units": "px"}, atomic=True) as sink:
+    with (
+        pytest.raises(RuntimeError, match="tracker failed"),
+        CentrelineSink(path, {"units": "px"}, atomic=True) as sink,
+    ):
         sink.add(make_batch(7))
         sink.flush()
         raise RuntimeError("tracker failed")

@@ -26,8 +26,9 @@ def reference_update(angles: np.ndarray, x: np.ndarray, y: np.ndarray, p: ChainP
     return angles
 
 
-def _line_events(angles: np.ndarray, p: ChainParams, n: int, rng: np.random.Generator, width: float = 0.8
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def _line_events(
+    angles: np.ndarray, p: ChainParams, n: int, rng: np.random.Generator, width: float = 0.8
+) -> tuple[np.ndarray, np.ndarray]:
     """Events scattered along the polyline of a chain, rounded to pixels."""
     jx, jy = joint_positions(p.root[0], p.root[1], angles, p.lengths())
     k = rng.integers(0, len(angles), n)

@@ -10,7 +10,7 @@ import pytest
 from flagtrack.daemon import cli
 
 
-def _choices(parser) -> set[str]:  # noqa: ANN001
+def _choices(parser) -> set[str]:
     return set(next(a for a in parser._actions if a.dest == "command").choices)
 
 
@@ -51,8 +51,10 @@ def test_version_prints_on_stdout(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_command_start_up_leaves_yaml_and_package_metadata_unimported() -> None:
     """``import yaml`` (~20 ms) and ``importlib.metadata`` (~30 ms) wait until a command needs them."""
-    code = ("import sys; from flagtrack.daemon import cli; cli.build_parser('reconstruct'); "
-            "from flagtrack.daemon.commands import reconstruct; "
-            "print(sorted({'yaml', 'importlib.metadata'} & set(sys.modules)))")
+    code = (
+        "import sys; from flagtrack.daemon import cli; cli.build_parser('reconstruct'); "
+        "from flagtrack.daemon.commands import reconstruct; "
+        "print(sorted({'yaml', 'importlib.metadata'} & set(sys.modules)))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"

@@ -10,10 +10,15 @@ from pathlib import Path
 
 import pytest
 
-from flagtrack.daemon.typed_yaml import (
-    from_mapping, load_yaml, require_file, require_folder, require_output_file, to_mapping,
-)
 from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.typed_yaml import (
+    from_mapping,
+    load_yaml,
+    require_file,
+    require_folder,
+    require_output_file,
+    to_mapping,
+)
 
 
 class Mode(enum.Enum):

@@ -20,13 +20,19 @@ def _ev(rows: list[tuple[int, int, int]]) -> np.ndarray:
 def _mixed(noise_over_line: float, duration_us: int = 50_000, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """A flapping line plus uniform noise ``noise_over_line`` times as many events; (events, is_line)."""
     flag = WavyFlag()
-    clean = np.concatenate(list(line_events(flag, 0, duration_us, 640, 480, QuickLineParams(events_per_px2=20),
-                                            seed=seed)))
+    clean = np.concatenate(
+        list(line_events(flag, 0, duration_us, 640, 480, QuickLineParams(events_per_px2=20), seed=seed))
+    )
     if noise_over_line == 0:
         return clean, np.ones(len(clean), bool)
     rate = noise_over_line * len(clean) / (duration_us * 1e-6)
-    noise = np.concatenate(list(line_events(flag, 0, duration_us, 640, 480,
-                                            QuickLineParams(events_per_px2=0.0, noise_rate_hz=rate), seed=seed + 1)))
+    noise = np.concatenate(
+        list(
+            line_events(
+                flag, 0, duration_us, 640, 480, QuickLineParams(events_per_px2=0.0, noise_rate_hz=rate), seed=seed + 1
+            )
+        )
+    )
     both = np.concatenate([clean, noise])
     is_line = np.r_[np.ones(len(clean), bool), np.zeros(len(noise), bool)]
     order = np.argsort(both["t"], kind="stable")
@@ -66,14 +72,22 @@ def test_adaptive_result_does_not_depend_on_chunking_or_on_the_sensor_size_given
     cuts = np.sort(np.random.default_rng(0).integers(0, len(events), 50))
     parts = np.concatenate([f.keep_mask(chunk) for chunk in np.split(events, cuts)])
     g = BackgroundActivityFilter(ADAPTIVE)
-    single = np.concatenate([g.keep_mask(events[i:i + 1]) for i in range(0, 20_000)])
+    single = np.concatenate([g.keep_mask(events[i : i + 1]) for i in range(0, 20_000)])
     np.testing.assert_array_equal(parts, BackgroundActivityFilter(ADAPTIVE).keep_mask(events))
     np.testing.assert_array_equal(single, parts[:20_000])
     np.testing.assert_array_equal(whole, parts)  # the noise rate is per pixel of the area seen so far
 
 
-@pytest.mark.parametrize("kwargs", [dict(min_neighbours=0), dict(min_neighbours=3, max_neighbours=2),
-                                    dict(max_neighbours=9), dict(noise_pass=0.0), dict(block_us=0)])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(min_neighbours=0),
+        dict(min_neighbours=3, max_neighbours=2),
+        dict(max_neighbours=9),
+        dict(noise_pass=0.0),
+        dict(block_us=0),
+    ],
+)
 def test_bad_settings_are_refused(kwargs: dict) -> None:
     with pytest.raises(ValueError):
         DenoiseParams(**kwargs)

@@ -17,21 +17,32 @@ from flagtrack.drivers.formats import read_events, write_events
 def recording(tmp_path: Path) -> tuple[Path, np.ndarray]:
     rng = np.random.default_rng(5)
     n = 5000
-    events = make_events(np.cumsum(rng.integers(0, 3, n)) + 7, rng.integers(0, 320, n), rng.integers(0, 240, n),
-                         rng.integers(0, 2, n))
+    events = make_events(
+        np.cumsum(rng.integers(0, 3, n)) + 7, rng.integers(0, 320, n), rng.integers(0, 240, n), rng.integers(0, 2, n)
+    )
     path = tmp_path / "rec.raw"
     write_events(path, events, width=320, height=240, encoding="evt2")
     return path, events
 
 
-def test_info_json_has_exactly_the_documented_keys(recording: tuple[Path, np.ndarray], capsys: pytest.CaptureFixture) -> None:
+def test_info_json_has_exactly_the_documented_keys(
+    recording: tuple[Path, np.ndarray], capsys: pytest.CaptureFixture
+) -> None:
     path, events = recording
     assert main(["events", "info", str(path), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     on = int(events["p"].sum())
-    assert info == {"format": "raw", "encoding": "evt2", "width": 320, "height": 240, "events": len(events),
-                    "on": on, "off": len(events) - on, "t_first_us": int(events["t"][0]),
-                    "t_last_us": int(events["t"][-1])}
+    assert info == {
+        "format": "raw",
+        "encoding": "evt2",
+        "width": 320,
+        "height": 240,
+        "events": len(events),
+        "on": on,
+        "off": len(events) - on,
+        "t_first_us": int(events["t"][0]),
+        "t_last_us": int(events["t"][-1]),
+    }
 
 
 def test_convert_through_every_format_and_back(recording: tuple[Path, np.ndarray], tmp_path: Path) -> None:
@@ -47,8 +58,9 @@ def test_convert_through_every_format_and_back(recording: tuple[Path, np.ndarray
     np.testing.assert_array_equal(read_events(tmp_path / "e.raw").events, events)
 
 
-def test_errors_are_one_line_naming_the_file(recording: tuple[Path, np.ndarray], tmp_path: Path,
-                                             capsys: pytest.CaptureFixture) -> None:
+def test_errors_are_one_line_naming_the_file(
+    recording: tuple[Path, np.ndarray], tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     path, _ = recording
     cut = tmp_path / "cut.raw"
     cut.write_bytes(path.read_bytes()[:-1])

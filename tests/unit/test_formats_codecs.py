@@ -43,7 +43,7 @@ def evt3_word(kind: str, *a: int) -> int:
     return {"cont4": 0x7, "others": 0xE, "cont12": 0xF}[kind] << 12 | (a[0] if a else 0)
 
 
-def ref_decode_evt3(words: list[int]) -> tuple[list[tuple], list[tuple]]:
+def ref_decode_evt3(words: list[int]) -> tuple[list[tuple], list[tuple]]:  # noqa: PLR0912 - one branch per word type
     """OpenEB standalone EVT 3.0 semantics, word by word."""
     events, triggers = [], []
     base = time = y = xb = pol = loops = 0
@@ -172,33 +172,72 @@ def decode_all(encoding: str, data: bytes, **options: object) -> tuple[list[tupl
 def test_evt3_every_word_type_decodes_as_the_format_says() -> None:
     w = evt3_word
     words = [
-        w("y", 9), w("x", 5, 1),  # before the first TIME_HIGH: skipped
-        w("thigh", 1), w("tlow", 5), w("y", 10), w("x", 3, 1),
-        w("vbase", 100, 0), w("v12", 0b101), w("v8", 0b1),  # x 100, 102, then 112
-        w("tlow", 3), w("x", 7, 0),  # time steps back: kept as sent
-        w("em_y", 5), w("x", 9, 1), w("vbase", 20, 1), w("v12", 1),  # EM: no CD events
-        w("y", 11), w("trigger", 2, 1), w("others", 0x123), w("cont4", 1), w("cont12", 7),
-        w("thigh", 4095), w("tlow", 4095), w("x", 4, 1),
-        w("thigh", 2), w("x", 1, 0),  # 24-bit wrap: unwrapped to the next loop
+        w("y", 9),
+        w("x", 5, 1),  # before the first TIME_HIGH: skipped
+        w("thigh", 1),
+        w("tlow", 5),
+        w("y", 10),
+        w("x", 3, 1),
+        w("vbase", 100, 0),
+        w("v12", 0b101),
+        w("v8", 0b1),  # x 100, 102, then 112
+        w("tlow", 3),
+        w("x", 7, 0),  # time steps back: kept as sent
+        w("em_y", 5),
+        w("x", 9, 1),
+        w("vbase", 20, 1),
+        w("v12", 1),  # EM: no CD events
+        w("y", 11),
+        w("trigger", 2, 1),
+        w("others", 0x123),
+        w("cont4", 1),
+        w("cont12", 7),
+        w("thigh", 4095),
+        w("tlow", 4095),
+        w("x", 4, 1),
+        w("thigh", 2),
+        w("x", 1, 0),  # 24-bit wrap: unwrapped to the next loop
         w("thigh", 4094),  # a small step back across a TIME_HIGH: kept
         w("x", 2, 0),
     ]
     events, triggers = decode_all("evt3", u16(words))
     assert events == [
-        (4101, 3, 10, 1), (4101, 100, 10, 0), (4101, 102, 10, 0), (4101, 112, 10, 0), (4099, 7, 10, 0),
-        (MAX_EVT3 + 4095, 4, 11, 1), ((1 << 24) + 8192, 1, 11, 0), ((1 << 24) + 4094 * 4096, 2, 11, 0),
+        (4101, 3, 10, 1),
+        (4101, 100, 10, 0),
+        (4101, 102, 10, 0),
+        (4101, 112, 10, 0),
+        (4099, 7, 10, 0),
+        (MAX_EVT3 + 4095, 4, 11, 1),
+        ((1 << 24) + 8192, 1, 11, 0),
+        ((1 << 24) + 4094 * 4096, 2, 11, 0),
     ]
     assert triggers == [(4099, 2, 1)]
 
 
 def test_evt2_time_high_low_bits_and_wrap() -> None:
     w = evt2_word
-    words = [w("cd", 1, 0, 1, 1), w("thigh", 100), w("cd", 1, 5, 639, 479), w("cd", 0, 63, 0, 0),
-             w("trigger", 7, 3, 1), w("others"), w("continued"), w("cd", 0, 2, 10, 20),
-             w("thigh", (1 << 28) - 1), w("cd", 1, 1, 2, 3), w("thigh", 0), w("cd", 0, 0, 4, 5)]
+    words = [
+        w("cd", 1, 0, 1, 1),
+        w("thigh", 100),
+        w("cd", 1, 5, 639, 479),
+        w("cd", 0, 63, 0, 0),
+        w("trigger", 7, 3, 1),
+        w("others"),
+        w("continued"),
+        w("cd", 0, 2, 10, 20),
+        w("thigh", (1 << 28) - 1),
+        w("cd", 1, 1, 2, 3),
+        w("thigh", 0),
+        w("cd", 0, 0, 4, 5),
+    ]
     events, triggers = decode_all("evt2", u32(words))
-    assert events == [(6405, 639, 479, 1), (6463, 0, 0, 0), (6402, 10, 20, 0), (MAX_EVT2 + 1, 2, 3, 1),
-                      (1 << 34, 4, 5, 0)]
+    assert events == [
+        (6405, 639, 479, 1),
+        (6463, 0, 0, 0),
+        (6402, 10, 20, 0),
+        (MAX_EVT2 + 1, 2, 3, 1),
+        (1 << 34, 4, 5, 0),
+    ]
     assert triggers == [(6407, 3, 1)]
 
 
@@ -277,10 +316,19 @@ def test_evt2_random_streams_match_the_reference(seed: int) -> None:
             high = (high + int(rng.integers(-2, 1 << 26))) % (1 << 28)
             words.append(evt2_word("thigh", high))
         elif r < 0.93:
-            words.append(evt2_word("cd", int(rng.integers(0, 2)), int(rng.integers(0, 64)),
-                                   int(rng.integers(0, 640)), int(rng.integers(0, 480))))
+            words.append(
+                evt2_word(
+                    "cd",
+                    int(rng.integers(0, 2)),
+                    int(rng.integers(0, 64)),
+                    int(rng.integers(0, 640)),
+                    int(rng.integers(0, 480)),
+                )
+            )
         else:
-            words.append(evt2_word("trigger", int(rng.integers(0, 64)), int(rng.integers(0, 32)), int(rng.integers(0, 2))))
+            words.append(
+                evt2_word("trigger", int(rng.integers(0, 64)), int(rng.integers(0, 32)), int(rng.integers(0, 2)))
+            )
     data = u32(words)
     expected = ref_decode_evt2(words)
     assert decode_all("evt2", data, width=640, height=480) == expected
@@ -324,8 +372,9 @@ def tricky_events(rng: np.random.Generator, n: int, t0: int = 0) -> np.ndarray:
     """Events with vector-friendly runs, small backward steps, and gaps of several EVT 3.0 loops."""
     dt = rng.choice([0, 0, 0, 1, 2, 50, 5000, -3], size=n, p=[0.3, 0.1, 0.1, 0.2, 0.1, 0.1, 0.05, 0.05])
     dt[rng.random(n) < 0.002] = 40_000_000  # more than two loops of 2**24 µs
-    events = make_events(t0 + 10 + np.cumsum(dt), rng.integers(0, 640, n), rng.integers(0, 480, n),
-                         rng.integers(0, 2, n))
+    events = make_events(
+        t0 + 10 + np.cumsum(dt), rng.integers(0, 640, n), rng.integers(0, 480, n), rng.integers(0, 2, n)
+    )
     run = rng.random(n) < 0.6  # event i continues a run of consecutive x at the same t, y, p
     for i in np.flatnonzero(run[1:]) + 1:
         if events["x"][i - 1] < 639:

@@ -9,8 +9,10 @@ from flagtrack.drivers.formats import parse_raw_header, raw_header
 from flagtrack.drivers.formats.geometry import geometry_from_plugin, inferred_geometry
 from flagtrack.drivers.formats.raw_header import parse_header_lines, raw_layout
 
-OLD_EVT2 = (b"% Date 2020-09-14 09:03:25\n% firmware_version 2.0.2\n% integrator_name Prophesee\n"
-            b"% plugin_name hal_plugin_gen3_fx3\n% serial_number 30384338\n% system_ID 21\n% evt 2.0\n")
+OLD_EVT2 = (
+    b"% Date 2020-09-14 09:03:25\n% firmware_version 2.0.2\n% integrator_name Prophesee\n"
+    b"% plugin_name hal_plugin_gen3_fx3\n% serial_number 30384338\n% system_ID 21\n% evt 2.0\n"
+)
 
 
 def test_old_header_ends_at_the_first_line_without_percent() -> None:
@@ -105,8 +107,13 @@ def test_evt21_layout_from_format_options_or_old_systems() -> None:
 def test_written_header_reads_back_with_what_metavision_needs() -> None:
     head = raw_header("evt2", 640, 480, {"t_offset_us": 1 << 34, "serial_number": "sim"})
     text = head.decode()
-    for line in ("% format EVT2;height=480;width=640", "% geometry 640x480", "% evt 2.0",
-                 "% plugin_integrator_name Prophesee", "% camera_integrator_name Prophesee"):
+    for line in (
+        "% format EVT2;height=480;width=640",
+        "% geometry 640x480",
+        "% evt 2.0",
+        "% plugin_integrator_name Prophesee",
+        "% camera_integrator_name Prophesee",
+    ):
         assert line in text.splitlines()
     assert text.endswith("% end\n")
     fields, offset = parse_raw_header(head + b"\x00\x00\x00\x80")

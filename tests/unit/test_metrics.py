@@ -7,13 +7,22 @@ import pytest
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.metrics import (
-    align, cloud_distance, compare, eps_rms, flapping_frequency_hz, lateral_displacement, rest_frame,
-    tip_amplitude_over_l, tip_error, travelling_wave_index,
+    align,
+    cloud_distance,
+    compare,
+    eps_rms,
+    flapping_frequency_hz,
+    lateral_displacement,
+    rest_frame,
+    tip_amplitude_over_l,
+    tip_error,
+    travelling_wave_index,
 )
 
 
-def waves(w_travel: float, n_s: int = 21, per_period: int = 20, periods: int = 5, amp: float = 1.0,
-          wavelengths: float = 1.0) -> np.ndarray:
+def waves(
+    w_travel: float, n_s: int = 21, per_period: int = 20, periods: int = 5, amp: float = 1.0, wavelengths: float = 1.0
+) -> np.ndarray:
     """w sin(ks - wt) + (1 - w) sin(ks) cos(wt) on s in [0, wavelengths], t over whole periods."""
     s = np.linspace(0.0, wavelengths, n_s, endpoint=False)[None, :]
     t = (np.arange(per_period * periods) / per_period)[:, None]
@@ -59,8 +68,16 @@ def test_index_rejects_bad_input() -> None:
 
 def batch(t_s: np.ndarray, s: np.ndarray, x: np.ndarray, y: np.ndarray) -> CentrelineBatch:
     n = len(t_s)
-    return CentrelineBatch(t_s=t_s, s=s, x=x, y=y, joints_x=x[:, ::10], joints_y=y[:, ::10],
-                           delta_rms=np.full(n, np.nan), n_events=np.zeros(n, np.int64))
+    return CentrelineBatch(
+        t_s=t_s,
+        s=s,
+        x=x,
+        y=y,
+        joints_x=x[:, ::10],
+        joints_y=y[:, ::10],
+        delta_rms=np.full(n, np.nan),
+        n_events=np.zeros(n, np.int64),
+    )
 
 
 def moving_line(t_s: np.ndarray, s: np.ndarray, speed: float = 2.0) -> tuple[np.ndarray, np.ndarray]:

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from flagtrack.daemon.core.onset import FlagState, OnsetDetector, OnsetParams, detect_states, transitions
 from flagtrack.daemon.bench.onset_traces import RateModel, detection_delays, false_alarms_per_hour, rate_trace
+from flagtrack.daemon.core.onset import FlagState, OnsetDetector, OnsetParams, detect_states, transitions
 
 DT = 0.1
 STILL_HZ = 2e4

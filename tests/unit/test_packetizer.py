@@ -7,8 +7,8 @@ import pytest
 
 from flagtrack.daemon.core.events import TRIGGER_DTYPE, make_events
 from flagtrack.daemon.errors import FormatError
-from flagtrack.drivers.formats.packets import PacketParams, Packetizer, decode_packet, slot_table
 from flagtrack.drivers.formats.codec import LOOP_US, Encoder
+from flagtrack.drivers.formats.packets import Packetizer, PacketParams, decode_packet, slot_table
 
 
 def stream(n: int = 40_000, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -73,8 +73,9 @@ def test_packets_that_need_more_room_than_usual_are_still_encoded() -> None:
     """Sensor jitter across a time-base step (the time high word repeats for every event) and a
     trigger many time loops before an event need more words than the usual bound."""
     n = 200
-    jitter = make_events(np.where(np.arange(n) % 2 == 0, 4096, 4095), np.arange(n) % 640, np.arange(n) % 480,
-                         np.ones(n))
+    jitter = make_events(
+        np.where(np.arange(n) % 2 == 0, 4096, 4095), np.arange(n) % 640, np.arange(n) % 480, np.ones(n)
+    )
     packets = Packetizer("evt3", 640, 480).push(jitter, None, t_until_us=5_000)
     assert [p.n_events for p in packets] == [n]
     np.testing.assert_array_equal(decode_packet("evt3", packets[0].data, packets[0].t_offset_us)[0], jitter)

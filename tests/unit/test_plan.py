@@ -68,13 +68,24 @@ def test_actions_surround_the_record() -> None:
     kinds = [type(s).__name__ for s in sweep_plan(cfg)]
     assert kinds == ["Point", "SetSpeed", "Wait", "Action", "Record", "Action", "EndPoint", "SetSpeed"]
     actions = [s for s in sweep_plan(cfg) if isinstance(s, Action)]
-    assert actions == [Action("pause", "000-up-3.00", {"seconds": 3}), Action("command", "000-up-3.00", {"argv": ["true"]})]
+    assert actions == [
+        Action("pause", "000-up-3.00", {"seconds": 3}),
+        Action("command", "000-up-3.00", {"argv": ["true"]}),
+    ]
 
 
 def test_resume_skips_done_points_and_reenters_the_down_branch_from_the_top() -> None:
     cfg = SweepConfig(range=SpeedRange(3.0, 6.0, 1.0), settle_s=7, record_s=1)
     ids = [p.point_id for p in plan_points(cfg)]
-    assert ids == ["000-up-3.00", "001-up-4.00", "002-up-5.00", "003-up-6.00", "004-down-5.00", "005-down-4.00", "006-down-3.00"]
+    assert ids == [
+        "000-up-3.00",
+        "001-up-4.00",
+        "002-up-5.00",
+        "003-up-6.00",
+        "004-down-5.00",
+        "005-down-4.00",
+        "006-down-3.00",
+    ]
     done = set(ids[:5])  # crashed while measuring 005-down-4.00
     steps = list(sweep_plan(cfg, done))
     assert [s.point_id for s in steps if isinstance(s, Record)] == ["005-down-4.00", "006-down-3.00"]
@@ -90,7 +101,12 @@ def test_resume_on_the_up_branch_needs_no_reentry() -> None:
     cfg = SweepConfig(speeds=(3.0, 4.0, 5.0), settle_s=1, record_s=1)
     steps = list(sweep_plan(cfg, {"000-up-3.00"}))
     assert steps[0] == Point("001-up-4.00", 1, Branch.UP, 4.0)
-    assert [s.point_id for s in steps if isinstance(s, Record)] == ["001-up-4.00", "002-up-5.00", "003-down-4.00", "004-down-3.00"]
+    assert [s.point_id for s in steps if isinstance(s, Record)] == [
+        "001-up-4.00",
+        "002-up-5.00",
+        "003-down-4.00",
+        "004-down-3.00",
+    ]
 
 
 def test_resume_of_a_finished_sweep_only_returns_to_zero() -> None:
@@ -111,7 +127,9 @@ def test_plan_from_yaml(tmp_path: Path) -> None:
     )
     cfg = load_sweep_config(path)
     assert cfg.speed_values() == (3.0, 3.5, 4.0)
-    assert cfg.branches == (Branch.UP, Branch.DOWN) and cfg.actions == (ActionSpec("command", params={"argv": ["flagtrack", "events", "info", "{raw}"]}),)
+    assert cfg.branches == (Branch.UP, Branch.DOWN) and cfg.actions == (
+        ActionSpec("command", params={"argv": ["flagtrack", "events", "info", "{raw}"]}),
+    )
     assert len([s for s in sweep_plan(cfg) if isinstance(s, Record)]) == 5
 
 

@@ -32,7 +32,7 @@ def test_slices_partition_the_stream_in_slots_of_the_running_time(tmp_path: Path
     n = 400_000  # several of the replay's reads (256 KB), so slices continue across them
     t = np.cumsum(rng.integers(0, 3, n)).astype(np.int64) + 1_000
     t[rng.choice(n, 300, replace=False)] -= 2  # small steps back in time, as real sensors make
-    t[n // 2:] += 30_000  # a pause: empty slots are skipped, not handed over
+    t[n // 2 :] += 30_000  # a pause: empty slots are skipped, not handed over
     events = make_events(t, rng.integers(0, 640, n), rng.integers(0, 480, n), rng.integers(0, 2, n))
     triggers = np.zeros(40, dtype=TRIGGER_DTYPE)
     triggers["t"] = np.sort(rng.integers(1_000, int(t.max()), 40))
@@ -52,7 +52,7 @@ def test_slices_partition_the_stream_in_slots_of_the_running_time(tmp_path: Path
     for (events, slice_triggers, t_until), start in zip(got[:-1], starts):  # the last ends the file
         assert t_until % slice_us == 0
         assert np.all(slice_triggers["t"] < t_until)
-        slots = running_max[start:start + len(events)] // slice_us  # each slice: one slot of the running time
+        slots = running_max[start : start + len(events)] // slice_us  # each slice: one slot of the running time
         assert np.all(slots == t_until // slice_us - 1)
 
 
@@ -71,11 +71,11 @@ def test_a_looped_replay_repeats_the_file_later_in_time(tmp_path: Path) -> None:
         data = camera.read(1.0)
         if data is not None:
             got.append(data.events)
-    stream = np.concatenate(got)[:3 * n]
+    stream = np.concatenate(got)[: 3 * n]
     assert camera.loops >= 2
     assert np.all(np.diff(stream["t"]) >= 0)  # time goes on increasing across the loops
     for k in range(3):
-        part = stream[k * n:(k + 1) * n]
+        part = stream[k * n : (k + 1) * n]
         np.testing.assert_array_equal(part[["x", "y", "p"]], want[["x", "y", "p"]])
         shift = int(part["t"][0] - want["t"][0])
         np.testing.assert_array_equal(part["t"], want["t"] + shift)

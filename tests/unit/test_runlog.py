@@ -30,7 +30,7 @@ CFG = SweepConfig(range=SpeedRange(3.0, 6.0, 0.5), settle_s=1, record_s=1)
 ONSET_MPS, DECAY_MPS = 5.0, 4.0
 
 
-def measured(point, **changes) -> PointResult:  # noqa: ANN001 - a plan Point
+def measured(point, **changes) -> PointResult:
     """A plausible result: flapping above the onset going up, above the decay going down."""
     flapping = point.speed_mps >= (ONSET_MPS if point.branch.value == "up" else DECAY_MPS + 0.5)
     raw, h5 = point_paths(point.point_id)
@@ -114,7 +114,7 @@ def test_nul_filled_tail_counts_as_torn(tmp_path: Path) -> None:
         (lambda text: text.replace("}\n", "\n", 2), "malformed record"),
     ],
 )
-def test_damage_before_the_last_line_is_a_format_error_with_offset(tmp_path: Path, damage, words: str) -> None:  # noqa: ANN001
+def test_damage_before_the_last_line_is_a_format_error_with_offset(tmp_path: Path, damage, words: str) -> None:
     run_points(tmp_path, upto=3)
     path = tmp_path / RUN_LOG
     path.write_text(damage(path.read_text()))
@@ -228,14 +228,30 @@ def test_stored_plan_mismatch_is_refused(tmp_path: Path) -> None:
 def test_sensor_fields_round_trip_and_older_records_load(tmp_path: Path) -> None:
     points = plan_points(CFG)
     with RunLog.create(tmp_path, run_id="s", config={}, plan=points, t_unix=1.0) as log:
-        log.point(measured(points[0], sensor_status="ok", sensor_error_rms_over_l=0.004, sensor_error_max_over_l=0.012,
-                           sensor_error_mean_over_l=0.003, sensor_error_std_over_l=0.002, sensor_sync="trigger",
-                           sensor_offset_us=3000.2, sensor_offset_unc_us=0.2, sensor_samples=1000, sensor_missing=2,
-                           sensor_file="points/x_sensor.h5", delta_rms_std_over_l=0.001))
+        log.point(
+            measured(
+                points[0],
+                sensor_status="ok",
+                sensor_error_rms_over_l=0.004,
+                sensor_error_max_over_l=0.012,
+                sensor_error_mean_over_l=0.003,
+                sensor_error_std_over_l=0.002,
+                sensor_sync="trigger",
+                sensor_offset_us=3000.2,
+                sensor_offset_unc_us=0.2,
+                sensor_samples=1000,
+                sensor_missing=2,
+                sensor_file="points/x_sensor.h5",
+                delta_rms_std_over_l=0.001,
+            )
+        )
         log.point(measured(points[1]))  # no sensor
     with open(tmp_path / RUN_LOG, "a") as handle:  # a record written before the sensor fields existed
-        old = {k: v for k, v in json.loads((tmp_path / RUN_LOG).read_text().splitlines()[2]).items()
-               if not k.startswith("sensor") and k != "delta_rms_std_over_l"}
+        old = {
+            k: v
+            for k, v in json.loads((tmp_path / RUN_LOG).read_text().splitlines()[2]).items()
+            if not k.startswith("sensor") and k != "delta_rms_std_over_l"
+        }
         handle.write(json.dumps({**old, "point_id": points[2].point_id, "index": points[2].index}) + "\n")
     got = read_run(tmp_path).points
     assert got[0].sensor_error_rms_over_l == 0.004 and got[0].sensor_sync == "trigger" and got[0].sensor_missing == 2

@@ -96,12 +96,20 @@ print(applied, resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
 def test_kept_freed_memory_stops_arrays_faulting_in_again() -> None:
     """By default each new, larger array is mapped afresh (~50 page faults for 200 KB); with the
     services' allocator settings freed memory is reused and only the growth faults in."""
-    plain_allocator = {name: value for name, value in os.environ.items()  # glibc's own defaults
-                       if not name.startswith("MALLOC_") and name not in ("LD_PRELOAD", "GLIBC_TUNABLES")}
+    plain_allocator = {
+        name: value
+        for name, value in os.environ.items()  # glibc's own defaults
+        if not name.startswith("MALLOC_") and name not in ("LD_PRELOAD", "GLIBC_TUNABLES")
+    }
     runs = {}
     for mode in ("default", "keep"):
-        out = subprocess.run([sys.executable, "-c", _GROWING_ARRAYS, mode], capture_output=True, text=True,
-                             check=True, env=plain_allocator).stdout.split()
+        out = subprocess.run(
+            [sys.executable, "-c", _GROWING_ARRAYS, mode],
+            capture_output=True,
+            text=True,
+            check=True,
+            env=plain_allocator,
+        ).stdout.split()
         runs[mode] = (out[0], int(out[1]))
     assert runs["keep"][0] == "True"
     assert runs["default"][1] > 100 * 30
@@ -113,8 +121,11 @@ def test_end_hook_runs_as_each_service_ends_before_the_group_reacts() -> None:
     before its end or failure stops the others."""
     for ending in (Finishing("camera"), Failing("camera")):
         seen: list[tuple[str, bool]] = []
-        group = ServiceGroup([Looping("tracker"), ending], stop_when_any_finishes=["camera"],
-                             on_service_end=lambda name: seen.append((name, group.stop.is_set())))
+        group = ServiceGroup(
+            [Looping("tracker"), ending],
+            stop_when_any_finishes=["camera"],
+            on_service_end=lambda name: seen.append((name, group.stop.is_set())),  # noqa: B023 - this iteration's
+        )
         group.start()
         group.wait(timeout_s=5.0)
         assert group.stop.is_set()

@@ -15,7 +15,14 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import SchemaError
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import (
-    CameraStatus, CentrelineMessage, EventPacket, Keys, SensorSamples, TunnelCommand, decode, encode,
+    CameraStatus,
+    CentrelineMessage,
+    EventPacket,
+    Keys,
+    SensorSamples,
+    TunnelCommand,
+    decode,
+    encode,
 )
 
 
@@ -23,16 +30,34 @@ def centreline_message() -> CentrelineMessage:
     rng = np.random.default_rng(0)
     n_t, n_s = 4, 51
     batch = CentrelineBatch(
-        t_s=np.arange(n_t) * 1e-3, s=np.linspace(0, 1, n_s), x=rng.normal(size=(n_t, n_s)),
-        y=rng.normal(size=(n_t, n_s)), joints_x=rng.normal(size=(n_t, 11)), joints_y=rng.normal(size=(n_t, 11)),
-        delta_rms=rng.random(n_t), n_events=np.arange(n_t, dtype=np.int64),
+        t_s=np.arange(n_t) * 1e-3,
+        s=np.linspace(0, 1, n_s),
+        x=rng.normal(size=(n_t, n_s)),
+        y=rng.normal(size=(n_t, n_s)),
+        joints_x=rng.normal(size=(n_t, 11)),
+        joints_y=rng.normal(size=(n_t, 11)),
+        delta_rms=rng.random(n_t),
+        n_events=np.arange(n_t, dtype=np.int64),
     )
     return CentrelineMessage.from_batch(batch, source="tracker", seq=7, units="px", source_ns=np.arange(n_t) + 10**18)
 
 
 def packet() -> EventPacket:
-    return EventPacket("cam0", 3, 1000, 1999, 42, 640, 480, "evt3", 1_700_000_000_000_000_000, t_offset_us=16_777_216,
-                       n_triggers=2, end_of_stream=True, data=bytes(range(256)))
+    return EventPacket(
+        "cam0",
+        3,
+        1000,
+        1999,
+        42,
+        640,
+        480,
+        "evt3",
+        1_700_000_000_000_000_000,
+        t_offset_us=16_777_216,
+        n_triggers=2,
+        end_of_stream=True,
+        data=bytes(range(256)),
+    )
 
 
 def test_event_packet_round_trip() -> None:
@@ -67,13 +92,26 @@ def test_other_messages_round_trip(message: object) -> None:
     [
         packet(),
         centreline_message(),
-        CameraStatus("cam0", "streaming", "simulated", 640, 480, "evt3", {"biases": {"bias_fo": 3}}, "dé\"jà"),
+        CameraStatus("cam0", "streaming", "simulated", 640, 480, "evt3", {"biases": {"bias_fo": 3}}, 'dé"jà'),
         TunnelCommand("set", 5.5),
         SensorSamples("om70", 1, "m", np.arange(5, dtype=np.int64)[::2], np.linspace(0, 1, 6).reshape(2, 3)[:, 1]),
-        CentrelineMessage.from_batch(CentrelineBatch(
-            t_s=np.zeros(0), s=np.linspace(0, 1, 3), x=np.zeros((0, 3)), y=np.zeros((0, 3)), joints_x=np.zeros((0, 2)),
-            joints_y=np.zeros((0, 2)), delta_rms=np.zeros(0), n_events=np.zeros(0, dtype=np.int64),
-        ), source="tracker", seq=0, units="m", source_ns=np.zeros(0, dtype=np.int64), final=True),
+        CentrelineMessage.from_batch(
+            CentrelineBatch(
+                t_s=np.zeros(0),
+                s=np.linspace(0, 1, 3),
+                x=np.zeros((0, 3)),
+                y=np.zeros((0, 3)),
+                joints_x=np.zeros((0, 2)),
+                joints_y=np.zeros((0, 2)),
+                delta_rms=np.zeros(0),
+                n_events=np.zeros(0, dtype=np.int64),
+            ),
+            source="tracker",
+            seq=0,
+            units="m",
+            source_ns=np.zeros(0, dtype=np.int64),
+            final=True,
+        ),
     ],
 )
 def test_meta_is_the_json_that_json_dumps_writes(message: object) -> None:
@@ -82,7 +120,7 @@ def test_meta_is_the_json_that_json_dumps_writes(message: object) -> None:
     arrays in C order (non-contiguous ones included)."""
     data = encode(message)
     meta_len = struct.unpack_from("<2sBBI", data)[3]
-    meta_bytes = data[8:8 + meta_len]
+    meta_bytes = data[8 : 8 + meta_len]
     scalars, blobs, payload = {}, [], []
     for f in dataclasses.fields(message):
         value = getattr(message, f.name)
@@ -95,7 +133,7 @@ def test_meta_is_the_json_that_json_dumps_writes(message: object) -> None:
         else:
             scalars[f.name] = value
     assert meta_bytes == json.dumps({**scalars, "_blobs": blobs}, separators=(",", ":")).encode()
-    assert data[8 + meta_len:] == b"".join(payload)
+    assert data[8 + meta_len :] == b"".join(payload)
 
 
 def with_meta(meta: dict, type_id: int = schema.MessageType.EVENT_PACKET, payload: bytes = b"") -> bytes:
@@ -134,15 +172,16 @@ def with_blobs(message: object, edit: object) -> bytes:
     """``message`` encoded, with its payload descriptors changed by ``edit(blobs)``."""
     data = encode(message)
     magic, version, type_id, meta_len = struct.unpack_from("<2sBBI", data)
-    meta = json.loads(data[8:8 + meta_len])
+    meta = json.loads(data[8 : 8 + meta_len])
     edit(meta["_blobs"])
     body = json.dumps(meta).encode()
-    return struct.pack("<2sBBI", magic, version, type_id, len(body)) + body + data[8 + meta_len:]
+    return struct.pack("<2sBBI", magic, version, type_id, len(body)) + body + data[8 + meta_len :]
 
 
-def _set(index: int, part: int, value: object):  # noqa: ANN202
+def _set(index: int, part: int, value: object):
     def edit(blobs: list) -> None:
         blobs[index][part] = value
+
     return edit
 
 
@@ -183,17 +222,37 @@ def test_wrong_type_is_refused() -> None:
 
 def test_keys_are_lowercase_slash_words_under_namespace() -> None:
     keys = Keys("flagtrack/rig1")
-    names = [keys.camera_events("cam0"), keys.camera_status("cam0"), keys.event_rate("cam0"), keys.centrelines(),
-             keys.tracker_status(), keys.tunnel_state(), keys.tunnel_command(), keys.supervisor_state(),
-             keys.recorder_command(), keys.recorder_status(), keys.sensor_samples("om70"), keys.alive("tracker")]
+    names = [
+        keys.camera_events("cam0"),
+        keys.camera_status("cam0"),
+        keys.event_rate("cam0"),
+        keys.centrelines(),
+        keys.tracker_status(),
+        keys.tunnel_state(),
+        keys.tunnel_command(),
+        keys.supervisor_state(),
+        keys.recorder_command(),
+        keys.recorder_status(),
+        keys.sensor_samples("om70"),
+        keys.alive("tracker"),
+    ]
     assert len(set(names)) == len(names)
     for name in names:
         assert name.startswith("flagtrack/rig1/") and name == name.lower() and "//" not in name
 
 
 def test_sensor_samples_carry_pulses_missing_counts_and_clock() -> None:
-    msg = SensorSamples("om70", 4, "mm", np.array([10, 20, 30], dtype=np.int64), np.array([1.5, np.nan, 2.5]),
-                        trigger_t_us=np.array([15, 65], dtype=np.int64), missing=3, clock="host", wall_ns=1_700_000_000_123)
+    msg = SensorSamples(
+        "om70",
+        4,
+        "mm",
+        np.array([10, 20, 30], dtype=np.int64),
+        np.array([1.5, np.nan, 2.5]),
+        trigger_t_us=np.array([15, 65], dtype=np.int64),
+        missing=3,
+        clock="host",
+        wall_ns=1_700_000_000_123,
+    )
     got = decode(encode(msg), SensorSamples)
     np.testing.assert_array_equal(got.value, msg.value)  # NaN = a missing sample, kept
     np.testing.assert_array_equal(got.trigger_t_us, [15, 65])
@@ -202,12 +261,18 @@ def test_sensor_samples_carry_pulses_missing_counts_and_clock() -> None:
 
 def test_sensor_samples_of_the_first_layout_still_decode() -> None:
     t_us, value = np.arange(3, dtype=np.int64), np.ones(3)
-    meta = {"sensor_id": "om70", "seq": 1, "units": "mm",
-            "_blobs": [["t_us", t_us.dtype.str, [3]], ["value", value.dtype.str, [3]]]}
+    meta = {
+        "sensor_id": "om70",
+        "seq": 1,
+        "units": "mm",
+        "_blobs": [["t_us", t_us.dtype.str, [3]], ["value", value.dtype.str, [3]]],
+    }
     got = decode(with_meta(meta, schema.MessageType.SENSOR_SAMPLES, t_us.tobytes() + value.tobytes()), SensorSamples)
     assert got.missing == 0 and got.clock == "sensor" and len(got.trigger_t_us) == 0
     with pytest.raises(SchemaError, match="missing"):
-        decode(with_meta({**meta, "missing": "many"}, schema.MessageType.SENSOR_SAMPLES, t_us.tobytes() + value.tobytes()))
+        decode(
+            with_meta({**meta, "missing": "many"}, schema.MessageType.SENSOR_SAMPLES, t_us.tobytes() + value.tobytes())
+        )
 
 
 def test_descriptor_checks_cache_no_oversized_shape() -> None:
@@ -238,7 +303,10 @@ _MSG = centreline_message()  # 4 updates, 51 samples, 10 links
 @pytest.mark.parametrize(
     ("data", "words"),
     [
-        (_replaced(_MSG, joints_x=_MSG.joints_x[:, 0]), r"'joints_x' has shape \(4,\), expected \(n, N_j\+1\) with n = 4"),
+        (
+            _replaced(_MSG, joints_x=_MSG.joints_x[:, 0]),
+            r"'joints_x' has shape \(4,\), expected \(n, N_j\+1\) with n = 4",
+        ),
         (_replaced(_MSG, joints_y=_MSG.joints_y[:, :5]), r"'joints_y' has shape \(4, 5\).*N_j\+1 = 11"),
         (_replaced(_MSG, joints_x=_MSG.joints_x[:, :1], joints_y=_MSG.joints_y[:, :1]), r"'joints_x'.*N_j\+1 >= 2"),
         (_replaced(_MSG, x=_MSG.x[:, :3]), r"'x' has shape \(4, 3\), expected \(n, n_s\) with n = 4, n_s = 51"),
@@ -251,8 +319,10 @@ _MSG = centreline_message()  # 4 updates, 51 samples, 10 links
         (_replaced(_MSG, n_events=_MSG.n_events.astype(float)), r"'n_events' holds float64, expected integers"),
         (_replaced(_MSG, t_s=np.array(["a", "b", "c", "d"])), r"'t_s' holds <U1, expected real numbers"),
         (encode(SensorSamples("om70", 1, "m", np.arange(3, dtype=np.int64), np.ones(2))), r"'value' has shape \(2,\)"),
-        (encode(SensorSamples("om70", 1, "m", np.arange(3, dtype=np.int64), np.ones(3), np.ones((2, 2), np.int64))),
-         r"'trigger_t_us' has shape \(2, 2\), expected \(m,\)"),
+        (
+            encode(SensorSamples("om70", 1, "m", np.arange(3, dtype=np.int64), np.ones(3), np.ones((2, 2), np.int64))),
+            r"'trigger_t_us' has shape \(2, 2\), expected \(m,\)",
+        ),
     ],
 )
 def test_arrays_that_disagree_are_refused_naming_key_and_field(data: bytes, words: str) -> None:
@@ -266,10 +336,24 @@ def test_arrays_that_disagree_are_refused_naming_key_and_field(data: bytes, word
 def test_arrays_that_agree_decode_whatever_their_sizes() -> None:
     """No updates, one sample, one link, and integer coordinates are all consistent."""
     n_s, joints = 1, 2
-    empty = CentrelineMessage.from_batch(CentrelineBatch(
-        t_s=np.zeros(0), s=np.zeros(n_s), x=np.zeros((0, n_s)), y=np.zeros((0, n_s)), joints_x=np.zeros((0, joints)),
-        joints_y=np.zeros((0, joints)), delta_rms=np.zeros(0), n_events=np.zeros(0, dtype=np.int64),
-    ), source="tracker", seq=0, units="px", source_ns=np.zeros(0, dtype=np.int64), final=True, stream=3)
+    empty = CentrelineMessage.from_batch(
+        CentrelineBatch(
+            t_s=np.zeros(0),
+            s=np.zeros(n_s),
+            x=np.zeros((0, n_s)),
+            y=np.zeros((0, n_s)),
+            joints_x=np.zeros((0, joints)),
+            joints_y=np.zeros((0, joints)),
+            delta_rms=np.zeros(0),
+            n_events=np.zeros(0, dtype=np.int64),
+        ),
+        source="tracker",
+        seq=0,
+        units="px",
+        source_ns=np.zeros(0, dtype=np.int64),
+        final=True,
+        stream=3,
+    )
     got = decode(encode(empty), CentrelineMessage)
     assert got.final and got.stream == 3 and got.joints_x.shape == (0, 2)
     ints = _replaced(_MSG, x=np.zeros((4, 51), dtype=np.int32), source_ns=np.arange(4, dtype=np.uint64))

@@ -14,15 +14,18 @@ from flagtrack.daemon.schema import EventPacket, TrackerStatus, decode, encode
 _HEADER = struct.Struct("<2sBBI")
 
 
-def _rewrite(data: bytes, version: int | None = None, edit=None) -> bytes:  # noqa: ANN001
+def _rewrite(data: bytes, version: int | None = None, edit=None) -> bytes:
     """The message with another version byte and/or an edited meta."""
     magic, old_version, type_id, meta_len = _HEADER.unpack_from(data)
-    meta = json.loads(data[_HEADER.size:_HEADER.size + meta_len])
+    meta = json.loads(data[_HEADER.size : _HEADER.size + meta_len])
     if edit is not None:
         edit(meta)
     body = json.dumps(meta).encode()
-    return _HEADER.pack(magic, old_version if version is None else version, type_id, len(body)) + body + \
-        data[_HEADER.size + meta_len:]
+    return (
+        _HEADER.pack(magic, old_version if version is None else version, type_id, len(body))
+        + body
+        + data[_HEADER.size + meta_len :]
+    )
 
 
 def test_this_build_writes_version_2_and_reads_1_and_2() -> None:

@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 import yaml
 
-from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.rig.config import RigConfig, load_rig
-from flagtrack.drivers.formats.packets import Packetizer, decode_packet
+from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.drivers.camera.simulated import SimulatedCamera, SimulatedCameraConfig, fast_forward, trigger_edges
+from flagtrack.drivers.formats.packets import Packetizer, decode_packet
 from flagtrack.drivers.sensor.ascii import AsciiSensorProtocol, LineParser
-from flagtrack.drivers.sensor.setup import SensorConfig
 from flagtrack.drivers.sensor.modbus import ModbusSensorMap
+from flagtrack.drivers.sensor.setup import SensorConfig
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -41,8 +41,15 @@ class Run:
 
 
 def twin_run(speed_mps: float, offset_ms: float, drift_ppm: float = 0.0, record_s: float = RECORD_S) -> Run:
-    point = twin_point(speed_mps, tau_s=TAU_S, offset_ms=offset_ms, drift_ppm=drift_ppm, noise_over_l=0.002,
-                       warm_s=WARM_S, record_s=record_s)
+    point = twin_point(
+        speed_mps,
+        tau_s=TAU_S,
+        offset_ms=offset_ms,
+        drift_ppm=drift_ppm,
+        noise_over_l=0.002,
+        warm_s=WARM_S,
+        record_s=record_s,
+    )
     validation = validate_point(point.lines, point.record, point.triggers, FRAME, BEAM, SyncParams(), "px")
     return Run(point.camera, point.sensor, point.lines, point.record, point.triggers, validation)
 
@@ -117,8 +124,9 @@ def test_updates_without_events_of_a_flapping_flag_are_not_compared(flapping: Ru
     lost = CentrelineBatch(lines.t_s, lines.s, x, y, lines.joints_x, lines.joints_y, lines.delta_rms, n_events)
     kept = validate_point(lost, flapping.record, flapping.triggers, FRAME, BEAM, SyncParams(), "px")
     assert kept.fields()["sensor_error_rms_over_l"] > 0.03  # the stale shape is far from the flapping flag
-    skipped = validate_point(lost, flapping.record, flapping.triggers, FRAME, BEAM, SyncParams(), "px",
-                             compare_without_events=False)
+    skipped = validate_point(
+        lost, flapping.record, flapping.triggers, FRAME, BEAM, SyncParams(), "px", compare_without_events=False
+    )
     f = skipped.fields()
     assert skipped.n_stale == 200 and f["sensor_error_rms_over_l"] < 0.01
     assert f["sensor_compared"] < flapping.validation.fields()["sensor_compared"] - 150
@@ -132,9 +140,19 @@ def test_a_host_stamped_sensor_without_pulses_is_found_from_wall_stamps_then_cor
     t_host = rec.t_us + wall0_us  # sensor clock = camera + 3 ms, so host = camera + wall0 + 3 ms
     batches = t_host[::50]
     camera_t = np.arange(300_000, 1_300_000, 4000)
-    host = SensorRecord("dist", "mm", "host", t_host, rec.value, np.zeros(0, dtype=np.int64), 0,
-                        wall_t_us=batches, wall_ns=(batches + 2_500) * 1000,  # arrive 2.5 ms late
-                        camera_t_us=camera_t, camera_wall_ns=(camera_t + wall0_us + 4_000) * 1000)
+    host = SensorRecord(
+        "dist",
+        "mm",
+        "host",
+        t_host,
+        rec.value,
+        np.zeros(0, dtype=np.int64),
+        0,
+        wall_t_us=batches,
+        wall_ns=(batches + 2_500) * 1000,  # arrive 2.5 ms late
+        camera_t_us=camera_t,
+        camera_wall_ns=(camera_t + wall0_us + 4_000) * 1000,
+    )
     v = validate_point(flapping.lines, host, flapping.triggers, FRAME, BEAM, SyncParams(), "px")
     assert v.coarse.method == "coarse" and abs(v.coarse.offset_us - (wall0_us + 3000)) < 3000
     assert v.sync.method == "xcorr" and abs(v.sync.offset_us - (wall0_us + 3000)) < TAU_S * 1e6

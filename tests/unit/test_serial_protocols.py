@@ -25,10 +25,10 @@ from flagtrack.drivers.sensor.base import SensorReading
 from flagtrack.drivers.sensor.modbus import ModbusSensor, ModbusSensorMap
 from flagtrack.drivers.sensor.poll import PollParams
 from flagtrack.drivers.serial import modbus_rtu as rtu
+from flagtrack.drivers.serial.adapter import SerialAdapter
 from flagtrack.drivers.tunnel.ascii import AsciiProtocol, AsciiTunnel
 from flagtrack.drivers.tunnel.modbus import ModbusMap, ModbusTunnel
 from flagtrack.drivers.tunnel.safe import SafeTunnel, SafetyParams
-from flagtrack.drivers.serial.adapter import SerialAdapter
 from tests.fakes.serial_replay import ReplayError, SerialReplay, expected_protocol
 
 pytest.importorskip("pymodbus")
@@ -103,20 +103,23 @@ def test_replay_urls_open_through_pyserial_with_the_callers_settings() -> None:
 
 def ascii_tunnel(replay: SerialReplay, protocol: AsciiProtocol | None = None) -> AsciiTunnel:
     protocol = protocol or AsciiProtocol()
-    adapter = SerialAdapter(replay.url, timeout_s=TIMEOUT_S, eol=protocol.eol.encode("ascii"),
-                            port_obj=replay.open_port(TIMEOUT_S))
+    adapter = SerialAdapter(
+        replay.url, timeout_s=TIMEOUT_S, eol=protocol.eol.encode("ascii"), port_obj=replay.open_port(TIMEOUT_S)
+    )
     return AsciiTunnel(adapter, protocol)
 
 
 def test_ascii_set_read_stop_keep_alive_and_faults() -> None:
-    with expected_protocol([
-        (b"SET 5.00\n", b"OK\n"),
-        (b"GET?\n", b"SPD 4.98\n"),
-        (b"PING\n", b"PONG\n"),
-        (b"FLT?\n", b"FLT NONE\n"),
-        (b"FLT?\n", b"FLT WATCHDOG\n"),
-        (b"STOP\n", b"OK\n"),
-    ]) as replay:
+    with expected_protocol(
+        [
+            (b"SET 5.00\n", b"OK\n"),
+            (b"GET?\n", b"SPD 4.98\n"),
+            (b"PING\n", b"PONG\n"),
+            (b"FLT?\n", b"FLT NONE\n"),
+            (b"FLT?\n", b"FLT WATCHDOG\n"),
+            (b"STOP\n", b"OK\n"),
+        ]
+    ) as replay:
         tunnel = ascii_tunnel(replay)
         tunnel.write_setpoint_mps(5.0)
         assert tunnel.read_speed_mps() == 4.98
@@ -127,18 +130,24 @@ def test_ascii_set_read_stop_keep_alive_and_faults() -> None:
         tunnel.close()
 
 
-@pytest.mark.parametrize(("response", "words"), [
-    (b"ERR bad set-point '50.00' (0..12 m/s)\n", "controller refused 'SET 50.00': bad set-point '50.00' (0..12 m/s)"),
-    (b"PONG\n", "unexpected reply 'PONG' to 'SET 50.00' (expected /OK/)"),
-    (None, "no reply within 0.1 s"),
-    (b"O", "no reply within 0.1 s (got b'O')"),  # the line's end never comes
-    (b"\xcf\x8e\xce\x9a\n", "reply is not ASCII: b'\\xcf\\x8e\\xce\\x9a'"),
-])
-def test_ascii_refusals_garbage_and_silence_are_driver_errors_naming_the_port(response: bytes | None,
-                                                                               words: str) -> None:
-    with expected_protocol([(b"SET 50.00\n", response)]) as replay:
-        with pytest.raises(DriverError) as info:
-            ascii_tunnel(replay).write_setpoint_mps(50.0)
+@pytest.mark.parametrize(
+    ("response", "words"),
+    [
+        (
+            b"ERR bad set-point '50.00' (0..12 m/s)\n",
+            "controller refused 'SET 50.00': bad set-point '50.00' (0..12 m/s)",
+        ),
+        (b"PONG\n", "unexpected reply 'PONG' to 'SET 50.00' (expected /OK/)"),
+        (None, "no reply within 0.1 s"),
+        (b"O", "no reply within 0.1 s (got b'O')"),  # the line's end never comes
+        (b"\xcf\x8e\xce\x9a\n", "reply is not ASCII: b'\\xcf\\x8e\\xce\\x9a'"),
+    ],
+)
+def test_ascii_refusals_garbage_and_silence_are_driver_errors_naming_the_port(
+    response: bytes | None, words: str
+) -> None:
+    with expected_protocol([(b"SET 50.00\n", response)]) as replay, pytest.raises(DriverError) as info:
+        ascii_tunnel(replay).write_setpoint_mps(50.0)
     assert words in str(info.value) and info.value.device == replay.url
 
 
@@ -163,18 +172,20 @@ def test_ascii_stale_reply_is_dropped_before_the_next_command() -> None:
 def test_ascii_ramp_up_and_down_is_one_exchange_per_command() -> None:
     """A controller ramping a set-point up, read back until there, then stopped: the link sends
     exactly one line per call and reads exactly one reply."""
-    with expected_protocol([
-        (b"GET?\n", b"SPD 0.00\n"),
-        (b"SET 2.00\n", b"OK\n"),
-        (b"SET 4.00\n", b"OK\n"),
-        (b"GET?\n", b"SPD 3.10\n"),
-        (b"GET?\n", b"SPD 3.97\n"),
-        (b"PING\n", b"PONG\n"),
-        (b"SET 2.00\n", b"OK\n"),
-        (b"STOP\n", b"OK\n"),
-        (b"GET?\n", b"SPD 0.41\n"),
-        (b"FLT?\n", b"FLT NONE\n"),
-    ]) as replay:
+    with expected_protocol(
+        [
+            (b"GET?\n", b"SPD 0.00\n"),
+            (b"SET 2.00\n", b"OK\n"),
+            (b"SET 4.00\n", b"OK\n"),
+            (b"GET?\n", b"SPD 3.10\n"),
+            (b"GET?\n", b"SPD 3.97\n"),
+            (b"PING\n", b"PONG\n"),
+            (b"SET 2.00\n", b"OK\n"),
+            (b"STOP\n", b"OK\n"),
+            (b"GET?\n", b"SPD 0.41\n"),
+            (b"FLT?\n", b"FLT NONE\n"),
+        ]
+    ) as replay:
         tunnel = ascii_tunnel(replay)
         assert tunnel.read_speed_mps() == 0.0
         for speed in (2.0, 4.0):
@@ -190,15 +201,27 @@ def test_ascii_controller_in_percent_with_cr_echo_and_no_set_reply() -> None:
     """A controller configured in YAML: set-point in percent of 15 m/s, CR line ends, an RS-485
     adapter echoing every command, a set command it does not answer, no ping (the keep-alive is a
     speed query) and no fault query."""
-    protocol = AsciiProtocol(eol="\r", units_per_mps=100 / 15, set_command="S{value:05.1f}", set_reply=None,
-                             query_command="R", query_reply=r"R=(?P<value>\d+\.\d)%", stop_command="S000.0",
-                             stop_reply=None, ping_command=None, fault_command=None, echo=True)
-    with expected_protocol([
-        (b"S033.3\r", b"S033.3\r"),
-        (b"R\r", b"R\rR=32.8%\r"),
-        (b"R\r", b"R\rR=33.3%\r"),
-        (b"S000.0\r", b"S000.0\r"),
-    ]) as replay:
+    protocol = AsciiProtocol(
+        eol="\r",
+        units_per_mps=100 / 15,
+        set_command="S{value:05.1f}",
+        set_reply=None,
+        query_command="R",
+        query_reply=r"R=(?P<value>\d+\.\d)%",
+        stop_command="S000.0",
+        stop_reply=None,
+        ping_command=None,
+        fault_command=None,
+        echo=True,
+    )
+    with expected_protocol(
+        [
+            (b"S033.3\r", b"S033.3\r"),
+            (b"R\r", b"R\rR=32.8%\r"),
+            (b"R\r", b"R\rR=33.3%\r"),
+            (b"S000.0\r", b"S000.0\r"),
+        ]
+    ) as replay:
         tunnel = ascii_tunnel(replay, protocol)
         tunnel.write_setpoint_mps(5.0)
         assert tunnel.read_speed_mps() == pytest.approx(32.8 * 0.15)
@@ -214,21 +237,24 @@ def test_a_safe_tunnel_session_on_the_ascii_driver() -> None:
     """``with SafeTunnel(link)``: read the speed and fault at start, set, wait for the readback, then
     ramp to zero, stop and wait for zero, in exactly these lines. (The ramp is so steep here that
     each change is one set-point: its timing is tested on the simulated tunnel.)"""
-    params = SafetyParams(max_ramp_mps2=1e9, tolerance_mps=0.1, poll_period_s=0.001, keepalive_s=1800,
-                          watchdog_s=3600)
-    with expected_protocol([
-        (b"GET?\n", b"SPD 0.00\n"),
-        (b"FLT?\n", b"FLT NONE\n"),
-        (b"SET 3.00\n", b"OK\n"),
-        (b"GET?\n", b"SPD 2.40\n"),
-        (b"GET?\n", b"SPD 2.95\n"),
-        (b"SET 0.00\n", b"OK\n"),
-        (b"STOP\n", b"OK\n"),
-        (b"GET?\n", b"SPD 0.05\n"),
-    ]) as replay:
-        with SafeTunnel(ascii_tunnel(replay), params) as tunnel:
-            tunnel.set_speed_mps(3.0)
-            assert tunnel.setpoint_mps == 3.0
+    params = SafetyParams(max_ramp_mps2=1e9, tolerance_mps=0.1, poll_period_s=0.001, keepalive_s=1800, watchdog_s=3600)
+    with (
+        expected_protocol(
+            [
+                (b"GET?\n", b"SPD 0.00\n"),
+                (b"FLT?\n", b"FLT NONE\n"),
+                (b"SET 3.00\n", b"OK\n"),
+                (b"GET?\n", b"SPD 2.40\n"),
+                (b"GET?\n", b"SPD 2.95\n"),
+                (b"SET 0.00\n", b"OK\n"),
+                (b"STOP\n", b"OK\n"),
+                (b"GET?\n", b"SPD 0.05\n"),
+            ]
+        ) as replay,
+        SafeTunnel(ascii_tunnel(replay), params) as tunnel,
+    ):
+        tunnel.set_speed_mps(3.0)
+        assert tunnel.setpoint_mps == 3.0
 
 
 # -- the Modbus RTU tunnel driver (drivers/tunnel/modbus.py; frames of modbus_rtu.py) -------------
@@ -271,16 +297,18 @@ def test_the_framing_agrees_with_the_standards_example() -> None:
 def test_modbus_set_read_stop_and_faults() -> None:
     """5 m/s is 25 Hz, 2500 counts of 0.01 Hz in holding register 1, then run (control word 1 in
     register 0); the readback is input register 16, the fault code input register 17."""
-    with expected_protocol([
-        write_register(1, 2500),
-        write_register(0, 1),
-        read_input(16, [2490]),
-        read_input(17, [0]),
-        read_input(17, [2]),
-        read_input(17, [9]),
-        write_register(1, 0),
-        write_register(0, 0),
-    ]) as replay:
+    with expected_protocol(
+        [
+            write_register(1, 2500),
+            write_register(0, 1),
+            read_input(16, [2490]),
+            read_input(17, [0]),
+            read_input(17, [2]),
+            read_input(17, [9]),
+            write_register(1, 0),
+            write_register(0, 0),
+        ]
+    ) as replay:
         tunnel = modbus_tunnel(replay)
         tunnel.write_setpoint_mps(5.0)
         assert tunnel.read_speed_mps() == pytest.approx(4.98)
@@ -292,18 +320,26 @@ def test_modbus_set_read_stop_and_faults() -> None:
 
 
 def test_modbus_run_coil_and_holding_readback() -> None:
-    coil_map = ModbusMap(control="coil", control_address=5, readback_register=3, readback_kind="holding",
-                         fault_register=None, mps_per_hz=0.2)
+    coil_map = ModbusMap(
+        control="coil",
+        control_address=5,
+        readback_register=3,
+        readback_kind="holding",
+        fault_register=None,
+        mps_per_hz=0.2,
+    )
     run = request(1, rtu.WRITE_COIL, 5, 0xFF00)
     stop = request(1, rtu.WRITE_COIL, 5, 0x0000)
     readback = request(1, rtu.READ_HOLDING, 3, 1)
-    with expected_protocol([
-        write_register(1, 1500),
-        (run, run),
-        (readback, rtu.read_response(rtu.Request(1, rtu.READ_HOLDING, 3), [1499])),
-        write_register(1, 0),
-        (stop, stop),
-    ]) as replay:
+    with expected_protocol(
+        [
+            write_register(1, 1500),
+            (run, run),
+            (readback, rtu.read_response(rtu.Request(1, rtu.READ_HOLDING, 3), [1499])),
+            write_register(1, 0),
+            (stop, stop),
+        ]
+    ) as replay:
         tunnel = modbus_tunnel(replay, coil_map)
         tunnel.write_setpoint_mps(3.0)
         tunnel.keep_alive()  # a readback
@@ -328,8 +364,12 @@ def test_modbus_no_valid_reply_is_retried_once_then_a_driver_error(reply: str) -
     """The driver asks twice (pymodbus, one retry), then gives up naming the drive and the port."""
     asked, good = read_input(16, [2490])
     assert good is not None
-    answer = {"silent": None, "bad CRC": corrupt(good), "another drive": read_input(16, [2490], device_id=2)[1],
-              "truncated": good[:4]}[reply]
+    answer = {
+        "silent": None,
+        "bad CRC": corrupt(good),
+        "another drive": read_input(16, [2490], device_id=2)[1],
+        "truncated": good[:4],
+    }[reply]
     with expected_protocol([(asked, answer), (asked, answer)]) as replay:
         with pytest.raises(DriverError, match="read input register 16: no valid reply from drive 1") as info:
             modbus_tunnel(replay).read_speed_mps()
@@ -359,11 +399,16 @@ SILENCE = PollParams(rate_hz=50.0, retry_s=0.02, fail_after_s=0.2, batch_s=0.001
 SLOW_TIMEOUT_S = 0.3
 
 
-def ascii_sensor(replay: SerialReplay, protocol: AsciiSensorProtocol | None = None, poll: PollParams = POLL,
-                 timeout_s: float = TIMEOUT_S) -> AsciiSensor:
+def ascii_sensor(
+    replay: SerialReplay,
+    protocol: AsciiSensorProtocol | None = None,
+    poll: PollParams = POLL,
+    timeout_s: float = TIMEOUT_S,
+) -> AsciiSensor:
     protocol = protocol or AsciiSensorProtocol()
-    adapter = SerialAdapter(replay.url, timeout_s=timeout_s, eol=protocol.eol.encode("ascii"),
-                            port_obj=replay.open_port(timeout_s))
+    adapter = SerialAdapter(
+        replay.url, timeout_s=timeout_s, eol=protocol.eol.encode("ascii"), port_obj=replay.open_port(timeout_s)
+    )
     return AsciiSensor(adapter, protocol, poll)
 
 
@@ -375,20 +420,21 @@ def samples(sensor: AsciiSensor | ModbusSensor, n: int, timeout_s: float = 5.0) 
     while sum(len(r) for r in got) < n:
         assert time.monotonic() < deadline, f"{sum(len(r) for r in got)} of {n} samples in {timeout_s} s"
         got.append(sensor.read(0.001))
-    return (np.concatenate([r.t_us for r in got]), np.concatenate([r.value for r in got]),
-            sum(r.missing for r in got))
+    return (np.concatenate([r.t_us for r in got]), np.concatenate([r.value for r in got]), sum(r.missing for r in got))
 
 
 def test_ascii_sensor_poll_readings_out_of_range_and_refusals() -> None:
     """``M?`` once per sample; ``D -----`` (out of range) and a refusal are missing samples (NaN),
     stamped by the host at the middle of the exchange."""
-    with expected_protocol([
-        (b"M?\n", b"D 152.3070\n"),
-        (b"M?\n", b"D -----\n"),
-        (b"M?\n", b"D 151.9995\n"),
-        (b"M?\n", b"ERR laser off\n"),
-        (b"M?\n", b"D -0.5\n"),
-    ]) as replay:
+    with expected_protocol(
+        [
+            (b"M?\n", b"D 152.3070\n"),
+            (b"M?\n", b"D -----\n"),
+            (b"M?\n", b"D 151.9995\n"),
+            (b"M?\n", b"ERR laser off\n"),
+            (b"M?\n", b"D -0.5\n"),
+        ]
+    ) as replay:
         sensor = ascii_sensor(replay)
         info = sensor.open()  # poll mode: nothing sent
         before_us = time.time_ns() // 1000
@@ -417,10 +463,12 @@ def test_ascii_sensor_stream_with_sensor_clock_triggers_and_stop() -> None:
     sends by itself, stamped by its clock; ``STOP`` at close."""
     stream = AsciiSensorProtocol(mode="stream")
     poll = PollParams(rate_hz=1000.0)
-    with expected_protocol([
-        (b"START\n", b"OK\nD 1000 152.3070\nD 2000 152.4000\nT 2500\nD 3000 -----\nD 4000 152.5\n"),
-        (b"STOP\n", b"OK\n"),
-    ]) as replay:
+    with expected_protocol(
+        [
+            (b"START\n", b"OK\nD 1000 152.3070\nD 2000 152.4000\nT 2500\nD 3000 -----\nD 4000 152.5\n"),
+            (b"STOP\n", b"OK\n"),
+        ]
+    ) as replay:
         sensor = ascii_sensor(replay, stream, poll)
         info = sensor.open()
         got = sensor.read(0.05)
@@ -432,10 +480,13 @@ def test_ascii_sensor_stream_with_sensor_clock_triggers_and_stop() -> None:
     assert got.missing == 1
 
 
-@pytest.mark.parametrize(("reply", "words"), [
-    (b"ERR not ready\n", "'START' refused: 'ERR not ready'"),
-    (None, "no reply within 0.1 s"),
-])
+@pytest.mark.parametrize(
+    ("reply", "words"),
+    [
+        (b"ERR not ready\n", "'START' refused: 'ERR not ready'"),
+        (None, "no reply within 0.1 s"),
+    ],
+)
 def test_ascii_sensor_stream_start_refused_or_unanswered_is_a_driver_error(reply: bytes | None, words: str) -> None:
     with expected_protocol([(b"START\n", reply)]) as replay:
         sensor = ascii_sensor(replay, AsciiSensorProtocol(mode="stream"))
@@ -446,14 +497,22 @@ def test_ascii_sensor_stream_start_refused_or_unanswered_is_a_driver_error(reply
 
 # -- the Modbus point-sensor driver (drivers/sensor/modbus.py) -------------------------------------
 
-DISTANCE = ModbusSensorMap(device_id=1, register=0, kind="input", words=2, word_order="big", signed=True,
-                           scale=0.001, invalid_counts=(2147483647,))  # deploy/rig-sensor-modbus.yaml
+DISTANCE = ModbusSensorMap(
+    device_id=1,
+    register=0,
+    kind="input",
+    words=2,
+    word_order="big",
+    signed=True,
+    scale=0.001,
+    invalid_counts=(2147483647,),
+)  # deploy/rig-sensor-modbus.yaml
 
 
-def modbus_sensor(replay: SerialReplay, modbus_map: ModbusSensorMap = DISTANCE, poll: PollParams = POLL,
-                  timeout_s: float = TIMEOUT_S) -> ModbusSensor:
-    return ModbusSensor.open_port(replay.url, modbus_map, baudrate=115200, parity="E", timeout_s=timeout_s,
-                                  poll=poll)
+def modbus_sensor(
+    replay: SerialReplay, modbus_map: ModbusSensorMap = DISTANCE, poll: PollParams = POLL, timeout_s: float = TIMEOUT_S
+) -> ModbusSensor:
+    return ModbusSensor.open_port(replay.url, modbus_map, baudrate=115200, parity="E", timeout_s=timeout_s, poll=poll)
 
 
 def words(counts: int) -> list[int]:
@@ -464,12 +523,14 @@ def words(counts: int) -> list[int]:
 
 def test_modbus_sensor_32_bit_signed_readings_and_no_target() -> None:
     """Input registers 0-1, high word first, signed, 0.001 mm per count; 0x7FFFFFFF is "no target"."""
-    with expected_protocol([
-        read_input(0, words(152_307)),
-        read_input(0, words(-1_500)),
-        read_input(0, words(2147483647)),
-        read_input(0, words(152_000)),
-    ]) as replay:
+    with expected_protocol(
+        [
+            read_input(0, words(152_307)),
+            read_input(0, words(-1_500)),
+            read_input(0, words(2147483647)),
+            read_input(0, words(152_000)),
+        ]
+    ) as replay:
         sensor = modbus_sensor(replay)
         info = sensor.open()
         _, values, missing = samples(sensor, 4)
@@ -493,10 +554,12 @@ def test_modbus_sensor_failures_are_missing_samples_then_a_driver_error() -> Non
     """An exception reply and a silence (no retry: a late sample is a missing one) are NaN samples;
     silent past fail_after_s, the next read raises DriverError naming the port and the last failure."""
     asked, _ = read_input(0, [0, 0])
-    with expected_protocol([
-        (asked, rtu.exception_response(1, rtu.READ_INPUT, rtu.ILLEGAL_ADDRESS)),
-        (asked, None),
-    ]) as replay:
+    with expected_protocol(
+        [
+            (asked, rtu.exception_response(1, rtu.READ_INPUT, rtu.ILLEGAL_ADDRESS)),
+            (asked, None),
+        ]
+    ) as replay:
         sensor = modbus_sensor(replay, poll=SILENCE, timeout_s=SLOW_TIMEOUT_S)
         _, values, missing = samples(sensor, 2)
         with pytest.raises(DriverError, match=r"no valid reply for 0\.\d s \(.*sensor 1 .*after 0 retries") as info:

@@ -9,8 +9,9 @@ from flagtrack.drivers.sim.dvs import DvsParams, EventCamera
 
 
 def one_pixel(**kwargs: float) -> EventCamera:
-    params = DvsParams(**{"contrast_on": 0.25, "contrast_off": 0.25, "sigma_contrast": 0.0, "refractory_us": 0.0,
-                          **kwargs})
+    params = DvsParams(
+        **{"contrast_on": 0.25, "contrast_off": 0.25, "sigma_contrast": 0.0, "refractory_us": 0.0, **kwargs}
+    )
     camera = EventCamera(1, 1, params, seed=0)
     camera.reset(np.zeros(1), 0.0)
     return camera

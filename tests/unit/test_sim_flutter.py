@@ -8,7 +8,11 @@ import numpy as np
 import pytest
 
 from flagtrack.drivers.sim.flutter import (
-    FlutterModel, FlutterParams, FlutterState, flutter_step, target_amplitude_over_l,
+    FlutterModel,
+    FlutterParams,
+    FlutterState,
+    flutter_step,
+    target_amplitude_over_l,
 )
 
 

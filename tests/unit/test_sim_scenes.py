@@ -8,14 +8,25 @@ import pytest
 from flagtrack.drivers.sim.dvs import DvsParams
 from flagtrack.drivers.sim.kinematics import FlagKinematics, sample_kinematics
 from flagtrack.drivers.sim.optics import PlaneCamera, tilted_pinhole
-from flagtrack.drivers.sim.render import LaserLineScene, LineRenderParams
+from flagtrack.drivers.sim.render import LaserLineScene
 from flagtrack.drivers.sim.scenes import (
-    BlinkingPatternScene, BlinkParams, CheckerboardSpec, checkerboard, simulate_events,
+    BlinkingPatternScene,
+    BlinkParams,
+    CheckerboardSpec,
+    checkerboard,
+    simulate_events,
 )
 
 
-def line_events(kin: FlagKinematics, t_stop_us: int, dvs: DvsParams = DvsParams(), seed: int = 0,
-                optics: PlaneCamera | None = None, width: int = 640, height: int = 480) -> tuple[LaserLineScene, np.ndarray]:
+def line_events(
+    kin: FlagKinematics,
+    t_stop_us: int,
+    dvs: DvsParams = DvsParams(),
+    seed: int = 0,
+    optics: PlaneCamera | None = None,
+    width: int = 640,
+    height: int = 480,
+) -> tuple[LaserLineScene, np.ndarray]:
     scene = LaserLineScene(kin, optics or PlaneCamera.identity(), width, height)
     chunks = list(simulate_events(scene, 0, t_stop_us, dvs, seed=seed, chunk_us=5_000))
     return scene, np.concatenate(chunks)

@@ -24,10 +24,14 @@ def events() -> np.ndarray:
 
 def _params(method: str = "robust", **schedule: float) -> TrackerParams:
     robust = method == "robust"
-    chain = ChainParams(root=FLAG.root, length=FLAG.length, min_events=5 if robust else 1,
-                        refine_deg=10.0 if robust else None)
-    return TrackerParams(chain=chain, schedule=WindowSchedule.uniform(schedule.pop("tau", 2.5e-4), **schedule),
-                         denoise=DenoiseParams() if robust else None)
+    chain = ChainParams(
+        root=FLAG.root, length=FLAG.length, min_events=5 if robust else 1, refine_deg=10.0 if robust else None
+    )
+    return TrackerParams(
+        chain=chain,
+        schedule=WindowSchedule.uniform(schedule.pop("tau", 2.5e-4), **schedule),
+        denoise=DenoiseParams() if robust else None,
+    )
 
 
 def _feed_in_chunks(events: np.ndarray, params: TrackerParams, cuts: np.ndarray) -> CentrelineBatch:
@@ -102,8 +106,11 @@ def test_a_calibration_mapping_is_applied_to_every_event(events: np.ndarray) -> 
     scale, offset = 0.5, (10.0, -20.0)  # nearly exact in binary: the same decisions as in pixels
     mapping = AffineMapping(((scale, 0.0), (0.0, scale)), offset)
     px = _params("paper")
-    chain_m = ChainParams(root=(FLAG.root[0] * scale + offset[0], FLAG.root[1] * scale + offset[1]),
-                          length=FLAG.length * scale, refine_deg=None)
+    chain_m = ChainParams(
+        root=(FLAG.root[0] * scale + offset[0], FLAG.root[1] * scale + offset[1]),
+        length=FLAG.length * scale,
+        refine_deg=None,
+    )
     pm = TrackerParams(chain=chain_m, schedule=px.schedule)
     in_px = track(events, px)
     tracker = Tracker(pm, mapping=mapping)
@@ -215,8 +222,7 @@ def test_the_update_clock_gives_the_same_windows_however_often_it_is_asked() -> 
     the clock gives the same windows, across a change of dt and tau and up to the stop time."""
     from flagtrack.daemon.core.windows import UpdateClock
 
-    schedule = WindowSchedule((WindowSegment(0.0, 1.7e-4, 2.5e-4), WindowSegment(1.01, 4.1e-4, 3e-4)),
-                              t_stop_s=1.03)
+    schedule = WindowSchedule((WindowSegment(0.0, 1.7e-4, 2.5e-4), WindowSegment(1.01, 4.1e-4, 3e-4)), t_stop_s=1.03)
     once = UpdateClock(schedule, 1_000_003).take(1_040_000)
     often = UpdateClock(schedule, 1_000_003)
     rng = np.random.default_rng(3)
@@ -244,8 +250,11 @@ def test_a_source_horizon_completes_the_window_ending_there(events: np.ndarray) 
     assert params.schedule.window_ends_us(with_horizon.t_s)[-1] == end
     cuts = np.searchsorted(events["t"], np.arange(t0 + 1000, int(events["t"][-1]), 1000))  # 1 ms packets
     tracker = Tracker(params)
-    fed = [tracker.feed(packet, int(packet["t"][0]) // 1000 * 1000 + 999)
-           for packet in np.split(events, cuts) if len(packet)]
+    fed = [
+        tracker.feed(packet, int(packet["t"][0]) // 1000 * 1000 + 999)
+        for packet in np.split(events, cuts)
+        if len(packet)
+    ]
     _assert_same(track(events, params), CentrelineBatch.concatenate([*fed, tracker.finish()]))
 
 

@@ -16,33 +16,49 @@ import functools
 import numpy as np
 import pytest
 
-from tests.unit._defects import (CONDITIONS, HEIGHT, KINEMATICS, WIDTH, hot_pixel_positions, initial_state, recording,
-                                 tip_and_shape_errors)
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.chain import ChainState
 from flagtrack.daemon.core.denoise import BackgroundActivityFilter
 from flagtrack.daemon.core.tracker import Tracker, TrackerParams
 from flagtrack.daemon.tracking.section import Method, TrackingConfig
+from tests.unit._defects import (
+    CONDITIONS,
+    HEIGHT,
+    KINEMATICS,
+    WIDTH,
+    hot_pixel_positions,
+    initial_state,
+    recording,
+    tip_and_shape_errors,
+)
 
 DURATION_S = 0.1
-LIMITS = {"clean": (0.005, 0.01), "noisy": (0.0075, 0.0125), "defects": (0.0075, 0.0125),
-          "noisy+defects": (0.0075, 0.0125)}
+LIMITS = {
+    "clean": (0.005, 0.01),
+    "noisy": (0.0075, 0.0125),
+    "defects": (0.0075, 0.0125),
+    "noisy+defects": (0.0075, 0.0125),
+}
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _recording(name: str, condition: str) -> tuple[object, np.ndarray]:
     return recording(name, condition, duration_s=DURATION_S)
 
 
 def _params(kin: object, method: Method) -> TrackerParams:
     period = 1.0 / kin.frequency_hz  # type: ignore[attr-defined]
-    config = TrackingConfig(root=kin.root, length=kin.length, direction_deg=kin.direction_deg,  # type: ignore[attr-defined]
-                            tau_s=5e-3 * period, method=method)
+    config = TrackingConfig(
+        root=kin.root,
+        length=kin.length,
+        direction_deg=kin.direction_deg,  # type: ignore[attr-defined]
+        tau_s=5e-3 * period,
+        method=method,
+    )
     return config.tracker_params()
 
 
-def _reconstruct(kin: object, events: np.ndarray, method: Method, state: ChainState | None = None
-                 ) -> CentrelineBatch:
+def _reconstruct(kin: object, events: np.ndarray, method: Method, state: ChainState | None = None) -> CentrelineBatch:
     """The reconstruction, from ``state`` or else from the true shape at the first event."""
     if state is None:
         state = initial_state(kin, float(events["t"][0]) * 1e-6)  # type: ignore[arg-type]

@@ -17,7 +17,9 @@ def _write(tmp_path: Path, text: str) -> Path:
 
 
 def test_yaml_section_to_tracker_params(tmp_path: Path) -> None:
-    path = _write(tmp_path, """
+    path = _write(
+        tmp_path,
+        """
 camera: {id: main}
 tracker:
   root: [102, 240.5]
@@ -30,7 +32,8 @@ tracker:
   ds: 2.0
   min_events: 3
   denoise: {window_us: 800}
-""")
+""",
+    )
     config = load_tracking_config(path)
     params = config.tracker_params(path=str(path))
     assert params.chain.root == (102.0, 240.5) and params.chain.n_joints == 12
@@ -56,17 +59,22 @@ def test_defaults_are_the_papers() -> None:
 
 
 def test_schedule_segments(tmp_path: Path) -> None:
-    path = _write(tmp_path, """
+    path = _write(
+        tmp_path,
+        """
 tracker:
   root: [0, 0]
   length: 100
   schedule:
     - {t_from_s: 0, dt_s: 0.005, tau_s: 0.005}
     - {t_from_s: 2.5, dt_s: 0.0003, tau_s: 0.0004}
-""")
+""",
+    )
     params = load_tracking_config(path).tracker_params()
-    assert [(s.t_from_s, s.dt_s, s.tau_s) for s in params.schedule.segments] == [(0.0, 0.005, 0.005),
-                                                                                  (2.5, 0.0003, 0.0004)]
+    assert [(s.t_from_s, s.dt_s, s.tau_s) for s in params.schedule.segments] == [
+        (0.0, 0.005, 0.005),
+        (2.5, 0.0003, 0.0004),
+    ]
 
 
 @pytest.mark.parametrize(
@@ -79,8 +87,11 @@ tracker:
         ("tracker: {root: [0, 0], length: 100, method: fast}", "tracker.method", "must be one of"),
         ("tracker: {root: [0, 0], length: 100, alpha: 1.5}", "tracker", "alpha"),
         ("tracker: {root: [0, 0], length: 100, denoise: {window_us: 0}}", "tracker.denoise", "window_us"),
-        ("tracker: {root: [0, 0], length: 100, schedule: [{t_from_s: 0, dt_s: 0, tau_s: 1}]}",
-         "tracker.schedule[0]", "dt_s"),
+        (
+            "tracker: {root: [0, 0], length: 100, schedule: [{t_from_s: 0, dt_s: 0, tau_s: 1}]}",
+            "tracker.schedule[0]",
+            "dt_s",
+        ),
     ],
 )
 def test_errors_name_key_and_file(tmp_path: Path, text: str, key: str, words: str) -> None:
@@ -123,4 +134,8 @@ def test_the_tracker_section_defaults_are_the_chain_defaults() -> None:
     chain = {f.name: f.default for f in dataclasses.fields(ChainParams)}
     section = TrackingConfig()
     assert (section.joints, section.direction_deg, section.alpha, section.angle_limit_deg) == (
-        chain["n_joints"], chain["direction_deg"], chain["alpha"], chain["angle_limit_deg"])
+        chain["n_joints"],
+        chain["direction_deg"],
+        chain["alpha"],
+        chain["angle_limit_deg"],
+    )

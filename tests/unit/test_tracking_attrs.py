@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.core.windows import WindowSegment as SegmentConfig
+from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.tracking.section import Method, TrackingConfig, load_tracking_config
 
 

@@ -24,9 +24,8 @@ import enum
 import time
 from typing import Any
 
-import numpy as np
-
 import _fake_streams
+import numpy as np
 
 from . import centuryarks_vga, prophesee_evk4
 from ._models import RingConfiguration, check_words  # noqa: F401
@@ -114,8 +113,9 @@ class FakeCamera:
         """The scene in front of the sensor (made on first use)."""
         if self.events is None:
             model = MODELS[self.name]
-            self.events, self.triggers = _fake_streams.flapping_source(model.WIDTH, model.HEIGHT, self.duration_us,
-                                                                       seed=self.seed)
+            self.events, self.triggers = _fake_streams.flapping_source(
+                model.WIDTH, model.HEIGHT, self.duration_us, seed=self.seed
+            )
         return self.events, self.triggers
 
 
@@ -140,9 +140,15 @@ def list_devices() -> list[ListedDevice]:
     return [ListedDevice(c.name, Connection.USB_SUPER, "", c.serial, c.error) for c in _fake.cameras]
 
 
-def open(configuration: Any = None, iterator_timeout: float | None = None, raw: bool = False,  # noqa: A001
-         serial: str | None = None, address: str | None = None, ring_configuration: Any = None,
-         iterator_maximum_raw_packets: int = 64) -> Device:
+def open(  # noqa: A001 - the real SDK's name
+    configuration: Any = None,
+    iterator_timeout: float | None = None,
+    raw: bool = False,
+    serial: str | None = None,
+    address: str | None = None,
+    ring_configuration: Any = None,
+    iterator_maximum_raw_packets: int = 64,
+) -> Device:
     for camera in _fake.cameras:
         if serial is None or camera.serial == serial:
             if camera.error:
@@ -238,8 +244,9 @@ class Device:
         events, triggers = camera.source()
         events = events[_unmasked(events, cfg)]
         if cfg.rate_limiter is not None:
-            events = _rate_limited(events, cfg.rate_limiter.reference_period_us,
-                                   cfg.rate_limiter.maximum_events_per_period)
+            events = _rate_limited(
+                events, cfg.rate_limiter.reference_period_us, cfg.rate_limiter.maximum_events_per_period
+            )
         triggers = triggers if getattr(cfg, "enable_external_trigger", True) else triggers[:0]
         camera.sent_events, camera.sent_triggers = events, triggers
         data = _fake_streams.encode("evt3", events, triggers, self.model.WIDTH, self.model.HEIGHT)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import typing
 
 from ._models import Bounds, RateLimiter, RingConfiguration  # noqa: F401 - part of the module's API
 
@@ -28,7 +27,7 @@ class Configuration:
     x_mask: tuple = (0,) * 10
     y_mask: tuple = (0,) * 8
     mask_intersection_only: bool = False
-    rate_limiter: typing.Optional[RateLimiter] = None
+    rate_limiter: RateLimiter | None = None
 
     @staticmethod
     def type() -> str:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-import typing
 
 from ._models import Bounds, RateLimiter, RingConfiguration  # noqa: F401 - part of the module's API
 
@@ -45,7 +44,7 @@ class Configuration:
     mask_intersection_only: bool = False
     enable_external_trigger: bool = True
     clock: Clock = Clock.INTERNAL
-    rate_limiter: typing.Optional[RateLimiter] = None
+    rate_limiter: RateLimiter | None = None
     enable_output: bool = True
 
     @staticmethod
