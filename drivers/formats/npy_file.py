@@ -9,6 +9,7 @@ room for any count), so memory stays bounded. Triggers go to a sidecar ``NAME.tr
 from __future__ import annotations
 
 import struct
+import tokenize
 from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
@@ -31,7 +32,7 @@ def _read_npy_header(path: Path) -> tuple[np.dtype, int, int]:
             version = np.lib.format.read_magic(f)
             read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
             shape, fortran, dtype = read(f)
-        except (ValueError, SyntaxError, TypeError, struct.error, EOFError) as exc:
+        except (ValueError, SyntaxError, TypeError, struct.error, EOFError, tokenize.TokenError) as exc:
             raise FormatError(f"garbage .npy header: {exc}", path=str(path), offset=0) from None
         offset = f.tell()
     if len(shape) != 1 or fortran:

@@ -25,6 +25,10 @@ _FORMAT_OUT = {"evt2": "EVT2", "evt21": "EVT21", "evt3": "EVT3"}
 _EVT_OUT = {"evt2": "2.0", "evt21": "2.1", "evt3": "3.0"}
 
 
+MAX_T_OFFSET_US = 1 << 62
+"""The largest ``% t_offset_us`` (either sign) a header may give: event times (int64 µs) must still fit after it."""
+
+
 @dataclass(frozen=True)
 class RawLayout:
     """What a RAW header says about its stream.
@@ -130,6 +134,12 @@ def raw_layout(fields: Mapping[str, str], offsets: Mapping[str, int], path: str 
         t_offset = int(fields.get("t_offset_us", "0"))
     except ValueError:
         raise FormatError("t_offset_us is not an integer", path=path, offset=offsets.get("t_offset_us")) from None
+    if abs(t_offset) > MAX_T_OFFSET_US:  # event times are int64 us: an offset past this cannot be added
+        raise FormatError(
+            f"t_offset_us {t_offset} is beyond +-{MAX_T_OFFSET_US} (about 146 000 years)",
+            path=path,
+            offset=offsets.get("t_offset_us"),
+        )
     return RawLayout(encoding, endianness, width, height, t_offset)
 
 

@@ -122,3 +122,14 @@ def test_written_header_reads_back_with_what_metavision_needs() -> None:
     assert (layout.encoding, layout.width, layout.height, layout.t_offset_us) == ("evt2", 640, 480, 1 << 34)
     with pytest.raises(FormatError):
         raw_header("evt3", 1, 1, {"bad key": 1})
+
+
+@pytest.mark.parametrize("offset_text", ["99999999999999999999999", "-99999999999999999999999", str((1 << 62) + 1)])
+def test_a_time_offset_beyond_int64_times_is_a_format_error(offset_text: str) -> None:
+    """It used to reach the compiled decoder and come out as a numba typing traceback."""
+    head = f"% evt 3.0\n% format EVT3;height=480;width=640\n% t_offset_us {offset_text}\n% end\n".encode()
+    fields, _, offsets = parse_header_lines(head)
+    with pytest.raises(FormatError, match="t_offset_us .* is beyond") as err:
+        raw_layout(fields, offsets, "x.raw")
+    assert err.value.offset == offsets["t_offset_us"] and err.value.path == "x.raw"
+    assert raw_layout({**fields, "t_offset_us": str(1 << 62)}, offsets).t_offset_us == 1 << 62
