@@ -11,8 +11,8 @@ HELP = "run a wind-speed sweep with the rig of -c rig.yaml, or resume one (--res
 DESCRIPTION = """\
 Run the rig's services with the supervisor in sweep mode: for each point of the config's
 `supervisor.sweep` plan, set and verify the speed, settle, record events and centrelines, and
-append the point's numbers to RUN_DIR/run.jsonl; then write summary.csv and amplitude.png.
-Whatever happens, the tunnel ends ramped to zero and the stop record says why.
+append the point's numbers to RUN_DIR/run.jsonl; then write summary.csv, amplitude.png, run.json
+(the run for programs) and README.txt (what each file is). Whatever happens, the tunnel ends ramped to zero and the stop record says why.
 
   flagtrack sweep -c deploy/rig-sweep-sim.yaml
   flagtrack sweep --resume runs/run-20261121-101500      # finished points are not redone
@@ -62,7 +62,8 @@ def run(args: argparse.Namespace) -> int:
         run_dir = supervisor_service.run_dir
         print(f"flagtrack sweep: {supervisor_service.stop_reason}; run folder {run_dir}", file=sys.stderr)
         print(
-            f"  log {run_dir / 'run.jsonl'}\n  summary {run_dir / 'summary.csv'}\n  figure {run_dir / 'amplitude.png'}",
+            f"  log {run_dir / 'run.jsonl'}\n  summary {run_dir / 'summary.csv'}\n  figure {run_dir / 'amplitude.png'}\n"
+            f"  about {run_dir / 'README.txt'} (what each file is; run.json for programs)",
             file=sys.stderr,
         )
         if supervisor_service.stop_reason != "finished":

@@ -28,6 +28,7 @@ from flagtrack.daemon.services.supervisor.monitor import BusMonitor, point_state
 from flagtrack.daemon.services.supervisor.section import SupervisorConfig
 from flagtrack.daemon.sweep.actions import ActionOutcome, PauseAction, parse_action, run_command
 from flagtrack.daemon.sweep.plan import Action, EndPoint, Point, Record, SetSpeed, Wait, plan_points, sweep_plan
+from flagtrack.daemon.sweep.runfiles import command_line
 from flagtrack.daemon.sweep.runlog import POINTS_DIR, PointResult, RunLog, completed_points, point_paths, stored_sweep
 from flagtrack.daemon.sweep.summary import write_summary
 from flagtrack.daemon.transport import Bus
@@ -246,7 +247,7 @@ class SupervisorService:
 
     def _open_run(self) -> RunLog:
         if self.resume_dir is not None:
-            runlog, record = RunLog.resume(self.resume_dir)
+            runlog, record = RunLog.resume(self.resume_dir, command=command_line())
             self.run_dir = runlog.run_dir
             self._sweep = stored_sweep(record)
             self._done = completed_points(self.run_dir)
@@ -257,7 +258,9 @@ class SupervisorService:
         assert self.cfg.sweep is not None
         self._sweep, self._done = self.cfg.sweep, set()
         config = {**self.rig_snapshot, "sweep": _mapping(self.cfg.sweep)}
-        return RunLog.create(self.run_dir, run_id=name, config=config, plan=plan_points(self.cfg.sweep))
+        return RunLog.create(
+            self.run_dir, run_id=name, config=config, plan=plan_points(self.cfg.sweep), command=command_line()
+        )
 
     def _run_sweep(self, runlog: RunLog) -> None:
         point: Point | None = None

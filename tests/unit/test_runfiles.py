@@ -1,0 +1,145 @@
+"""A run folder explains itself: README.txt and run.json written with the summary, brought up to date when a run
+is resumed."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from flagtrack.daemon import __version__
+from flagtrack.daemon.sweep import summary
+from flagtrack.daemon.sweep.plan import SpeedRange, SweepConfig, plan_points
+from flagtrack.daemon.sweep.runfiles import README, RUN_JSON, command_line, run_status
+from flagtrack.daemon.sweep.runlog import PointResult, RunLog, point_paths, read_run
+from flagtrack.daemon.sweep.summary import summary_points, transition_speeds, write_summary
+from flagtrack.daemon.typed_yaml import to_mapping
+
+CFG = SweepConfig(range=SpeedRange(4.0, 5.0, 0.5), settle_s=1, record_s=2)  # up 4, 4.5, 5; down 4.5, 4
+PLAN = plan_points(CFG)
+FLAPPING = {"001-up-4.50": False, "002-up-5.00": True, "003-down-4.50": True}
+
+
+def result(point, **changes) -> PointResult:
+    flapping = FLAPPING.get(point.point_id, False)
+    raw, lines = point_paths(point.point_id)
+    values = dict(
+        state="flapping" if flapping else "still",
+        amplitude_over_l=0.25 if flapping else 0.001,
+        frequency_hz=11.0 if flapping else math.nan,
+        event_rate_mev_s=0.3 if flapping else 0.007,
+        delta_rms_over_l=0.004,
+        raw_file=raw,
+        centreline_file=lines,
+        sensor_status="ok",
+        sensor_error_rms_over_l=0.004 if flapping else 0.002,
+    )
+    return PointResult.planned(point, **{**values, **changes})
+
+
+def start_run(run_dir: Path, upto: int, stop: str | None, command: str = "flagtrack sweep -c rig.yaml") -> None:
+    with RunLog.create(
+        run_dir,
+        run_id=run_dir.name,
+        config={"rig": "lab", "sweep": to_mapping(CFG)},
+        plan=PLAN,
+        command=command,
+        t_unix=1_790_000_000.0,
+    ) as log:
+        for point in PLAN[:upto]:
+            (run_dir / point_paths(point.point_id)[0]).write_bytes(b"\x00" * 64)  # the point's raw file
+            log.point(result(point))
+        if stop is not None:
+            log.stop(stop, error="OSError: serial port gone" if stop == "error" else None, t_unix=1_790_000_100.0)
+
+
+def test_the_summary_writes_a_readme_and_a_run_json_that_describe_the_folder(tmp_path: Path) -> None:
+    run_dir = tmp_path / "run-a"
+    start_run(run_dir, upto=len(PLAN), stop="finished")
+    write_summary(run_dir)
+    run = json.loads((run_dir / RUN_JSON).read_text())
+    points = summary_points(read_run(run_dir))
+    assert run["format"] == "flagtrack-sweep-run" and run["format_version"] == 1 and run["written_by"] == __version__
+    assert run["command"] == "flagtrack sweep -c rig.yaml" and run["status"] == "finished"
+    assert (run["onset_mps"], run["decay_mps"]) == transition_speeds(points) == (5.0, 4.0)
+    assert run["counts"] == {"planned": 5, "done": 5, "failed": 0}
+    assert (
+        [p["point_id"] for p in run["points"]]
+        == [p.point_id for p in PLAN]
+        == [p["point_id"] for p in run["plan"]["points"]]
+    )
+    assert run["plan"]["sweep"]["range"] == {"start": 4.0, "stop": 5.0, "step": 0.5} and run["rig"] == {"rig": "lab"}
+    flapping = run["points"][2]
+    assert flapping["amplitude_over_l"] == 0.25 and flapping["frequency_hz"] == 11.0
+    assert flapping["sensor_error_rms_over_l"] == 0.004 and run["points"][0]["frequency_hz"] is None  # NaN: null
+    listed = {f["path"]: f for f in run["files"]}
+    for name in ("README.txt", "run.json", "run.jsonl", "summary.csv", "amplitude.png", "points/000-up-4.00.raw"):
+        assert name in listed and (run_dir / name).is_file(), name
+    assert listed["points/000-up-4.00.raw"]["bytes"] == 64 and "events" in listed["points/000-up-4.00.raw"]["what"]
+    assert not [f for f in listed if not (run_dir / f).is_file()]
+    readme = (run_dir / README).read_text()
+    for part in (
+        "flagtrack sweep -c rig.yaml",
+        f"flagtrack {__version__}",
+        "finished; 5 of 5 points done",
+        "Onset      5 m/s",
+        "Decay      4 m/s",
+        "run.jsonl",
+        "summary.csv",
+        "amplitude.png",
+        "points/*.raw  (5 files)",
+        "002-up-5.00",
+        "flagtrack sweep --resume",
+    ):
+        assert part in readme, part
+    assert "validation.png" in readme and "_sensor.png" not in readme  # a kind of file is listed only when there
+
+
+def test_a_resumed_run_gets_its_files_brought_up_to_date(tmp_path: Path) -> None:
+    run_dir = tmp_path / "run-b"
+    start_run(run_dir, upto=2, stop="SIGTERM")
+    write_summary(run_dir)  # as the supervisor's safe state does at the end of each session
+    first = json.loads((run_dir / RUN_JSON).read_text())
+    assert first["status"] == "stopped" and first["status_detail"] == "SIGTERM" and first["counts"]["done"] == 2
+    assert first["onset_mps"] is None and "stopped (SIGTERM); 2 of 5 points done" in (run_dir / README).read_text()
+    log, _ = RunLog.resume(run_dir, command=f"flagtrack sweep --resume {run_dir}", t_unix=1_790_000_200.0)
+    with log:
+        for point in PLAN[2:]:
+            log.point(result(point))
+        log.stop("finished", t_unix=1_790_000_300.0)
+    write_summary(run_dir)
+    second = json.loads((run_dir / RUN_JSON).read_text())
+    assert second["status"] == "finished" and second["counts"]["done"] == 5 and second["onset_mps"] == 5.0
+    assert [r["command"] for r in second["resumes"]] == [f"flagtrack sweep --resume {run_dir}"]
+    assert "Resumed    " in (readme := (run_dir / README).read_text()) and "5 of 5 points done" in readme
+
+
+def test_the_folder_describes_itself_even_when_a_figure_fails(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    start_run(tmp_path, upto=3, stop="finished")
+
+    def broken(*args, **kwargs):
+        raise ValueError("Data cannot be log-scaled")
+
+    monkeypatch.setattr(summary, "plot_amplitude", broken)
+    with pytest.raises(ValueError, match="log-scaled"):  # the supervisor logs it ("summary failed")
+        write_summary(tmp_path)
+    assert json.loads((tmp_path / RUN_JSON).read_text())["counts"]["done"] == 3 and (tmp_path / README).is_file()
+
+
+def test_the_status_says_whether_the_last_session_ended(tmp_path: Path) -> None:
+    start_run(tmp_path / "killed", upto=1, stop=None)
+    assert run_status(read_run(tmp_path / "killed"))[0] == "incomplete"
+    start_run(tmp_path / "failed", upto=1, stop="error")
+    assert run_status(read_run(tmp_path / "failed")) == ("error", "OSError: serial port gone")
+    log, _ = RunLog.resume(tmp_path / "failed", t_unix=1_790_000_200.0)  # resumed, then killed: no stop after it
+    log.close()
+    assert run_status(read_run(tmp_path / "failed"))[0] == "incomplete"
+
+
+def test_the_command_line_is_written_as_a_user_types_it() -> None:
+    assert command_line(["/venv/bin/flagtrack", "sweep", "-c", "my rig.yaml"]) == "flagtrack sweep -c 'my rig.yaml'"
+    module = "/src/flagtrack/daemon/__main__.py"
+    assert command_line([module, "demo", "--quick"]) == "flagtrack demo --quick"
+    assert command_line(["/usr/bin/pytest", "-q"]) == "/usr/bin/pytest -q"
