@@ -1,5 +1,5 @@
 """A run folder explains itself: README.txt and run.json written with the summary, brought up to date when a run
-is resumed."""
+is resumed, and `flagtrack runs list` over finished, interrupted, corrupt and foreign folders."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from flagtrack.daemon import __version__
+from flagtrack.daemon.cli import main
 from flagtrack.daemon.sweep import summary
 from flagtrack.daemon.sweep.plan import SpeedRange, SweepConfig, plan_points
 from flagtrack.daemon.sweep.runfiles import README, RUN_JSON, command_line, run_status
@@ -143,3 +144,52 @@ def test_the_command_line_is_written_as_a_user_types_it() -> None:
     module = "/src/flagtrack/daemon/__main__.py"
     assert command_line([module, "demo", "--quick"]) == "flagtrack demo --quick"
     assert command_line(["/usr/bin/pytest", "-q"]) == "/usr/bin/pytest -q"
+
+
+def make_runs(runs: Path) -> None:
+    start_run(runs / "a-finished", upto=len(PLAN), stop="finished")
+    start_run(runs / "b-killed", upto=3, stop=None)
+    start_run(runs / "c-corrupt", upto=3, stop="finished")
+    log_path = runs / "c-corrupt" / "run.jsonl"
+    lines = log_path.read_text().splitlines(keepends=True)
+    log_path.write_text("".join([lines[0], '{"type": "point", "v": 1, "point_id": \n', *lines[2:]]))  # a torn middle
+    (runs / "d-foreign").mkdir()
+    (runs / "d-foreign" / "notes.txt").write_text("not a run")
+    (runs / "e-empty-log").mkdir()
+    (runs / "e-empty-log" / "run.jsonl").write_bytes(b"")
+    (runs / "stray-file.txt").write_text("a file, not a folder: not listed")
+
+
+def test_runs_list_shows_each_folder_with_its_status_or_why_it_is_not_a_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    make_runs(tmp_path)
+    assert main(["runs", "list", str(tmp_path)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].split() == ["run", "started", "points", "onset", "m/s", "decay", "m/s", "status"]
+    rows = {line.split()[0]: line for line in out[1:]}
+    assert list(rows) == ["a-finished", "b-killed", "c-corrupt", "d-foreign", "e-empty-log"]
+    assert rows["a-finished"].split()[3:7] == ["5/5", "5", "4", "finished"]
+    assert "3/5" in rows["b-killed"] and "incomplete: no stop record" in rows["b-killed"]
+    assert "unreadable:" in rows["c-corrupt"] and "malformed record" in rows["c-corrupt"]
+    assert "not a run: no run.jsonl" in rows["d-foreign"]
+    assert "unreadable:" in rows["e-empty-log"] and "start record" in rows["e-empty-log"]
+    assert main(["runs", "list", str(tmp_path), "--json"]) == 0
+    listed = {row["run"]: row for row in json.loads(capsys.readouterr().out)}
+    assert listed["a-finished"]["onset_mps"] == 5.0 and listed["a-finished"]["decay_mps"] == 4.0
+    assert listed["a-finished"]["points_done"] == listed["a-finished"]["points_planned"] == 5
+    assert listed["a-finished"]["started_unix"] == 1_790_000_000.0 and listed["a-finished"]["reason"] is None
+    assert listed["b-killed"]["status"] == "incomplete" and listed["c-corrupt"]["status"] == "unreadable"
+    assert listed["d-foreign"]["status"] == "not a run" and listed["d-foreign"]["points_done"] is None
+
+
+def test_runs_list_of_one_run_folder_and_of_a_missing_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    start_run(tmp_path / "only", upto=2, stop="SIGINT")
+    assert main(["runs", "list", str(tmp_path / "only"), "--json"]) == 0
+    (row,) = json.loads(capsys.readouterr().out)
+    assert row["run"] == "only" and row["status"] == "stopped" and row["reason"] == "SIGINT"
+    assert main(["runs", "list", str(tmp_path / "nowhere")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"flagtrack runs: error: no such folder: {tmp_path / 'nowhere'}"]
