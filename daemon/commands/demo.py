@@ -15,7 +15,8 @@ DESCRIPTION = """\
 Simulated wind tunnel on a pseudo-terminal, simulated camera (the digital twin), tracker, recorder,
 supervisor and viewer, over Zenoh on loopback: a sweep from 4 to 6 m/s and back in 0.25 m/s steps
 through the flag's onset (4.9 m/s going up) and decay (4.4 m/s coming down). Takes about 2 minutes.
-Prints where the results are; --json ends with one JSON object (paths absolute).
+A line per point and (on a terminal) a progress bar show on stderr (--quiet: none). Prints where
+the results are; --json ends with one JSON object (paths absolute).
 """
 
 ONSET_MPS, DECAY_MPS, STEP_MPS = 4.9, 4.4, 0.25
@@ -81,15 +82,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--json", action="store_true", help="end with one JSON object of the results")
     parser.add_argument("--quick", action="store_true", help="a 5-point sweep (4.2, 4.7, 5.2 m/s) in about 30 s")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines or bar, only the results")
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo and report the simulated and detected onset and decay speeds."""
+    from flagtrack.daemon.commands._progress import SweepProgressView
     from flagtrack.daemon.rig.config import RigConfig
     from flagtrack.daemon.rig.run import prepare_services, run_rig
     from flagtrack.daemon.sweep.runlog import read_run
     from flagtrack.daemon.sweep.summary import summary_points, transition_speeds
     from flagtrack.daemon.typed_yaml import from_mapping
+
+    def say(text: str) -> None:
+        if not args.quiet:
+            print(f"flagtrack demo: {text}", file=sys.stderr)
 
     out = (args.out or Path(f"flagtrack-demo-{time.strftime('%Y%m%d-%H%M%S')}")).expanduser().resolve()
     if (out / "sweep").exists():
@@ -100,15 +107,17 @@ def run(args: argparse.Namespace) -> int:
     rig = from_mapping(RigConfig, config, key="demo")
     speeds = rig.supervisor.sweep.speed_values()  # type: ignore[union-attr]
     step_mps = float(speeds[1] - speeds[0])
-    print(
-        f"flagtrack demo: simulated onset {ONSET_MPS} m/s going up, decay {DECAY_MPS} m/s coming down; "
+    say(
+        f"simulated onset {ONSET_MPS} m/s going up, decay {DECAY_MPS} m/s coming down; "
         f"sweeping {speeds[0]:g} -> {speeds[-1]:g} -> {speeds[0]:g} m/s in {step_mps:g} m/s steps "
-        f"(about {'30 s' if args.quick else '2 minutes'}) into {out}",
-        file=sys.stderr,
+        f"(about {'30 s' if args.quick else '2 minutes'}) into {out}"
     )
-    prepare_services(rig, list(rig.services), lambda text: print(f"flagtrack demo: {text} ...", file=sys.stderr))
+    prepare_services(rig, list(rig.services), lambda text: say(f"{text} ..."))
     started = time.monotonic()
-    result = run_rig(rig, list(rig.services), shutdown_timeout_s=30.0, quiet=True, prepared=True)
+    with SweepProgressView(quiet=args.quiet) as progress:
+        result = run_rig(
+            rig, list(rig.services), shutdown_timeout_s=30.0, quiet=True, prepared=True, on_supervisor_state=progress
+        )
     supervisor = result.service("supervisor")
     viewer = result.service("viewer")
     run_dir = out / "sweep"

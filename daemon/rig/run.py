@@ -7,19 +7,23 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from flagtrack.daemon.errors import FlagtrackError
 from flagtrack.daemon.rig.build import build_services, open_camera, open_hardware_camera
 from flagtrack.daemon.rig.config import RigConfig, check_rig
 from flagtrack.daemon.services.centreline_file import CentrelineFileService
 from flagtrack.daemon.services.runner import RunReport, Service, run_services
+from flagtrack.daemon.services.supervisor.service import SupervisorService
 from flagtrack.daemon.services.tracker import warm_up_kernels
 from flagtrack.daemon.sweep import figures
 from flagtrack.daemon.tracking.setup import TrackingSetup, processing_attrs, tracking_setup
 from flagtrack.daemon.transport import Bus
 from flagtrack.daemon.typed_yaml import require_output_file
 from flagtrack.drivers.camera.simulated import fast_forward
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.schema import SupervisorState
 
 
 def run_rig(
@@ -32,10 +36,13 @@ def run_rig(
     resume_dir: Path | None = None,
     quiet: bool = False,
     prepared: bool = False,
+    on_supervisor_state: Callable[[SupervisorState], None] | None = None,
 ) -> RigRun:
     """Open the bus, build and run the services until a signal, a failure or the end of the work.
 
     ``prepared``: the caller already ran :func:`prepare_services` (to time the run without it).
+    ``on_supervisor_state``: called with every state the supervisor publishes, in its thread (a
+    command draws the sweep's progress with it; see ``SupervisorService.add_observer``).
 
     Returns:
         A :class:`RigRun` (exit code, the services, the runner's report).
@@ -74,6 +81,10 @@ def run_rig(
                 tracker=setup,
                 camera=camera,
             )
+            if on_supervisor_state is not None:
+                for service in services:
+                    if isinstance(service, SupervisorService):
+                        service.add_observer(on_supervisor_state)
             if centrelines is not None:
                 made_by = setup.attrs if setup is not None else processing_attrs(rig.tracker)
                 attrs = {**made_by, "input_file": str(rig.camera.replay.path) if rig.camera.replay else ""}

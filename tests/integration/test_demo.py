@@ -1,4 +1,5 @@
-"""`flagtrack demo --quick --json`: the whole simulated rig, its JSON contract, onset and decay found."""
+"""`flagtrack demo --quick --json`: the whole simulated rig, its JSON contract, onset and decay found, a plain
+line per point on a pipe."""
 
 from __future__ import annotations
 
@@ -51,3 +52,6 @@ def test_quick_demo_finds_onset_and_decay_within_one_step(tmp_path: Path) -> Non
     for key in ("summary_csv", "log", "rrd"):
         assert Path(summary[key]).is_absolute() and Path(summary[key]).stat().st_size > 0
     assert "onset  detected" in result.stderr
+    # progress on a pipe: a plain line per point, no bar
+    lines = [line for line in result.stderr.splitlines() if line.startswith("point ")]
+    assert [line.split()[1] for line in lines] == ["1/5", "2/5", "3/5", "4/5", "5/5"] and "\r" not in result.stderr

@@ -1,14 +1,16 @@
-"""Sweep progress: the ETA, the per-point facts (lost-fraction hook included), and the new SupervisorState fields
-on the wire, for peers of this version and of the previous one."""
+"""Sweep progress: the ETA, the per-point facts (lost-fraction hook included), their line, the plain and quiet
+views, and the new SupervisorState fields on the wire, for peers of this version and of the previous one."""
 
 from __future__ import annotations
 
 import dataclasses
+import io
 import math
 from types import SimpleNamespace
 
 import pytest
 
+from flagtrack.daemon.commands._progress import SweepProgressView, bar_text, clock, point_line
 from flagtrack.daemon.schema import SupervisorState, decode, encode
 from flagtrack.daemon.schema.messages import MESSAGE_TYPES, MessageType
 from flagtrack.daemon.sweep.plan import SpeedRange, SweepConfig, plan_points
@@ -75,6 +77,62 @@ def state(**changes) -> SupervisorState:
         sensor_error_rms_over_l=0.0043,
     )
     return SupervisorState(**{**values, **changes})
+
+
+def test_the_line_of_a_point_shows_its_facts_and_dashes_for_what_is_not_known() -> None:
+    line = point_line(state())
+    for part in (
+        " 3/17",
+        "4.50 m/s",
+        "up",
+        "flapping",
+        "A/L 0.231",
+        "f  12.4 Hz",
+        "lost -",
+        "e/L 0.43%",
+        "[0:42, ETA 1:38]",
+    ):
+        assert part in line, (part, line)
+    still = point_line(
+        state(last_state="still", amplitude_over_l=0.0004, frequency_hz=-1.0, sensor_error_rms_over_l=-1.0)
+    )
+    assert "f     - Hz" in still and "e/L" not in still and "A/L 0.000" in still
+    assert "lost 5.0%" in point_line(state(lost_fraction=0.05))
+    assert "FAILED" in point_line(state(last_status="failed"))
+    assert bar_text(state()) == "0:42 elapsed, ETA 1:38 | point 4: 5.00 m/s up, flag flapping"
+    assert clock(3725) == "1:02:05" and clock(-1.0) == "?"
+
+
+def feed(view: SweepProgressView) -> None:
+    view(state(points_total=0, points_done=0, last_point=""))  # before the sweep: nothing to show
+    view(state(points_done=0, last_point="", last_index=0))  # the sweep begins
+    for _ in range(3):
+        view(state(points_done=0, last_point="", last_index=0))  # states between points: no new line
+    view(state(points_done=1, last_point="000-up-4.00", last_index=1, last_speed_mps=4.0))
+    view(state(points_done=1, last_point="000-up-4.00", last_index=1, last_speed_mps=4.0))
+    view(state(points_done=2, last_point="001-up-4.25", last_index=2, last_speed_mps=4.25))
+
+
+def test_plain_lines_one_per_finished_point_when_not_on_a_terminal() -> None:
+    out = io.StringIO()
+    with SweepProgressView(out) as view:
+        assert not view.terminal
+        feed(view)
+    lines = out.getvalue().splitlines()
+    assert lines[0] == "sweep: 17 points, ETA 1:38"
+    assert [line.split()[1] for line in lines[1:]] == ["1/17", "2/17"] and "\r" not in out.getvalue()
+
+
+def test_quiet_shows_nothing_and_a_bar_is_drawn_when_asked() -> None:
+    out = io.StringIO()
+    with SweepProgressView(out, quiet=True) as view:
+        feed(view)
+    assert out.getvalue() == ""
+    bar = io.StringIO()
+    with SweepProgressView(bar, terminal=True) as view:
+        feed(view)
+    shown = bar.getvalue()
+    assert "\r" in shown and "sweep 2/17 |" in shown and "ETA 1:38" in shown and shown.count("point  2/17") == 1
 
 
 def test_new_state_fields_round_trip_and_default_to_no_sweep() -> None:
