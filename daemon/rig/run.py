@@ -138,8 +138,12 @@ def prepare_services(
       (hardware cameras are not opened here).
     - A supervisor imports matplotlib (about a second, holding the GIL): drawing the summary figure
       at the end of a sweep would otherwise stall the twin camera of the same process.
+    - Trigger events (a twin with a sync generator, a point sensor that reads the raw files' pulses)
+      take kernels of their own: encoding them into packets and reading them back from a file
+      (compiling those on a first run took 2 s, which the twin could not make up in real time).
     """
     twin = "camera" in names and rig.camera.adapter == "simulated"
+    triggers = (twin and rig.camera.simulated.trigger_period_ms > 0) or "sensor" in names
     if twin or "tracker" in names:
         say("loading the compiled kernels (the first run after installing compiles them: about a minute)")
     try:
@@ -149,10 +153,38 @@ def prepare_services(
             warm_up_kernels((tracker or tracking_setup(rig.tracker, path=rig.path)).factory)
         if "supervisor" in names:
             figures.load_figure_modules()
+        if triggers:
+            _warm_up_triggers()
     except FlagtrackError:
         raise
     except Exception as exc:  # a failed compile or import: one line, as the services' own failures are
         raise FlagtrackError(f"preparing the services failed ({type(exc).__name__}: {exc})") from exc
+
+
+def _warm_up_triggers() -> None:
+    """Packetize a few events with trigger pulses (EVT 3.0 and 2.0), write them to a file and read the
+    pulses back as a point's sensor check does, to load (or compile) the kernels of that path."""
+    import tempfile
+
+    import numpy as np
+
+    from flagtrack.daemon.core.events import empty_triggers, make_events
+    from flagtrack.daemon.validation.collect import raw_triggers
+    from flagtrack.drivers.formats import write_events
+    from flagtrack.drivers.formats.packets import Packetizer
+
+    n = 200
+    events = make_events(np.arange(n, dtype=np.int64) * 10, np.arange(n) % 20, np.arange(n) // 20, np.arange(n) % 2)
+    triggers = empty_triggers(4)
+    triggers["t"], triggers["edge"] = [100, 110, 1100, 1110], [1, 0, 1, 0]
+    for encoding in ("evt3", "evt2"):
+        packetizer = Packetizer(encoding, 64, 64)
+        packetizer.push(events, triggers, t_until_us=5000)
+        packetizer.flush()
+    with tempfile.TemporaryDirectory(prefix="flagtrack-warm-up-") as folder:
+        path = Path(folder) / "triggers.raw"
+        write_events(path, events, width=64, height=64, encoding="evt3", triggers=triggers)
+        raw_triggers(path)
 
 
 @dataclass(frozen=True)
