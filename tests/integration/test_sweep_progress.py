@@ -157,14 +157,22 @@ def test_quiet_sweep_prints_no_progress_only_the_result(tmp_path: Path) -> None:
     assert read_run(tmp_path / "runs" / "run").stop["reason"] == "finished"
 
 
-def test_a_remote_subscriber_receives_the_facts_of_each_point(tmp_path: Path) -> None:
+def test_a_remote_subscriber_receives_the_facts_of_each_point(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     config = from_mapping(RigConfig, rig_mapping(tmp_path, bus={"listen": [endpoint]}))
     local: list[SupervisorState] = []
+
+    def broken_display(state: SupervisorState) -> None:
+        local.append(state)
+        if state.last_point:  # from the first finished point on, the command's display fails
+            raise BrokenPipeError("stderr went away")
+
     with Bus(BusConfig(namespace=config.bus_config.namespace, connect=(endpoint,))) as viewer:
         states = viewer.subscribe(viewer.keys.supervisor_state(), SupervisorState, capacity=100_000)
-        result = run_rig(config, list(config.services), quiet=True, on_supervisor_state=local.append)
-        assert result.code == 0
+        result = run_rig(config, list(config.services), quiet=True, on_supervisor_state=broken_display)
+        assert result.code == 0  # the sweep went on: a display never stops it
+        failures = [r for r in caplog.records if "progress observer failed" in r.getMessage()]
+        assert len(failures) == 1 and "BrokenPipeError" in failures[0].getMessage()  # said once
         remote: list[SupervisorState] = []
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline and not (remote and remote[-1].mode == "safe"):  # the last state sent
