@@ -31,6 +31,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from flagtrack.daemon import __file__ as _daemon_init
 from flagtrack.daemon import __version__
 from flagtrack.daemon.sweep.runlog import RUN_LOG, PointResult, RunRecord
 
@@ -38,6 +39,7 @@ RUN_JSON = "run.json"
 README = "README.txt"
 RUN_JSON_FORMAT = "flagtrack-sweep-run"
 RUN_JSON_VERSION = 1
+_MAIN = (Path(_daemon_init).parent / "__main__.py").resolve()  # what ``python -m flagtrack.daemon`` runs
 
 # (pattern relative to the run folder, what the file is), in the order README.txt lists them
 FILE_KINDS: tuple[tuple[str, str], ...] = (
@@ -67,8 +69,8 @@ def command_line(argv: Sequence[str] | None = None) -> str:
     argv = list(sys.argv if argv is None else argv)
     if not argv:
         return ""
-    name = Path(argv[0]).name
-    if name == "flagtrack" or (name == "__main__.py" and "flagtrack" in Path(argv[0]).parts):
+    program = Path(argv[0])
+    if program.name == "flagtrack" or program.resolve() == _MAIN:  # the script, or python -m flagtrack.daemon
         return shlex.join(["flagtrack", *argv[1:]])
     return shlex.join(argv)
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from flagtrack import daemon
 from flagtrack.daemon import __version__
 from flagtrack.daemon.cli import main
 from flagtrack.daemon.sweep import summary
@@ -141,8 +142,9 @@ def test_the_status_says_whether_the_last_session_ended(tmp_path: Path) -> None:
 
 def test_the_command_line_is_written_as_a_user_types_it() -> None:
     assert command_line(["/venv/bin/flagtrack", "sweep", "-c", "my rig.yaml"]) == "flagtrack sweep -c 'my rig.yaml'"
-    module = "/src/flagtrack/daemon/__main__.py"
+    module = str(Path(daemon.__file__).parent / "__main__.py")  # python -m flagtrack.daemon (an editable install)
     assert command_line([module, "demo", "--quick"]) == "flagtrack demo --quick"
+    assert command_line(["/elsewhere/__main__.py", "x"]) == "/elsewhere/__main__.py x"
     assert command_line(["/usr/bin/pytest", "-q"]) == "/usr/bin/pytest -q"
 
 
