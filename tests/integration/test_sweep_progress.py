@@ -155,6 +155,8 @@ def test_quiet_sweep_prints_no_progress_only_the_result(tmp_path: Path) -> None:
     assert not point_lines(result.stderr) and "sweep: 3 points" not in result.stderr and "ETA" not in result.stderr
     assert "flagtrack sweep: finished; run folder" in result.stderr  # the result still says where the run is
     assert read_run(tmp_path / "runs" / "run").stop["reason"] == "finished"
+    readme = (tmp_path / "runs" / "run" / "README.txt").read_text()  # run as python -m flagtrack.daemon
+    assert f"Command    flagtrack sweep -c {tmp_path / 'rig.yaml'} --quiet\n" in readme, readme[:400]
 
 
 def test_a_remote_subscriber_receives_the_facts_of_each_point(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
