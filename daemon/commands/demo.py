@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -13,12 +14,17 @@ COMMAND = "demo"
 HELP = "run the whole rig with no hardware: a short up-and-down sweep through the simulated flutter onset"
 DESCRIPTION = """\
 Simulated wind tunnel on a pseudo-terminal, simulated camera (the digital twin), tracker, recorder,
-supervisor and viewer, over Zenoh on loopback: a sweep from 4 to 6 m/s and back in 0.25 m/s steps
-through the flag's onset (4.9 m/s going up) and decay (4.4 m/s coming down). Takes about 2 minutes.
-Prints where the results are; --json ends with one JSON object (paths absolute).
+supervisor, viewer and the paper's validation sensor (a simulated laser distance sensor across the
+flag at x/L = 0.73, its clock synchronised with the camera's by trigger pulses, as
+deploy/rig-sensor-sim.yaml), over Zenoh on loopback: a sweep from 4 to 6 m/s and back in 0.25 m/s
+steps through the flag's onset (4.9 m/s going up) and decay (4.4 m/s coming down). Takes about 2
+minutes. A line per point and (on a terminal) a progress bar show on stderr (--quiet: none). Prints
+the onset and decay found, the worst sensor error e/L RMS of the flapping points and where the
+results are; --json ends with one JSON object (paths absolute).
 """
 
 ONSET_MPS, DECAY_MPS, STEP_MPS = 4.9, 4.4, 0.25
+PAPER_ERROR_OVER_L = 0.015  # the paper's e(t) stays within 0-1.5 % of L (section 4, figure 5c-e)
 
 
 def demo_rig(out: Path, headless: bool, quick: bool = False) -> dict[str, Any]:
@@ -42,6 +48,7 @@ def demo_rig(out: Path, headless: bool, quick: bool = False) -> dict[str, Any]:
                 "noise_rate_hz": 5000,
                 "max_lag_s": 1.0,
                 "flutter": {"onset_speed_mps": ONSET_MPS, "decay_speed_mps": DECAY_MPS, "tau_amp_s": 0.3},
+                "trigger_period_ms": 50,  # sync generator on the trigger input: the sensor stamps the same pulses
             },
         },
         "tracker": {"root": [150, 240], "length": 300, "direction_deg": 0, "tau_s": 0.001},
@@ -69,7 +76,23 @@ def demo_rig(out: Path, headless: bool, quick: bool = False) -> dict[str, Any]:
             "onset": {"learn_s": 2.0},
             "sweep": {**sweep, "branches": ["up", "down"]},
         },
-        "services": ["camera", "tracker", "recorder", "viewer", "supervisor"],
+        # the paper's validation (section 4, figure 5c-g), as deploy/rig-sensor-sim.yaml: a laser distance
+        # sensor across the flag at x/L = 0.73 reading the twin's true flag, its clock 3 ms off the camera's
+        "sensor": {
+            "id": "om70",
+            "driver": "simulated",
+            "units": "mm",
+            "simulated": {
+                "rate_hz": 1000,
+                "noise_over_l": 0.002,
+                "latency_ms": 2.0,
+                "clock_offset_ms": 3.0,
+                "record_triggers": True,
+            },
+            "beam": {"x_over_l": 0.73, "units_per_reading": 1.6666667, "zero_reading": 100.0, "direction": -1},
+            "sync": {"mode": "auto"},
+        },
+        "services": ["camera", "tracker", "recorder", "viewer", "supervisor", "sensor"],
     }
 
 
@@ -81,15 +104,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--json", action="store_true", help="end with one JSON object of the results")
     parser.add_argument("--quick", action="store_true", help="a 5-point sweep (4.2, 4.7, 5.2 m/s) in about 30 s")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines or bar, only the results")
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the demo and report the simulated and detected onset and decay speeds."""
+    """Run the demo and report the simulated and detected onset and decay speeds and the sensor check."""
+    from flagtrack.daemon.commands._progress import SweepProgressView
     from flagtrack.daemon.rig.config import RigConfig
     from flagtrack.daemon.rig.run import prepare_services, run_rig
     from flagtrack.daemon.sweep.runlog import read_run
     from flagtrack.daemon.sweep.summary import summary_points, transition_speeds
     from flagtrack.daemon.typed_yaml import from_mapping
+
+    def say(text: str) -> None:
+        if not args.quiet:
+            print(f"flagtrack demo: {text}", file=sys.stderr)
 
     out = (args.out or Path(f"flagtrack-demo-{time.strftime('%Y%m%d-%H%M%S')}")).expanduser().resolve()
     if (out / "sweep").exists():
@@ -100,21 +129,25 @@ def run(args: argparse.Namespace) -> int:
     rig = from_mapping(RigConfig, config, key="demo")
     speeds = rig.supervisor.sweep.speed_values()  # type: ignore[union-attr]
     step_mps = float(speeds[1] - speeds[0])
-    print(
-        f"flagtrack demo: simulated onset {ONSET_MPS} m/s going up, decay {DECAY_MPS} m/s coming down; "
+    say(
+        f"simulated onset {ONSET_MPS} m/s going up, decay {DECAY_MPS} m/s coming down; "
         f"sweeping {speeds[0]:g} -> {speeds[-1]:g} -> {speeds[0]:g} m/s in {step_mps:g} m/s steps "
-        f"(about {'30 s' if args.quick else '2 minutes'}) into {out}",
-        file=sys.stderr,
+        f"(about {'30 s' if args.quick else '2 minutes'}) into {out}; a laser distance sensor at x/L = 0.73 "
+        "checks every point"
     )
-    prepare_services(rig, list(rig.services), lambda text: print(f"flagtrack demo: {text} ...", file=sys.stderr))
+    prepare_services(rig, list(rig.services), lambda text: say(f"{text} ..."))
     started = time.monotonic()
-    result = run_rig(rig, list(rig.services), shutdown_timeout_s=30.0, quiet=True, prepared=True)
+    with SweepProgressView(quiet=args.quiet) as progress:
+        result = run_rig(
+            rig, list(rig.services), shutdown_timeout_s=30.0, quiet=True, prepared=True, on_supervisor_state=progress
+        )
     supervisor = result.service("supervisor")
     viewer = result.service("viewer")
     run_dir = out / "sweep"
     points = summary_points(read_run(run_dir)) if (run_dir / "run.jsonl").exists() else []
     onset, decay = transition_speeds(points)
     rrd = Path(viewer.cfg.rrd_path).resolve() if viewer is not None and "recording to" in viewer.description else None
+    sensor = sensor_check(points, run_dir)
     summary = {
         "onset_mps_simulated": ONSET_MPS,
         "decay_mps_simulated": DECAY_MPS,
@@ -125,18 +158,54 @@ def run(args: argparse.Namespace) -> int:
         "summary_csv": str(run_dir / "summary.csv"),
         "log": str(run_dir / "run.jsonl"),
         "rrd": str(rrd) if rrd else None,
+        "sensor_error_rms_over_l_max": sensor["worst"],
+        "sensor_figure": sensor["figure"],
+        "run_json": str(run_dir / "run.json"),
     }
     reason = supervisor.stop_reason if supervisor is not None else "not run"
     print(f"flagtrack demo: {reason} after {time.monotonic() - started:.0f} s, {len(points)} points", file=sys.stderr)
     print(
-        f"  onset  detected {onset} m/s (simulated {ONSET_MPS})\n  decay  detected {decay} m/s (simulated {DECAY_MPS})",
+        f"  onset  detected {onset} m/s (simulated {ONSET_MPS})\n  decay  detected {decay} m/s (simulated {DECAY_MPS})\n"
+        f"  sensor {sensor['text']}",
         file=sys.stderr,
     )
-    print(
-        f"  summary {summary['summary_csv']}\n  figure  {run_dir / 'amplitude.png'}\n  log     {summary['log']}"
-        + (f"\n  view    {rrd} (open with: rerun {rrd})" if rrd else ""),
-        file=sys.stderr,
-    )
+    lines = [
+        ("summary", f"{summary['summary_csv']}"),
+        ("figure", f"{run_dir / 'amplitude.png'} (A/L against the speed: the paper's figure 5h)"),
+    ]
+    if sensor["figure"]:
+        lines.append(("point", f"{sensor['figure']} (sensor and camera at the worst point: the paper's 5c-e)"))
+    if (run_dir / "validation.png").exists():
+        lines.append(("sensor", f"{run_dir / 'validation.png'} (|e|/L and Delta_RMS/L against the speed: 5g)"))
+    lines.append(("log", summary["log"]))
+    lines.append(("about", f"{run_dir / 'README.txt'} (what each file is; run.json for programs)"))
+    if rrd:
+        lines.append(("view", f"{rrd} (open with: rerun {rrd})"))
+    print("\n".join(f"  {label:<7} {text}" for label, text in lines), file=sys.stderr)
     if args.json:
         print(json.dumps(summary))
     return result.code or (0 if reason == "finished" else 1)
+
+
+def sensor_check(points: list[Any], run_dir: Path) -> dict[str, Any]:
+    """The worst e/L RMS of the flapping points (``worst``, None if none has one), the figure of that
+    point (``figure``, absolute path or None) and a line saying it (``text``)."""
+    flapping = [p for p in points if p.state == "flapping" and p.status == "done"]
+    checked = [p for p in flapping if math.isfinite(p.sensor_error_rms_over_l)]
+    if not checked:
+        statuses = sorted({str(p.sensor_status) for p in points})
+        return {"worst": None, "figure": None, "text": f"no comparison at a flapping point ({', '.join(statuses)})"}
+    worst = max(checked, key=lambda p: p.sensor_error_rms_over_l)
+    figure = run_dir / worst.sensor_figure if worst.sensor_figure else None
+    syncs = [p.sensor_sync for p in points if p.sensor_sync]
+    synced = sum(s == "trigger" for s in syncs)
+    within = "within" if worst.sensor_error_rms_over_l <= PAPER_ERROR_OVER_L else "OUTSIDE"
+    return {
+        "worst": worst.sensor_error_rms_over_l,
+        "figure": str(figure) if figure is not None and figure.exists() else None,
+        "text": (
+            f"worst e/L RMS {worst.sensor_error_rms_over_l:.2%} of L over {len(checked)} flapping points "
+            f"({worst.point_id}; {within} the paper's 0-{PAPER_ERROR_OVER_L:.1%}), clocks trigger-synchronised "
+            f"at {synced} of {len(points)} points"
+        ),
+    }

@@ -11,8 +11,11 @@ HELP = "run a wind-speed sweep with the rig of -c rig.yaml, or resume one (--res
 DESCRIPTION = """\
 Run the rig's services with the supervisor in sweep mode: for each point of the config's
 `supervisor.sweep` plan, set and verify the speed, settle, record events and centrelines, and
-append the point's numbers to RUN_DIR/run.jsonl; then write summary.csv and amplitude.png.
-Whatever happens, the tunnel ends ramped to zero and the stop record says why.
+append the point's numbers to RUN_DIR/run.jsonl; then write summary.csv, amplitude.png, run.json
+(the run for programs) and README.txt (what each file is). Whatever happens, the tunnel ends ramped
+to zero and the stop record says why. A line per finished point (index/total, speed, branch, flag
+state, A/L, f, lost fraction, sensor error) and, on a terminal, a progress bar with the elapsed time
+and the ETA show on stderr (--quiet: none).
 
   flagtrack sweep -c deploy/rig-sweep-sim.yaml
   flagtrack sweep --resume runs/run-20261121-101500      # finished points are not redone
@@ -25,12 +28,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", type=Path, metavar="RUN_DIR", help="resume this interrupted run")
     parser.add_argument("--runs-dir", type=Path, help="where run folders go (overrides supervisor.runs_dir)")
     parser.add_argument("--shutdown-timeout", type=float, default=90.0, help="seconds to wait for services to stop")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines or bar, only the result")
 
 
 def run(args: argparse.Namespace) -> int:
     """Run or resume the sweep; print where the results are."""
     import dataclasses
 
+    from flagtrack.daemon.commands._progress import SweepProgressView
     from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.rig.config import RigConfig, load_rig
     from flagtrack.daemon.rig.run import run_rig
@@ -56,13 +61,22 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(str(exc), key="supervisor", path=str(args.config or args.resume)) from exc
     rig = dataclasses.replace(rig, supervisor=supervisor)
     names = [*dict.fromkeys([*rig.services, "supervisor"])]
-    result = run_rig(rig, names, shutdown_timeout_s=args.shutdown_timeout, resume_dir=args.resume)
+    with SweepProgressView(quiet=args.quiet) as progress:
+        result = run_rig(
+            rig,
+            names,
+            shutdown_timeout_s=args.shutdown_timeout,
+            resume_dir=args.resume,
+            quiet=args.quiet,
+            on_supervisor_state=progress,
+        )
     supervisor_service = result.service("supervisor")
     if supervisor_service is not None and supervisor_service.run_dir is not None:
         run_dir = supervisor_service.run_dir
         print(f"flagtrack sweep: {supervisor_service.stop_reason}; run folder {run_dir}", file=sys.stderr)
         print(
-            f"  log {run_dir / 'run.jsonl'}\n  summary {run_dir / 'summary.csv'}\n  figure {run_dir / 'amplitude.png'}",
+            f"  log {run_dir / 'run.jsonl'}\n  summary {run_dir / 'summary.csv'}\n  figure {run_dir / 'amplitude.png'}\n"
+            f"  about {run_dir / 'README.txt'} (what each file is; run.json for programs)",
             file=sys.stderr,
         )
         if supervisor_service.stop_reason != "finished":

@@ -23,6 +23,8 @@ talking over Zenoh (peer mode, loopback, unless the config's `bus:` says otherwi
 
 With --replay, the file is played through camera adapter -> Zenoh -> tracker (same options and
 results as `flagtrack reconstruct`). The first Ctrl-C stops gracefully; a second one forces.
+With a supervisor that sweeps, a line per finished point and (on a terminal) a progress bar show
+on stderr, as in `flagtrack sweep` (--quiet: none).
 """
 
 log = logging.getLogger(__name__)
@@ -39,21 +41,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rrd", type=Path, metavar="OUT.rrd", help="write the Rerun view to this file (headless)")
     parser.add_argument("--record", type=Path, metavar="BASE", help="record the camera to BASE.raw (+ .json)")
     parser.add_argument("--shutdown-timeout", type=float, default=10.0, help="seconds to wait for services to stop")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress or status lines (errors still print)")
     add_tracking_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     """Build the rig from the config and flags, run it, report."""
+    from flagtrack.daemon.commands._progress import SweepProgressView
     from flagtrack.daemon.rig.run import run_rig
 
     rig, names = rig_from_args(args)
-    return run_rig(
-        rig,
-        names,
-        exit_at_end_of_stream=args.exit_at_eof,
-        centrelines=args.centrelines,
-        shutdown_timeout_s=args.shutdown_timeout,
-    ).code
+    with SweepProgressView(quiet=args.quiet or "supervisor" not in names) as progress:
+        return run_rig(
+            rig,
+            names,
+            exit_at_end_of_stream=args.exit_at_eof,
+            centrelines=args.centrelines,
+            shutdown_timeout_s=args.shutdown_timeout,
+            quiet=args.quiet,
+            on_supervisor_state=progress,
+        ).code
 
 
 def rig_from_args(args: argparse.Namespace) -> tuple[RigConfig, list[str]]:

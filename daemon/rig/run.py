@@ -7,19 +7,23 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from flagtrack.daemon.errors import FlagtrackError
 from flagtrack.daemon.rig.build import build_services, open_camera, open_hardware_camera
 from flagtrack.daemon.rig.config import RigConfig, check_rig
 from flagtrack.daemon.services.centreline_file import CentrelineFileService
 from flagtrack.daemon.services.runner import RunReport, Service, run_services
+from flagtrack.daemon.services.supervisor.service import SupervisorService
 from flagtrack.daemon.services.tracker import warm_up_kernels
 from flagtrack.daemon.sweep import figures
 from flagtrack.daemon.tracking.setup import TrackingSetup, processing_attrs, tracking_setup
 from flagtrack.daemon.transport import Bus
 from flagtrack.daemon.typed_yaml import require_output_file
 from flagtrack.drivers.camera.simulated import fast_forward
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.schema import SupervisorState
 
 
 def run_rig(
@@ -32,10 +36,13 @@ def run_rig(
     resume_dir: Path | None = None,
     quiet: bool = False,
     prepared: bool = False,
+    on_supervisor_state: Callable[[SupervisorState], None] | None = None,
 ) -> RigRun:
     """Open the bus, build and run the services until a signal, a failure or the end of the work.
 
     ``prepared``: the caller already ran :func:`prepare_services` (to time the run without it).
+    ``on_supervisor_state``: called with every state the supervisor publishes, in its thread (a
+    command draws the sweep's progress with it; see ``SupervisorService.add_observer``).
 
     Returns:
         A :class:`RigRun` (exit code, the services, the runner's report).
@@ -74,6 +81,10 @@ def run_rig(
                 tracker=setup,
                 camera=camera,
             )
+            if on_supervisor_state is not None:
+                for service in services:
+                    if isinstance(service, SupervisorService):
+                        service.add_observer(on_supervisor_state)
             if centrelines is not None:
                 made_by = setup.attrs if setup is not None else processing_attrs(rig.tracker)
                 attrs = {**made_by, "input_file": str(rig.camera.replay.path) if rig.camera.replay else ""}
@@ -127,8 +138,12 @@ def prepare_services(
       (hardware cameras are not opened here).
     - A supervisor imports matplotlib (about a second, holding the GIL): drawing the summary figure
       at the end of a sweep would otherwise stall the twin camera of the same process.
+    - Trigger events (a twin with a sync generator, a point sensor that reads the raw files' pulses)
+      take kernels of their own: encoding them into packets and reading them back from a file
+      (compiling those on a first run took 2 s, which the twin could not make up in real time).
     """
     twin = "camera" in names and rig.camera.adapter == "simulated"
+    triggers = (twin and rig.camera.simulated.trigger_period_ms > 0) or "sensor" in names
     if twin or "tracker" in names:
         say("loading the compiled kernels (the first run after installing compiles them: about a minute)")
     try:
@@ -138,10 +153,38 @@ def prepare_services(
             warm_up_kernels((tracker or tracking_setup(rig.tracker, path=rig.path)).factory)
         if "supervisor" in names:
             figures.load_figure_modules()
+        if triggers:
+            _warm_up_triggers()
     except FlagtrackError:
         raise
     except Exception as exc:  # a failed compile or import: one line, as the services' own failures are
         raise FlagtrackError(f"preparing the services failed ({type(exc).__name__}: {exc})") from exc
+
+
+def _warm_up_triggers() -> None:
+    """Packetize a few events with trigger pulses (EVT 3.0 and 2.0), write them to a file and read the
+    pulses back as a point's sensor check does, to load (or compile) the kernels of that path."""
+    import tempfile
+
+    import numpy as np
+
+    from flagtrack.daemon.core.events import empty_triggers, make_events
+    from flagtrack.daemon.validation.collect import raw_triggers
+    from flagtrack.drivers.formats import write_events
+    from flagtrack.drivers.formats.packets import Packetizer
+
+    n = 200
+    events = make_events(np.arange(n, dtype=np.int64) * 10, np.arange(n) % 20, np.arange(n) // 20, np.arange(n) % 2)
+    triggers = empty_triggers(4)
+    triggers["t"], triggers["edge"] = [100, 110, 1100, 1110], [1, 0, 1, 0]
+    for encoding in ("evt3", "evt2"):
+        packetizer = Packetizer(encoding, 64, 64)
+        packetizer.push(events, triggers, t_until_us=5000)
+        packetizer.flush()
+    with tempfile.TemporaryDirectory(prefix="flagtrack-warm-up-") as folder:
+        path = Path(folder) / "triggers.raw"
+        write_events(path, events, width=64, height=64, encoding="evt3", triggers=triggers)
+        raw_triggers(path)
 
 
 @dataclass(frozen=True)

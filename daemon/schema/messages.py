@@ -278,7 +278,22 @@ class TunnelCommand:
 
 @dataclass(frozen=True)
 class SupervisorState:
-    """Flag state from event rates, and sweep progress."""
+    """Flag state from event rates, and sweep progress.
+
+    The fields after ``message`` were added later with defaults (a peer of the previous version
+    ignores them; its messages decode as "no sweep progress"). A number that is not known is
+    ``-1.0`` (none of them can be negative; no NaN on the wire, as in :class:`TunnelState`):
+
+    - the plan: ``point_index`` the 1-based position in the plan of ``point``, the point being
+      measured (0: none); ``points_total`` the plan's points (0: no sweep); ``points_done`` those
+      finished (done or failed), the ones of earlier sessions of a resumed run included;
+      ``elapsed_s`` since this session's sweep began; ``eta_s`` estimated seconds to its end;
+    - the last finished point (``last_point`` its id, ``""`` before the first): ``last_index``
+      (1-based position), ``last_speed_mps``, ``last_branch``, ``last_state`` (still | flapping |
+      unknown), ``last_status`` (done | failed), ``amplitude_over_l``, ``frequency_hz``,
+      ``lost_fraction`` (updates the tracker flagged lost: -1 until the tracker has a lost flag),
+      ``sensor_error_rms_over_l`` (RMS |e|/L against the point sensor: -1 without one).
+    """
 
     TYPE: ClassVar[MessageType] = MessageType.SUPERVISOR_STATE
     flag_state: str  # still | flapping | unknown
@@ -288,6 +303,21 @@ class SupervisorState:
     branch: str = ""
     speed_mps: float = 0.0
     message: str = ""
+    point_index: int = 0
+    points_total: int = 0
+    points_done: int = 0
+    elapsed_s: float = 0.0
+    eta_s: float = -1.0
+    last_point: str = ""
+    last_index: int = 0
+    last_speed_mps: float = -1.0
+    last_branch: str = ""
+    last_state: str = ""
+    last_status: str = ""
+    amplitude_over_l: float = -1.0
+    frequency_hz: float = -1.0
+    lost_fraction: float = -1.0
+    sensor_error_rms_over_l: float = -1.0
 
 
 @dataclass(frozen=True)

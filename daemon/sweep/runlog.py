@@ -2,8 +2,10 @@
 
 Records (one JSON object per line, each with ``type`` and the format version ``v``):
 
-- ``start``: run id, flagtrack version, the run's config, the planned points;
-- ``resume``: appended when an interrupted run is resumed, with the points already done;
+- ``start``: run id, flagtrack version, the run's config, the planned points, and the command
+  line that made it (``command``; absent from runs made before it was stored);
+- ``resume``: appended when an interrupted run is resumed, with the points already done (and the
+  command line);
 - ``point``: one per measured point: id, branch, speed, state, metrics, pointers to the raw and
   centreline files (relative to the run folder), status ``done`` or ``failed``;
 - ``stop``: reason (``finished``, ``SIGTERM``, an error), appended on any orderly end.
@@ -270,9 +272,10 @@ class RunLog:
     @classmethod
     def create(
         cls, run_dir: str | Path, *, run_id: str, config: Mapping[str, Any], plan: Sequence[Point],
-        t_unix: float | None = None,
+        t_unix: float | None = None, command: str | None = None,
     ) -> RunLog:  # fmt: skip
-        """Make the run folder (and ``points/``) and write the start record.
+        """Make the run folder (and ``points/``) and write the start record (``command``: the command
+        line that made the run, stored when given).
 
         Raises:
             FormatError: the folder already holds a run log (resume it instead).
@@ -289,12 +292,16 @@ class RunLog:
             {"point_id": p.point_id, "index": p.index, "branch": p.branch.value, "speed_mps": p.speed_mps} for p in plan
         ]
         runlog._append({"type": "start", "run_id": run_id, "t_unix": _now(t_unix), "flagtrack_version": __version__,
-                        "config": to_mapping(dict(config)), "plan": plan_json})  # fmt: skip
+                        "config": to_mapping(dict(config)), "plan": plan_json,
+                        **({} if command is None else {"command": command})})  # fmt: skip
         return runlog
 
     @classmethod
-    def resume(cls, run_dir: str | Path, *, t_unix: float | None = None) -> tuple[RunLog, RunRecord]:
-        """Reopen a run for appending: cut a torn last line, write a ``resume`` record.
+    def resume(
+        cls, run_dir: str | Path, *, t_unix: float | None = None, command: str | None = None
+    ) -> tuple[RunLog, RunRecord]:
+        """Reopen a run for appending: cut a torn last line, write a ``resume`` record (with
+        ``command``, the command line resuming it, when given).
 
         Returns:
             The writer and what the log held before resuming.
@@ -308,7 +315,8 @@ class RunLog:
         handle.seek(record.valid_bytes)
         runlog = cls(run_dir, handle)
         done = sorted(pid for pid, p in record.latest_points().items() if p.status == "done")
-        runlog._append({"type": "resume", "t_unix": _now(t_unix), "done": done, "cut_torn_tail": record.torn_tail})
+        resume = {"type": "resume", "t_unix": _now(t_unix), "done": done, "cut_torn_tail": record.torn_tail}
+        runlog._append({**resume, **({} if command is None else {"command": command})})
         return runlog, record
 
     def point(self, result: PointResult) -> None:

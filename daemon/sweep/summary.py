@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from flagtrack.daemon.sweep.figures import plot_amplitude, plot_sweep
+from flagtrack.daemon.sweep.runfiles import write_run_files
 from flagtrack.daemon.sweep.runlog import PointResult, RunRecord, read_run
 
 SUMMARY_CSV = "summary.csv"
@@ -80,12 +81,17 @@ def _first_change(points: Sequence[PointResult], branch: str, before: str, after
 
 def write_summary(run_dir: str | Path) -> tuple[Path, Path]:
     """Read the run log of ``run_dir`` and write ``summary.csv`` and ``amplitude.png`` there (and
-    ``validation.png``, the point-sensor comparison against the speed, when a point has one)."""
+    ``validation.png``, the point-sensor comparison against the speed, when a point has one), then
+    the folder's ``run.json`` and ``README.txt`` (:mod:`~flagtrack.daemon.sweep.runfiles`)."""
     record = read_run(run_dir)
     points = summary_points(record)
     csv_path = write_summary_csv(points, Path(run_dir) / SUMMARY_CSV)
     title = f"run {record.start.get('run_id', '?')}"
-    fig_path = plot_amplitude(points, Path(run_dir) / AMPLITUDE_FIGURE, title, transition_speeds(points))
-    if any(p.sensor_status is not None for p in points):
-        plot_sweep(points, Path(run_dir) / VALIDATION_FIGURE, f"{title}: point sensor and cloud distance")
+    transitions = transition_speeds(points)
+    try:
+        fig_path = plot_amplitude(points, Path(run_dir) / AMPLITUDE_FIGURE, title, transitions)
+        if any(p.sensor_status is not None for p in points):
+            plot_sweep(points, Path(run_dir) / VALIDATION_FIGURE, f"{title}: point sensor and cloud distance")
+    finally:  # the folder describes itself even when a figure cannot be drawn
+        write_run_files(record, points, *transitions)
     return csv_path, fig_path

@@ -1,4 +1,5 @@
-"""`flagtrack demo --quick --json`: the whole simulated rig, its JSON contract, onset and decay found."""
+"""`flagtrack demo --quick --json`: the whole simulated rig, its JSON contract, onset and decay found, the point
+sensor's check of every point (the paper's validation), a plain line per point on a pipe, a self-describing run."""
 
 from __future__ import annotations
 
@@ -19,6 +20,9 @@ KEYS = [
     "summary_csv",
     "log",
     "rrd",
+    "sensor_error_rms_over_l_max",
+    "sensor_figure",
+    "run_json",
 ]
 
 
@@ -48,6 +52,18 @@ def test_quick_demo_finds_onset_and_decay_within_one_step(tmp_path: Path) -> Non
     assert abs(summary["onset_mps_detected"] - summary["onset_mps_simulated"]) <= step
     assert abs(summary["decay_mps_detected"] - summary["decay_mps_simulated"]) <= step
     assert summary["onset_mps_detected"] > summary["decay_mps_detected"]  # hysteresis seen
-    for key in ("summary_csv", "log", "rrd"):
+    for key in ("summary_csv", "log", "rrd", "sensor_figure", "run_json"):
         assert Path(summary[key]).is_absolute() and Path(summary[key]).stat().st_size > 0
     assert "onset  detected" in result.stderr
+    # the paper's validation: a laser distance sensor, trigger-synchronised, within the paper's 1.5 % of L
+    assert 0 < summary["sensor_error_rms_over_l_max"] < 0.015
+    assert Path(summary["sensor_figure"]).name.endswith("_sensor.png") and summary["sensor_figure"] in result.stderr
+    run = json.loads(Path(summary["run_json"]).read_text())
+    flapping = [p for p in run["points"] if p["state"] == "flapping"]
+    assert flapping and max(p["sensor_error_rms_over_l"] for p in flapping) == summary["sensor_error_rms_over_l_max"]
+    assert {p["sensor_sync"] for p in run["points"]} == {"trigger"}
+    assert f"worst e/L RMS {summary['sensor_error_rms_over_l_max']:.2%}" in result.stderr
+    # progress on a pipe: a plain line per point, no bar
+    lines = [line for line in result.stderr.splitlines() if line.startswith("point ")]
+    assert [line.split()[1] for line in lines] == ["1/5", "2/5", "3/5", "4/5", "5/5"] and "\r" not in result.stderr
+    assert all("e/L" in line for line in lines)

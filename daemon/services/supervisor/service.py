@@ -13,6 +13,7 @@ import math
 import threading
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from datetime import datetime
 from pathlib import Path
@@ -28,6 +29,8 @@ from flagtrack.daemon.services.supervisor.monitor import BusMonitor, point_state
 from flagtrack.daemon.services.supervisor.section import SupervisorConfig
 from flagtrack.daemon.sweep.actions import ActionOutcome, PauseAction, parse_action, run_command
 from flagtrack.daemon.sweep.plan import Action, EndPoint, Point, Record, SetSpeed, Wait, plan_points, sweep_plan
+from flagtrack.daemon.sweep.progress import SweepProgress
+from flagtrack.daemon.sweep.runfiles import command_line
 from flagtrack.daemon.sweep.runlog import POINTS_DIR, PointResult, RunLog, completed_points, point_paths, stored_sweep
 from flagtrack.daemon.sweep.summary import write_summary
 from flagtrack.daemon.transport import Bus
@@ -86,6 +89,15 @@ class SupervisorService:
         self._mode, self._point, self._branch = cfg.mode, "", ""
         self._last_publish = 0.0
         self._stop = threading.Event()
+        self.progress: SweepProgress | None = None
+        self._observers: list[Callable[[SupervisorState], None]] = []
+        self._observer_failed = False
+
+    def add_observer(self, observer: Callable[[SupervisorState], None]) -> None:
+        """Call ``observer`` with every state the supervisor publishes, in its thread (a command draws
+        the sweep's progress with it). The supervisor's own work goes on whatever the observer does:
+        an exception it raises is logged once and the states keep coming."""
+        self._observers.append(observer)
 
     # -- service ---------------------------------------------------------------------------
 
@@ -198,17 +210,17 @@ class SupervisorService:
             return
         self._last_publish = now
         m = self.monitor
-        self._state_pub.put(
-            SupervisorState(
-                m.state.value,
-                float(m.rate_hz) if np.isfinite(m.rate_hz) else 0.0,
-                self._mode,
-                self._point,
-                self._branch,
-                float(self.tunnel.setpoint_mps) if np.isfinite(self.tunnel.setpoint_mps) else 0.0,
-                self.stop_reason,
-            )
+        state = SupervisorState(
+            m.state.value,
+            float(m.rate_hz) if np.isfinite(m.rate_hz) else 0.0,
+            self._mode,
+            self._point,
+            self._branch,
+            float(self.tunnel.setpoint_mps) if np.isfinite(self.tunnel.setpoint_mps) else 0.0,
+            self.stop_reason,
+            **self._progress_fields(now),
         )
+        self._state_pub.put(state)
         status = self.tunnel.status()
         self._tunnel_pub.put(
             TunnelState(
@@ -219,6 +231,41 @@ class SupervisorService:
                 time.time(),
             )
         )
+        for observer in self._observers:
+            try:
+                observer(state)
+            except Exception as exc:  # noqa: BLE001 - a display never stops a sweep (or its safe state)
+                if not self._observer_failed:
+                    log.error("supervisor: a progress observer failed (%s: %s)", type(exc).__name__, exc)
+                self._observer_failed = True
+
+    def _progress_fields(self, now_s: float) -> dict[str, Any]:
+        """The sweep-progress fields of :class:`SupervisorState` (none outside a sweep)."""
+        progress = self.progress
+        if progress is None:
+            return {}
+        fields: dict[str, Any] = {
+            "point_index": progress.current_position,
+            "points_total": progress.total,
+            "points_done": progress.done,
+            "elapsed_s": progress.elapsed_s(now_s),
+            "eta_s": _known(progress.eta_s(now_s)),
+        }
+        last = progress.last
+        if last is not None:
+            fields.update(
+                last_point=last.point_id,
+                last_index=last.position,
+                last_speed_mps=_known(last.speed_mps),
+                last_branch=last.branch,
+                last_state=last.state,
+                last_status=last.status,
+                amplitude_over_l=_known(last.amplitude_over_l),
+                frequency_hz=_known(last.frequency_hz),
+                lost_fraction=_known(last.lost_fraction),
+                sensor_error_rms_over_l=_known(last.sensor_error_rms_over_l),
+            )
+        return fields
 
     def _recorder(self, command: RecorderCommand, wait: bool = True) -> Any:
         """Send a command to the recorder; with ``wait``, return its acknowledgement."""
@@ -246,7 +293,7 @@ class SupervisorService:
 
     def _open_run(self) -> RunLog:
         if self.resume_dir is not None:
-            runlog, record = RunLog.resume(self.resume_dir)
+            runlog, record = RunLog.resume(self.resume_dir, command=command_line())
             self.run_dir = runlog.run_dir
             self._sweep = stored_sweep(record)
             self._done = completed_points(self.run_dir)
@@ -257,16 +304,21 @@ class SupervisorService:
         assert self.cfg.sweep is not None
         self._sweep, self._done = self.cfg.sweep, set()
         config = {**self.rig_snapshot, "sweep": _mapping(self.cfg.sweep)}
-        return RunLog.create(self.run_dir, run_id=name, config=config, plan=plan_points(self.cfg.sweep))
+        return RunLog.create(
+            self.run_dir, run_id=name, config=config, plan=plan_points(self.cfg.sweep), command=command_line()
+        )
 
     def _run_sweep(self, runlog: RunLog) -> None:
         point: Point | None = None
         result: PointResult | None = None
         outcomes: list[ActionOutcome] = []
+        planned_point_s = self._sweep.settle_s + self._sweep.record_s
+        self.progress = SweepProgress(plan_points(self._sweep), self._done, planned_point_s, time.monotonic())
         for step in sweep_plan(self._sweep, self._done):
             if isinstance(step, Point):
                 point, result, outcomes = step, None, []
                 self._point, self._branch = step.point_id, step.branch.value
+                self.progress.start_point(step, time.monotonic())
                 log.info("supervisor: point %s", step.point_id)
             elif isinstance(step, SetSpeed):
                 self._set_speed(step.speed_mps)
@@ -288,6 +340,7 @@ class SupervisorService:
                     )
                     runlog.point(failed)
                     self.points_done.append(failed)
+                    self._point_finished(failed)
                     raise RunStopped(f"point {point.point_id}: required action {outcome.summary()}")
             elif isinstance(step, EndPoint) and result is not None:
                 if outcomes:
@@ -295,7 +348,14 @@ class SupervisorService:
                 runlog.point(result)
                 self.points_done.append(result)
                 self._point = ""
+                self._point_finished(result)
         self._mode = "done"
+
+    def _point_finished(self, result: PointResult) -> None:
+        """Count the point and publish its facts at once (each finished point is in a state message)."""
+        assert self.progress is not None
+        self.progress.finish_point(result, time.monotonic())
+        self._publish(force=True)
 
     def _run_action(self, step: Action, point: Point, number: int) -> ActionOutcome:
         """Run one per-point action (see :mod:`~flagtrack.daemon.sweep.actions`); stop requests still work."""
@@ -420,6 +480,11 @@ def _last_seconds(batches: list, window_s: float) -> list:
             break
         kept.append(batch.select(batch.t_s >= t_end - window_s))
     return kept[::-1]
+
+
+def _known(value: float) -> float:
+    """``value``, or -1.0 when it is not a finite number (the state messages' "not known")."""
+    return float(value) if math.isfinite(value) else -1.0
 
 
 def _mapping(obj: Any) -> Any:

@@ -1,0 +1,161 @@
+"""A sweep's progress on the command line: a line per finished point and, on a terminal, a bar.
+
+Drawn from the :class:`~flagtrack.daemon.schema.SupervisorState` messages the supervisor publishes
+(``run_rig(on_supervisor_state=view)`` hands each one to the view in the supervisor's thread), so
+what a command prints is what a viewer on the bus receives. On a terminal: the lines scroll above a
+tqdm bar (points done of the plan, elapsed time, ETA, the point being measured), and log messages
+print above the bar too; elsewhere (a pipe, a file): plain lines, each with the elapsed time and
+the ETA; ``quiet``: nothing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+import threading
+import time
+from types import TracebackType
+from typing import Any, TextIO
+
+from flagtrack.daemon.schema import SupervisorState
+
+REFRESH_S = 0.5  # the bar is redrawn at most this often (and at once when a point finishes)
+
+
+def clock(seconds: float) -> str:
+    """``1:05`` or ``2:01:05`` for a duration in seconds; ``?`` when not known (negative)."""
+    if not seconds >= 0:
+        return "?"
+    minutes, secs = divmod(round(seconds), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours}:{minutes:02d}:{secs:02d}" if hours else f"{minutes}:{secs:02d}"
+
+
+def _number(value: float, fmt: str, width: int) -> str:
+    """``value`` formatted, or ``-`` (right-aligned to ``width``) when not known (negative)."""
+    return format(value, fmt) if value >= 0 else "-".rjust(width)
+
+
+def point_line(state: SupervisorState) -> str:
+    """The line of the last finished point of ``state``, e.g.
+    ``point  3/17  4.50 m/s up    flapping  A/L 0.231  f  12.4 Hz  lost -  e/L 0.43 %  [0:42, ETA 1:38]``.
+
+    ``lost`` is the fraction of the point's updates the tracker flagged lost: ``-`` until point
+    records carry one (``daemon/sweep/progress.py``'s ``lost_fraction``); ``e/L`` (RMS error against
+    the point sensor, % of L) is shown when the point has one.
+    """
+    width = len(str(state.points_total))
+    head = f"point {state.last_index:>{width}}/{state.points_total}  {state.last_speed_mps:5.2f} m/s {state.last_branch:<4}"
+    times = f"[{clock(state.elapsed_s)}, ETA {clock(state.eta_s)}]"
+    if state.last_status == "failed":
+        return f"{head}  FAILED (the run log says why)  {times}"
+    lost = f"{state.lost_fraction:.1%}" if state.lost_fraction >= 0 else "-"
+    sensor = f"  e/L {state.sensor_error_rms_over_l:.2%}" if state.sensor_error_rms_over_l >= 0 else ""
+    return (
+        f"{head}  {state.last_state:<8}  A/L {_number(state.amplitude_over_l, '5.3f', 5)}  "
+        f"f {_number(state.frequency_hz, '5.1f', 5)} Hz  lost {lost}{sensor}  {times}"
+    )
+
+
+def bar_text(state: SupervisorState) -> str:
+    """The text after the bar: elapsed, ETA, the point being measured and the flag's state."""
+    now = (
+        f"point {state.point_index}: {state.speed_mps:.2f} m/s {state.branch}, flag {state.flag_state}"
+        if state.point_index
+        else f"{state.mode}, flag {state.flag_state}"
+    )
+    return f"{clock(state.elapsed_s)} elapsed, ETA {clock(state.eta_s)} | {now}"
+
+
+class SweepProgressView:
+    """Draws the progress of a sweep from the supervisor's states (call it with each one).
+
+    Args:
+        stream: where to draw (default ``sys.stderr``).
+        quiet: draw nothing.
+        terminal: draw a bar (default: when ``stream`` is a terminal); otherwise plain lines.
+    """
+
+    def __init__(self, stream: TextIO | None = None, *, quiet: bool = False, terminal: bool | None = None) -> None:
+        self.stream = stream if stream is not None else sys.stderr
+        self.quiet = quiet
+        self.terminal = _isatty(self.stream) if terminal is None else terminal
+        self._lock = threading.Lock()
+        self._bar: Any = None
+        self._started = False
+        self._finished = 0
+        self._last_draw = 0.0
+        self._redirect: contextlib.ExitStack | None = None
+
+    def __enter__(self) -> SweepProgressView:
+        if self.terminal and not self.quiet:  # log lines (a warning from a service) print above the bar
+            from tqdm.contrib.logging import logging_redirect_tqdm
+
+            self._redirect = contextlib.ExitStack()
+            self._redirect.enter_context(logging_redirect_tqdm())
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def __call__(self, state: SupervisorState) -> None:
+        """Take one state: a line when a point has finished since the last one, the bar redrawn."""
+        if self.quiet or state.points_total <= 0:
+            return
+        with self._lock:
+            if not self._started:
+                self._start(state)
+            new_point = state.points_done > self._finished and bool(state.last_point)
+            self._finished = max(self._finished, state.points_done)
+            if new_point:
+                self._write(point_line(state))
+            if self._bar is not None:
+                now = time.monotonic()
+                self._bar.n = state.points_done
+                self._bar.set_description_str(bar_text(state), refresh=False)
+                if new_point or now - self._last_draw >= REFRESH_S:
+                    self._bar.refresh()
+                    self._last_draw = now
+
+    def close(self) -> None:
+        """Leave the bar as it last was and stop redirecting the log (idempotent)."""
+        with self._lock:
+            if self._bar is not None:
+                self._bar.close()
+                self._bar = None
+            if self._redirect is not None:
+                self._redirect.close()
+                self._redirect = None
+
+    def _start(self, state: SupervisorState) -> None:
+        self._started = True
+        self._finished = state.points_done
+        if self.terminal:
+            from tqdm import tqdm
+
+            self._bar = tqdm(
+                total=state.points_total,
+                initial=state.points_done,
+                file=self.stream,
+                bar_format="sweep {n_fmt}/{total_fmt} |{bar}| {desc}",
+                dynamic_ncols=True,
+                leave=True,
+            )
+            return
+        before = f", {state.points_done} done before" if state.points_done else ""
+        self._write(f"sweep: {state.points_total} points{before}, ETA {clock(state.eta_s)}")
+
+    def _write(self, line: str) -> None:
+        if self._bar is not None:
+            self._bar.write(line, file=self.stream)
+        else:
+            print(line, file=self.stream, flush=True)
+
+
+def _isatty(stream: TextIO) -> bool:
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):  # a closed or odd stream
+        return False
