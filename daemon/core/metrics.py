@@ -4,7 +4,7 @@
 - travelling-wave index by complex orthogonal decomposition (Feeny 2013) of the lateral
   displacement;
 - Delta_RMS: RMS distance of an event cloud to a polyline;
-- tip amplitude A/L and flapping frequency f.
+- tip amplitude A/L (also over a short window with no known rest frame) and flapping frequency f.
 
 Two series are compared on their common time span: the truth is interpolated (linearly in time,
 linearly along s) at the reconstruction's times and arc lengths. A truth need only have times, arc
@@ -197,6 +197,25 @@ def tip_amplitude_over_l(tip_lateral: np.ndarray, length: float, robust: bool = 
     if robust:
         return float(np.sqrt(2.0) * np.std(values) / length)
     return float((values.max() - values.min()) / 2.0 / length)
+
+
+def window_amplitude_over_l(
+    root_x: np.ndarray, root_y: np.ndarray, tip_x: np.ndarray, tip_y: np.ndarray, length: float
+) -> float:
+    """A/L of a short window of updates when the rest frame is not known (a live view).
+
+    Half the peak-to-peak of the tip's displacement perpendicular to the window's mean root-to-tip
+    chord (the rest direction of a flag flapping about it), over ``length``. Arguments are (n,)
+    positions of the root and the tip, one per update; updates with a NaN are left out. NaN if none is left.
+    """
+    root_x, root_y = np.asarray(root_x, dtype=np.float64), np.asarray(root_y, dtype=np.float64)
+    tip_x, tip_y = np.asarray(tip_x, dtype=np.float64), np.asarray(tip_y, dtype=np.float64)
+    ok = np.isfinite(root_x) & np.isfinite(root_y) & np.isfinite(tip_x) & np.isfinite(tip_y)
+    if not np.any(ok):
+        return float("nan")
+    root = (float(root_x[ok].mean()), float(root_y[ok].mean()))
+    direction = float(np.degrees(np.arctan2(np.mean(tip_y[ok] - root_y[ok]), np.mean(tip_x[ok] - root_x[ok]))))
+    return tip_amplitude_over_l(lateral_displacement(tip_x[ok], tip_y[ok], root, direction), length)
 
 
 def flapping_frequency_hz(t_s: np.ndarray, signal: np.ndarray, pad: int = 8, gap_factor: float = 5.0) -> float:

@@ -60,6 +60,7 @@ def test_a_file_gets_busy_entities_in_chunks_of_chunk_bytes_and_quiet_ones_in_on
     assert count["/tracker/centreline"] == 20  # 5 messages of 10 x 416 bytes pass 20 000
     assert count["/tracker/joints"] == 5  # 11 joints: 20 messages of 10 x 100 bytes
     assert count["/plots/tip_y"] == 1 and count["/plots/delta_rms"] == 1
+    assert count["/plots/amplitude_over_l"] == 1  # a value per frame (30)
     assert count["/tracker/tip_trail"] <= 5  # a strip of up to 500 tips (4 kB) per frame
     expected = np.round((np.arange(1000) * 1e-3) * 1e9).astype(np.int64)
     for entity in ("/tracker/centreline", "/tracker/joints", "/plots/tip_y"):

@@ -34,7 +34,7 @@ def test_a_queue_is_due_at_a_size_or_a_row_count_whatever_its_age() -> None:
     assert policy.due(by_size, 1.0) and policy.due(by_rows, 1.0)
 
 
-@pytest.mark.parametrize("key", ["flush_s", "rrd_flush_s", "geometry_rate_hz", "chunk_bytes"])
+@pytest.mark.parametrize("key", ["flush_s", "rrd_flush_s", "geometry_rate_hz", "amplitude_window_s", "chunk_bytes"])
 def test_the_viewer_section_refuses_a_rate_or_interval_that_is_not_positive(key: str) -> None:
     with pytest.raises(ConfigError, match=f"key 'viewer.{key}': must be a positive number"):
         ViewerConfig(**{key: 0})

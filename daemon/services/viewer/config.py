@@ -24,7 +24,8 @@ class ViewerConfig:
         recent_events_ms: events younger than this are drawn.
         max_points: at most this many event points per frame (subsampled beyond).
         trail_s: length of the tip trail.
-        geometry_rate_hz: frames per second for event clouds and the tip trail.
+        geometry_rate_hz: frames per second for event clouds, the tip trail and A/L.
+        amplitude_window_s: A/L is half the peak-to-peak of the tip over this much of the latest updates.
         flush_s: a live viewer (``spawn``, ``serve``) gets what is queued at least this often, seconds.
         rrd_flush_s: an .rrd file gets an entity's queued rows when they reach ``chunk_bytes`` or the
             oldest has waited this long (so the file holds few large chunks; a crash loses at most this).
@@ -40,12 +41,13 @@ class ViewerConfig:
     max_points: int = 20_000
     trail_s: float = 0.5
     geometry_rate_hz: float = 30.0
+    amplitude_window_s: float = 1.0
     flush_s: float = 0.25
     rrd_flush_s: float = 30.0
     chunk_bytes: int = 2 << 20
 
     def __post_init__(self) -> None:
-        for name in ("geometry_rate_hz", "flush_s", "rrd_flush_s", "chunk_bytes"):
+        for name in ("geometry_rate_hz", "flush_s", "rrd_flush_s", "amplitude_window_s", "chunk_bytes"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"must be a positive number, got {value!r}", key=f"viewer.{name}")

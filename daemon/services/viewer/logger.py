@@ -1,13 +1,14 @@
 """Bus messages -> Rerun entities, batched (no bus code here).
 
 Messages only queue rows (one :class:`~.batching.RowQueue` per entity, times on the ``camera``
-timeline); :meth:`RerunLogger.frame` draws the geometry of the moment (recent events, tip trail)
+timeline); :meth:`RerunLogger.frame` draws the geometry of the moment (recent events, tip trail, A/L)
 ``geometry_rate_hz`` times a second and sends each queue that its :class:`~.batching.FlushPolicy`
 says is due in one ``send_columns`` call.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections import deque
@@ -18,9 +19,10 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from flagtrack.daemon.core.metrics import window_amplitude_over_l
 from flagtrack.daemon.errors import ConfigError, FormatError
 from flagtrack.daemon.problems import ProblemLog
-from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, TunnelState
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, SupervisorState, TunnelState
 from flagtrack.drivers.formats.packets import decode_packet
 
 from . import layout
@@ -29,9 +31,12 @@ from .config import ViewerConfig, effective_sink
 
 log = logging.getLogger(__name__)
 
+#: The fields every SupervisorState has; the others (per-point figures, progress) are shown as a table.
+SUPERVISOR_FIELDS = ("flag_state", "rate_hz", "mode", "point", "branch", "speed_mps", "message")
+
 
 def open_recording(cfg: ViewerConfig) -> tuple[rr.RecordingStream, str]:
-    """Create the Rerun recording stream and connect its sink; return it and a description."""
+    """Create the Rerun recording stream, connect its sink and send the layout; return it and a description."""
     rec = rr.RecordingStream("flagtrack")
     sink = effective_sink(cfg)
     if sink == "spawn":
@@ -50,6 +55,7 @@ def open_recording(cfg: ViewerConfig) -> tuple[rr.RecordingStream, str]:
         description = "nowhere (sink none)"
     else:
         raise ConfigError(f"unknown sink {sink!r}", key="viewer.sink")
+    rec.send_blueprint(layout.blueprint(), make_active=True, make_default=True)
     return rec, description
 
 
@@ -70,6 +76,25 @@ def _place(t_s: float, what: str) -> float:
     if not math.isfinite(t_s):
         raise ValueError(f"{what} at a time Rerun cannot place ({t_s} s)")
     return t_s
+
+
+def supervisor_text(msg: SupervisorState) -> str:
+    """The supervisor's state as Markdown: flag state, mode, point, branch, speed, event rate, message,
+    then a table of every other field the message has (per-point figures, progress)."""
+    head = f"**{msg.flag_state}** · {msg.mode}"
+    if msg.point:
+        head += f" · point `{msg.point}`" + (f" ({msg.branch})" if msg.branch else "")
+    head += f" · {msg.speed_mps:.2f} m/s · event rate {msg.rate_hz:.3g} ev/s"
+    lines = [head]
+    if msg.message:
+        lines += ["", msg.message]
+    extra = [f.name for f in dataclasses.fields(msg) if f.name not in SUPERVISOR_FIELDS]
+    rows = [(name, getattr(msg, name, None)) for name in extra]
+    rows = [(name, value) for name, value in rows if value is not None and value != ""]
+    if rows:
+        lines += ["", "| | |", "|---|---|"]
+        lines += [f"| {name} | {f'{value:.4g}' if isinstance(value, float) else value} |" for name, value in rows]
+    return "\n".join(lines)
 
 
 class RerunLogger:
@@ -97,20 +122,26 @@ class RerunLogger:
             layout.JOINTS: self._send_points,
             layout.EVENTS: self._send_points,
             layout.TIP_TRAIL: self._send_trail,
+            layout.SUPERVISOR_STATE: self._send_document,
+            layout.SUPERVISOR_LOG: self._send_text_log,
         }
         self._packets: deque[EventPacket] = deque()
-        self._track: deque[np.ndarray] = deque()  # (n, 3) arrays: t, tip x, tip y
+        self._track: deque[np.ndarray] = deque()  # (n, 5) arrays: t, root x, root y, tip x, tip y
         self._track_new = False
+        self._length = math.nan
+        self._units = "px"
         self._styled: set[str] = set()
         self._now: float | None = None
         self._last_frame = -math.inf
         self._camera_minus_wall_s: float | None = None
+        self._supervisor_waiting: tuple[SupervisorState, float] | None = None
+        self._supervisor_last: tuple[Any, ...] | None = None
 
     # -- messages: queue rows -------------------------------------------------------------------
 
     def centrelines(self, msg: CentrelineMessage) -> None:
-        """Queue a batch of tracker updates: centreline, joints, tip y, Δ_RMS, events used; note the tip
-        for the trail."""
+        """Queue a batch of tracker updates: centreline, joints, tip y, Δ_RMS, events used (and a lost flag
+        when the message has one); note the tip and root for the trail and A/L."""
         n = len(msg.t_s)
         if not n:
             return
@@ -126,9 +157,15 @@ class RerunLogger:
         self._scalars(layout.TIP_Y, t, msg.tip_y)
         self._scalars(layout.DELTA_RMS, t, msg.delta_rms)
         self._scalars(layout.EVENTS_PER_UPDATE, t, msg.n_events)
-        self._track.append(np.stack([t, x[:, -1], y[:, -1]], axis=1))
+        lost = getattr(msg, "lost", None)
+        if lost is not None:
+            self._scalars(layout.LOST, t, lost)
+        self._units = msg.units or self._units
+        self._length = float(msg.s[-1] - msg.s[0]) if len(msg.s) > 1 else math.nan
+        self._track.append(np.stack([t, x[:, 0], y[:, 0], x[:, -1], y[:, -1]], axis=1))
         self._track_new = True
-        while len(self._track) > 1 and not self._track[0][-1, 0] >= t[-1] - self.cfg.trail_s:  # (NaN too)
+        keep_s = max(self.cfg.trail_s, self.cfg.amplitude_window_s)
+        while len(self._track) > 1 and not self._track[0][-1, 0] >= t[-1] - keep_s:  # (NaN too)
             self._track.popleft()
 
     def events(self, packet: EventPacket) -> None:
@@ -136,6 +173,8 @@ class RerunLogger:
         if packet.n_events:
             self._packets.append(packet)
         self._camera_minus_wall_s = packet.t_last_us * 1e-6 - packet.sent_ns * 1e-9
+        if self._supervisor_waiting is not None:
+            self.supervisor(*self._supervisor_waiting)
 
     def rate(self, msg: EventRate) -> None:
         """Queue the camera's event rate."""
@@ -147,6 +186,26 @@ class RerunLogger:
             return
         t = _place(msg.t_wall_s + self._camera_minus_wall_s, "wind speed")
         self._scalars(layout.WIND_SPEED, np.array([t]), [msg.speed_mps])
+
+    def supervisor(self, msg: SupervisorState, wall_s: float) -> None:
+        """Queue the supervisor's state (received at ``wall_s``, Unix seconds) as a text document, and a
+        line in the sweep log when the flag state, mode, point, branch or message changes. Before the
+        camera clock is known, the latest state waits for it."""
+        if self._camera_minus_wall_s is None:
+            self._supervisor_waiting = (msg, wall_s)
+            return
+        self._supervisor_waiting = None
+        t = np.array([_place(wall_s + self._camera_minus_wall_s, "supervisor state")])
+        text = supervisor_text(msg)
+        self._queue(layout.SUPERVISOR_STATE, (t, text), 1, len(text) + 8)
+        key = (msg.flag_state, msg.mode, msg.point, msg.branch, msg.message)
+        if key != self._supervisor_last:
+            self._supervisor_last = key
+            where = msg.mode
+            if msg.point:
+                where += f", point {msg.point}" + (f" ({msg.branch})" if msg.branch else "")
+            line = f"{where}: flag {msg.flag_state}" + (f"; {msg.message}" if msg.message else "")
+            self._queue(layout.SUPERVISOR_LOG, (t, line, "INFO"), 1, len(line) + 8)
 
     # -- frames: draw the geometry of the moment, send what is due -------------------------------
 
@@ -210,16 +269,21 @@ class RerunLogger:
         return True
 
     def _draw_track(self) -> bool:
-        """Queue the tip trail (the tip over the last ``trail_s``)."""
+        """Queue the tip trail (the tip over the last ``trail_s``) and A/L over ``amplitude_window_s``."""
         if not self._track_new:
             return False
         self._track_new = False
         track = np.concatenate(list(self._track))
         t_last = track[-1, 0]
-        trail = track[track[:, 0] >= t_last - self.cfg.trail_s][:, 1:3].astype(np.float32)
+        trail = track[track[:, 0] >= t_last - self.cfg.trail_s][:, 3:5].astype(np.float32)
         t = np.array([_place(float(t_last), "tip trail")])
         if len(trail) > 1:
             self._queue(layout.TIP_TRAIL, (t, trail), 1, trail.nbytes + 16)
+        window = track[track[:, 0] >= t_last - self.cfg.amplitude_window_s]
+        if len(window) >= 8 and self._length > 0:
+            amplitude = window_amplitude_over_l(window[:, 1], window[:, 2], window[:, 3], window[:, 4], self._length)
+            if math.isfinite(amplitude):
+                self._scalars(layout.AMPLITUDE, t, [amplitude])
         return True
 
     # -- queues and senders ----------------------------------------------------------------------
@@ -237,6 +301,10 @@ class RerunLogger:
         self._queue(path, (t, values), len(t), 16 * len(t))
 
     def _send(self, path: str, pieces: list[Any]) -> None:
+        if path in layout.SERIES_NAMES and path not in self._styled:
+            self._styled.add(path)
+            name = layout.SERIES_NAMES[path].format(units=self._units)
+            self.rec.log(path, rr.SeriesLines(names=name), static=True)
         self._senders.get(path, self._send_scalars)(path, pieces)
 
     def _send_scalars(self, path: str, pieces: list[tuple[np.ndarray, np.ndarray]]) -> None:
@@ -275,3 +343,14 @@ class RerunLogger:
         t = np.concatenate([p[0] for p in pieces])
         columns = rr.LineStrips2D.columns(strips=[p[1] for p in pieces])
         self.rec.send_columns(path, _times(t), columns.partition(np.ones(len(t), dtype=np.int32)))
+
+    def _send_document(self, path: str, pieces: list[tuple[np.ndarray, str]]) -> None:
+        t = np.concatenate([p[0] for p in pieces])
+        texts = [p[1] for p in pieces]
+        columns = rr.TextDocument.columns(text=texts, media_type=["text/markdown"] * len(texts))
+        self.rec.send_columns(path, _times(t), columns)
+
+    def _send_text_log(self, path: str, pieces: list[tuple[np.ndarray, str, str]]) -> None:
+        t = np.concatenate([p[0] for p in pieces])
+        columns = rr.TextLog.columns(text=[p[1] for p in pieces], level=[p[2] for p in pieces])
+        self.rec.send_columns(path, _times(t), columns)

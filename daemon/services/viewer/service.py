@@ -1,4 +1,4 @@
-"""The viewer service: subscribes to the camera, tracker and tunnel topics and logs them to Rerun."""
+"""The viewer service: subscribes to the camera, tracker, tunnel and supervisor topics and logs them to Rerun."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import time
 from typing import Any
 
 from flagtrack.daemon.problems import ProblemLog
-from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, TunnelState
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, SupervisorState, TunnelState
 from flagtrack.daemon.transport import Bus
 
 from .config import ViewerConfig
@@ -18,7 +18,7 @@ log = logging.getLogger(__name__)
 
 
 class ViewerService:
-    """Subscribes to camera, tracker and tunnel topics and logs them to Rerun."""
+    """Subscribes to camera, tracker, tunnel and supervisor topics and logs them to Rerun."""
 
     name = "viewer"
 
@@ -42,6 +42,7 @@ class ViewerService:
             ),
             "rate": bus.subscribe(keys.event_rate(cfg.camera_id), EventRate, capacity=1000, ring=True),
             "tunnel": bus.subscribe(keys.tunnel_state(), TunnelState, capacity=1000, ring=True),
+            "supervisor": bus.subscribe(keys.supervisor_state(), SupervisorState, capacity=1000, ring=True),
         }
 
     def run(self, stop: threading.Event) -> None:
@@ -55,6 +56,7 @@ class ViewerService:
             ("events", logger.events),
             ("rate", logger.rate),
             ("tunnel", logger.tunnel),
+            ("supervisor", lambda msg: logger.supervisor(msg, time.time())),
         )
         try:
             while not stop.is_set():
