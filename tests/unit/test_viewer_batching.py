@@ -38,3 +38,18 @@ def test_a_queue_is_due_at_a_size_or_a_row_count_whatever_its_age() -> None:
 def test_the_viewer_section_refuses_a_rate_or_interval_that_is_not_positive(key: str) -> None:
     with pytest.raises(ConfigError, match=f"key 'viewer.{key}': must be a positive number"):
         ViewerConfig(**{key: 0})
+
+
+def test_a_queue_of_its_own_row_limit_is_due_at_it() -> None:
+    """Centrelines (LineStrips2D) go in chunks of at most 2 048 rows: Rerun reads a row of such a chunk
+    back in a time that grows with the chunk."""
+    from flagtrack.daemon.services.viewer.logger import MAX_ROWS
+
+    policy = FlushPolicy(interval_s=30.0, chunk_bytes=1 << 30, chunk_rows=32_768)
+    strips = RowQueue(since_s=0.0, max_rows=MAX_ROWS["tracker/centreline"])
+    scalars = RowQueue(since_s=0.0)
+    strips.add("lines", 2047, 2047 * 416)
+    scalars.add("values", 2048, 2048 * 16)
+    assert not policy.due(strips, 1.0) and not policy.due(scalars, 1.0)
+    strips.add("one more", 1, 416)
+    assert policy.due(strips, 1.0) and not policy.due(scalars, 1.0)

@@ -16,12 +16,14 @@ from typing import Any
 @dataclass
 class RowQueue:
     """The rows of one entity waiting to be sent: pieces (whatever the entity's sender takes), their
-    row and byte counts, and when the oldest of them was queued (``since_s``, None: not yet noted)."""
+    row and byte counts, when the oldest of them was queued (``since_s``, None: not yet noted), and
+    the most rows one chunk of this entity should hold (``max_rows``, None: the policy's)."""
 
     pieces: list[Any] = field(default_factory=list)
     n_rows: int = 0
     n_bytes: int = 0
     since_s: float | None = None
+    max_rows: int | None = None
 
     def add(self, piece: Any, n_rows: int, n_bytes: int) -> None:
         """Queue ``piece`` of ``n_rows`` rows, about ``n_bytes`` once sent."""
@@ -39,8 +41,8 @@ class RowQueue:
 
 @dataclass(frozen=True)
 class FlushPolicy:
-    """When a queue is sent: it holds ``chunk_bytes`` or ``chunk_rows``, or its oldest row has waited
-    ``interval_s`` (0.25 s for a live viewer, tens of seconds for a file).
+    """When a queue is sent: it holds ``chunk_bytes`` or ``chunk_rows`` (or its own ``max_rows``), or its
+    oldest row has waited ``interval_s`` (0.25 s for a live viewer, tens of seconds for a file).
 
     Rerun's offline optimiser (``rerun rrd optimize``, object-store profile) aims at chunks of up to
     2 MiB and about 65 000 rows, and ``rerun rrd stats`` counts the fewest chunks the data could fit
@@ -56,6 +58,7 @@ class FlushPolicy:
         """Whether ``queue`` is to be sent at ``now_s`` (seconds of the clock ``since_s`` is on)."""
         if not queue.n_rows:
             return False
-        if queue.n_bytes >= self.chunk_bytes or queue.n_rows >= self.chunk_rows:
+        max_rows = self.chunk_rows if queue.max_rows is None else min(queue.max_rows, self.chunk_rows)
+        if queue.n_bytes >= self.chunk_bytes or queue.n_rows >= max_rows:
             return True
         return queue.since_s is not None and now_s - queue.since_s >= self.interval_s
