@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 COMMAND = "metrics"
 HELP = "accuracy metrics of centreline files (compare a reconstruction with the ground truth)"
@@ -16,9 +17,19 @@ interpolated at the reconstruction's times and arc lengths. Prints, in this orde
   max_eps_rms_over_l   maximum over time of the RMS distance along the arc length / L
   twi                  travelling-wave index of the reconstruction (complex orthogonal decomposition)
   twi_ref              travelling-wave index of the truth on the same times
-then twi_abs_error, n_common, t_start_s, t_stop_s, length. L is the truth's `length` attribute
-(else its arc-length span).
+then twi_abs_error, n_common, t_start_s, t_stop_s, length, and
+  joint_rms_over_l     RMS distance of the chain joints to the truth's / L (needs /joints/x, /joints/y)
+  cloud_rms_over_l     RMS of the reconstruction's Delta_RMS (events to centreline) / L
+  cloud_rms_ref_over_l the same of the truth (needs its /delta_rms)
+L is the truth's `length` attribute (else its arc-length span).
+
+The truth needs only /t, /s, /x, /y (a truth from another simulator); a metric that needs what it
+lacks is printed as n/a (null in --json, with the reason under "not_available"). A line on stderr
+says which of the truth's datasets were used; --json has them under "truth_datasets".
 """
+
+#: The datasets of the truth each optional metric reads.
+NEEDS = {"joint_rms_over_l": ("joints/x", "joints/y"), "cloud_rms_ref_over_l": ("delta_rms",)}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     compare = sub.add_parser("compare", help="compare RECON.h5 with TRUTH.h5")
     compare.add_argument("recon", help="reconstructed centreline file")
-    compare.add_argument("truth", help="ground-truth centreline file")
+    compare.add_argument("truth", help="ground-truth centreline file (at least /t, /s, /x, /y)")
     compare.add_argument("--json", action="store_true", help="print one JSON object")
     compare.set_defaults(run=run)
 
@@ -35,16 +46,24 @@ def run(args: argparse.Namespace) -> int:
     """Print the comparison of ``args.recon`` with ``args.truth``."""
     from flagtrack.daemon.core.metrics import compare
     from flagtrack.daemon.errors import FormatError
-    from flagtrack.drivers.formats.centreline import read_centrelines
+    from flagtrack.drivers.formats.centreline import TRUTH_REQUIRED, read_centrelines, read_truth
 
     recon, _ = read_centrelines(args.recon)
-    truth, truth_attrs = read_centrelines(args.truth)
+    truth, truth_attrs, present = read_truth(args.truth)
     length = truth_attrs.get("length")
+    has_joints, has_delta = "joints/x" in present, "delta_rms" in present
     try:
-        result = compare(recon, truth, float(length) if length is not None else None)
+        result = compare(
+            recon,
+            truth,
+            float(length) if length is not None else None,
+            truth_has_joints=has_joints,
+            truth_has_delta_rms=has_delta,
+        )
     except ValueError as exc:
         raise FormatError(f"cannot compare with {args.truth}: {exc}", path=args.recon) from exc
-    values = {
+    used = [*TRUTH_REQUIRED, *(("joints/x", "joints/y") if has_joints else ()), *(("delta_rms",) if has_delta else ())]
+    values: dict[str, float | int | None] = {
         "delta_rms_over_l": result.delta_rms_over_l,
         "max_eps_rms_over_l": result.max_eps_rms_over_l,
         "twi": result.twi,
@@ -54,10 +73,29 @@ def run(args: argparse.Namespace) -> int:
         "t_start_s": result.t_start_s,
         "t_stop_s": result.t_stop_s,
         "length": result.length,
+        "joint_rms_over_l": result.joint_rms_over_l,
+        "cloud_rms_over_l": result.cloud_rms_over_l,
+        "cloud_rms_ref_over_l": result.cloud_rms_ref_over_l,
     }
+    where = "its attribute 'length'" if length is not None else "the span of its /s"
+    print(
+        f"flagtrack metrics: truth {args.truth}: used {' '.join('/' + name for name in used)}; "
+        f"L = {result.length:g} from {where}",
+        file=sys.stderr,
+    )
+    for name, reason in result.not_available.items():
+        values[name] = None
+        lacks = [f"/{dataset}" for dataset in NEEDS.get(name, ()) if dataset not in present]
+        print(
+            f"flagtrack metrics: {name} not available: {reason}" + (f" ({', '.join(lacks)})" if lacks else ""),
+            file=sys.stderr,
+        )
     if args.json:
-        print(json.dumps(values))
+        print(json.dumps({**values, "truth_datasets": used, "not_available": result.not_available}))
     else:
         for key, value in values.items():
-            print(f"{key:20s} {value:.6g}" if isinstance(value, float) else f"{key:20s} {value}")
+            if value is None:
+                print(f"{key:20s} n/a ({result.not_available[key]})")
+            else:
+                print(f"{key:20s} {value:.6g}" if isinstance(value, float) else f"{key:20s} {value}")
     return 0

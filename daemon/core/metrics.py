@@ -4,15 +4,18 @@
 - travelling-wave index by complex orthogonal decomposition (Feeny 2013) of the lateral
   displacement;
 - Delta_RMS: RMS distance of an event cloud to a polyline;
-- tip amplitude A/L and flapping frequency f.
+- tip amplitude A/L (also over a short window with no known rest frame) and flapping frequency f.
 
 Two series are compared on their common time span: the truth is interpolated (linearly in time,
-linearly along s) at the reconstruction's times and arc lengths. Pure numpy/scipy.
+linearly along s) at the reconstruction's times and arc lengths. A truth need only have times, arc
+lengths and centrelines; the metrics that need more of it (its chain joints, its Delta_RMS) are
+reported as not available, with the reason, when it lacks them. Pure numpy/scipy.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.signal import hilbert
@@ -63,14 +66,18 @@ def resample_t(values: np.ndarray, t_s: np.ndarray, t_new: np.ndarray) -> np.nda
     return values[i0] * (1 - w) + values[np.minimum(i0 + 1, len(t_s) - 1)] * w
 
 
+def common_rows(recon: CentrelineBatch, truth: CentrelineBatch, time_tol_s: float = 1e-9) -> np.ndarray:
+    """(n_t,) bool: the updates of ``recon`` inside the truth's time span (the times :func:`align` keeps)."""
+    return (recon.t_s >= truth.t_s[0] - time_tol_s) & (recon.t_s <= truth.t_s[-1] + time_tol_s)
+
+
 def align(recon: CentrelineBatch, truth: CentrelineBatch, time_tol_s: float = 1e-9) -> AlignedPair:
     """Put ``truth`` on the reconstruction's times (within the truth's span) and arc lengths.
 
     Raises:
         ValueError: the two series share no time.
     """
-    t0, t1 = truth.t_s[0] - time_tol_s, truth.t_s[-1] + time_tol_s
-    keep = (recon.t_s >= t0) & (recon.t_s <= t1)
+    keep = common_rows(recon, truth, time_tol_s)
     if not np.any(keep):
         raise ValueError(
             f"no common time: reconstruction {recon.t_s[:1]}..{recon.t_s[-1:]} s, truth {truth.t_s[0]}..{truth.t_s[-1]} s"
@@ -192,6 +199,25 @@ def tip_amplitude_over_l(tip_lateral: np.ndarray, length: float, robust: bool = 
     return float((values.max() - values.min()) / 2.0 / length)
 
 
+def window_amplitude_over_l(
+    root_x: np.ndarray, root_y: np.ndarray, tip_x: np.ndarray, tip_y: np.ndarray, length: float
+) -> float:
+    """A/L of a short window of updates when the rest frame is not known (a live view).
+
+    Half the peak-to-peak of the tip's displacement perpendicular to the window's mean root-to-tip
+    chord (the rest direction of a flag flapping about it), over ``length``. Arguments are (n,)
+    positions of the root and the tip, one per update; updates with a NaN are left out. NaN if none is left.
+    """
+    root_x, root_y = np.asarray(root_x, dtype=np.float64), np.asarray(root_y, dtype=np.float64)
+    tip_x, tip_y = np.asarray(tip_x, dtype=np.float64), np.asarray(tip_y, dtype=np.float64)
+    ok = np.isfinite(root_x) & np.isfinite(root_y) & np.isfinite(tip_x) & np.isfinite(tip_y)
+    if not np.any(ok):
+        return float("nan")
+    root = (float(root_x[ok].mean()), float(root_y[ok].mean()))
+    direction = float(np.degrees(np.arctan2(np.mean(tip_y[ok] - root_y[ok]), np.mean(tip_x[ok] - root_x[ok]))))
+    return tip_amplitude_over_l(lateral_displacement(tip_x[ok], tip_y[ok], root, direction), length)
+
+
 def flapping_frequency_hz(t_s: np.ndarray, signal: np.ndarray, pad: int = 8, gap_factor: float = 5.0) -> float:
     """Dominant frequency of ``signal`` (e.g. tip lateral displacement), Hz, with sub-bin refinement.
 
@@ -228,7 +254,13 @@ def flapping_frequency_hz(t_s: np.ndarray, signal: np.ndarray, pad: int = 8, gap
 
 @dataclass(frozen=True)
 class Comparison:
-    """Summary of a reconstruction against the truth (lengths over L)."""
+    """Summary of a reconstruction against the truth (lengths over L).
+
+    ``joint_rms_over_l``: RMS over the common times and the joints of the distance between the two
+    chains' joints. ``cloud_rms_over_l`` and ``cloud_rms_ref_over_l``: RMS over the common span of the
+    reconstruction's and the truth's Delta_RMS (their events' distance to their centreline). Those
+    that need what the truth lacks are NaN, their name in ``not_available`` with the reason.
+    """
 
     delta_rms_over_l: float
     max_eps_rms_over_l: float
@@ -238,6 +270,10 @@ class Comparison:
     t_start_s: float
     t_stop_s: float
     length: float
+    joint_rms_over_l: float = math.nan
+    cloud_rms_over_l: float = math.nan
+    cloud_rms_ref_over_l: float = math.nan
+    not_available: dict[str, str] = field(default_factory=dict)
 
     @property
     def twi_abs_error(self) -> float:
@@ -245,10 +281,49 @@ class Comparison:
         return abs(self.twi - self.twi_ref)
 
 
-def compare(recon: CentrelineBatch, truth: CentrelineBatch, length: float | None = None) -> Comparison:
-    """delta_RMS/L, max eps_RMS/L and travelling-wave indices of ``recon`` against ``truth``.
+def joint_error(recon: CentrelineBatch, truth: CentrelineBatch) -> tuple[np.ndarray, np.ndarray]:
+    """RMS over the joints of the distance between the reconstruction's and the truth's chain joints.
+
+    Args:
+        recon, truth: series with the same number of joints (N_j + 1 columns); the truth is
+            interpolated in time at the reconstruction's times inside its span.
+
+    Returns:
+        (t_s, error), both (n_t,) on the common times; NaN where the reconstruction had no chain.
+
+    Raises:
+        ValueError: the numbers of joints differ.
+    """
+    if recon.joints_x.shape[1] != truth.joints_x.shape[1]:
+        raise ValueError(
+            f"the truth has {truth.joints_x.shape[1]} joints, the reconstruction {recon.joints_x.shape[1]}"
+        )
+    rows = common_rows(recon, truth)
+    t_common = recon.t_s[rows]
+    jx = resample_t(truth.joints_x, truth.t_s, t_common)
+    jy = resample_t(truth.joints_y, truth.t_s, t_common)
+    sq = (recon.joints_x[rows] - jx) ** 2 + (recon.joints_y[rows] - jy) ** 2
+    return t_common, np.sqrt(np.mean(sq, axis=1))
+
+
+def compare(
+    recon: CentrelineBatch,
+    truth: CentrelineBatch,
+    length: float | None = None,
+    *,
+    truth_has_joints: bool = True,
+    truth_has_delta_rms: bool = True,
+) -> Comparison:
+    """delta_RMS/L, max eps_RMS/L and travelling-wave indices of ``recon`` against ``truth``; where the truth
+    has them, the joints' RMS error/L and the truth's Delta_RMS/L (beside the reconstruction's).
 
     Both indices use the same common times and arc lengths and the truth's rest frame.
+
+    Args:
+        recon, truth: the series.
+        length: L; None: the truth's arc-length span.
+        truth_has_joints, truth_has_delta_rms: whether the truth's joints and Delta_RMS are data (a truth
+            from another simulator may have neither; what stands in their place is then not read).
     """
     pair = align(recon, truth)
     length = float(length if length is not None else truth.s[-1] - truth.s[0])
@@ -260,13 +335,34 @@ def compare(recon: CentrelineBatch, truth: CentrelineBatch, length: float | None
     rows = np.all(np.isfinite(pair.x) & np.isfinite(pair.y), axis=1)  # updates the tracker had no shape for
     twi = travelling_wave_index(lateral_displacement(pair.x[rows], pair.y[rows], root, direction))
     twi_ref = travelling_wave_index(lateral_displacement(pair.x_ref[rows], pair.y_ref[rows], root, direction))
+    not_available: dict[str, str] = {}
+    joint_rms = math.nan
+    if not truth_has_joints:
+        not_available["joint_rms_over_l"] = "the truth has no joints"
+    else:
+        try:
+            joint_rms = rms(joint_error(recon, truth)[1]) / length
+        except ValueError as exc:
+            not_available["joint_rms_over_l"] = str(exc)
+    t0, t1 = float(pair.t_s[0]), float(pair.t_s[-1])
+    cloud_ref = math.nan
+    if not truth_has_delta_rms:
+        not_available["cloud_rms_ref_over_l"] = "the truth has no Delta_RMS"
+    else:
+        cloud_ref = rms(truth.delta_rms[(truth.t_s >= t0) & (truth.t_s <= t1)]) / length
+        if not math.isfinite(cloud_ref):
+            not_available["cloud_rms_ref_over_l"] = "the truth's Delta_RMS has no finite value in the common span"
     return Comparison(
         delta_rms_over_l=rms(delta) / length,
         max_eps_rms_over_l=float(np.nanmax(eps)) / length,
         twi=twi,
         twi_ref=twi_ref,
         n_common=len(pair.t_s),
-        t_start_s=float(pair.t_s[0]),
-        t_stop_s=float(pair.t_s[-1]),
+        t_start_s=t0,
+        t_stop_s=t1,
         length=length,
+        joint_rms_over_l=joint_rms,
+        cloud_rms_over_l=rms(recon.delta_rms[common_rows(recon, truth)]) / length,
+        cloud_rms_ref_over_l=cloud_ref,
+        not_available=not_available,
     )

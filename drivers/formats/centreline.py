@@ -28,6 +28,7 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import FormatError
 
 _PER_UPDATE = ("t", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events")
+_LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events")
 
 
 class CentrelineWriter:
@@ -383,6 +384,59 @@ def read_centrelines(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any]]
     except OSError as exc:
         raise FormatError(f"cannot open as HDF5: {exc}", path=str(path)) from exc
     return batch, attrs
+
+
+#: What a ground truth must hold: times, arc lengths and centrelines (a truth from another simulator
+#: may have nothing else); the other datasets of the layout are read when present.
+TRUTH_REQUIRED = ("t", "s", "x", "y")
+
+
+def read_truth(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any], tuple[str, ...]]:
+    """Read a ground-truth centreline file that may hold only ``/t``, ``/s``, ``/x``, ``/y``.
+
+    The datasets of the layout it lacks stand in as NaN (``/joints/*``: no column, ``/delta_rms``:
+    NaN, ``/n_events``: 0); the third value says which datasets were read, so a caller reports
+    what it could not compute rather than compute it from the stand-ins.
+
+    Returns:
+        (series, root attributes, names of the datasets read in layout order: ``t``, ``s``, ``x``, ``y``,
+        then those of ``joints/x`` and ``joints/y`` (both or neither), ``delta_rms``, ``n_events`` it has).
+
+    Raises:
+        FormatError: the file is missing or not HDF5, lacks one of :data:`TRUTH_REQUIRED` (named), or
+            its shapes disagree.
+    """
+    path = Path(path)
+    try:
+        with h5py.File(path, "r") as f:
+            names = tuple(name for name in _LAYOUT if isinstance(f.get(name), h5py.Dataset))
+            for name in TRUTH_REQUIRED:
+                if name not in names:
+                    needs = ", ".join(f"/{n}" for n in TRUTH_REQUIRED)
+                    raise FormatError(f"ground truth has no /{name} dataset (a truth needs {needs})", path=str(path))
+            data = {name: f[name][()] for name in names}
+            attrs = {name: _decode_attr(value) for name, value in f.attrs.items()}
+    except OSError as exc:
+        raise FormatError(f"cannot open as HDF5: {exc}", path=str(path)) from exc
+    t_s = np.asarray(data["t"], dtype=np.float64)
+    n_t = len(t_s)
+    joints = "joints/x" in data and "joints/y" in data
+    try:
+        batch = CentrelineBatch(
+            t_s=t_s,
+            s=np.asarray(data["s"], dtype=np.float64),
+            x=np.asarray(data["x"], dtype=np.float64),
+            y=np.asarray(data["y"], dtype=np.float64),
+            joints_x=np.asarray(data["joints/x"], dtype=np.float64) if joints else np.empty((n_t, 0)),
+            joints_y=np.asarray(data["joints/y"], dtype=np.float64) if joints else np.empty((n_t, 0)),
+            delta_rms=np.asarray(data.get("delta_rms", np.full(n_t, np.nan)), dtype=np.float64),
+            n_events=np.asarray(data.get("n_events", np.zeros(n_t)), dtype=np.int64),
+        )
+    except ValueError as exc:
+        raise FormatError(f"ground truth: {exc}", path=str(path)) from exc
+    if n_t == 0 or not np.all(np.diff(t_s) > 0):
+        raise FormatError("ground truth: /t is empty or not increasing", path=str(path))
+    return batch, attrs, tuple(name for name in names if joints or not name.startswith("joints/"))
 
 
 def _decode_attr(value: Any) -> Any:

@@ -77,6 +77,7 @@ def logged(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, dict[str
     assert logger.frame(0.0, force=True)
     logger.rate(EventRate("cam0", 1_010_000, 0.1, 123, 4.5e6, 0.2))
     logger.tunnel(TunnelState(speed_mps=5.25, setpoint_mps=5.5, state="running", t_wall_s=SENT_NS * 1e-9))
+    logger.close()  # queued rows are sent at the next due frame, or here
     rec.flush()
     rec.disconnect()
     truth = {"t_s": t_s, "tip_y": y[:, -1], "delta": delta, "used": used, "events": events}

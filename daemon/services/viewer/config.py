@@ -1,0 +1,60 @@
+"""The ``viewer:`` section of a rig: where the Rerun data goes, how much of it, how often it is sent."""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from flagtrack.daemon.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class ViewerConfig:
+    """Where the Rerun data goes and how much of it.
+
+    Attributes:
+        sink: ``auto`` (a viewer window when a display exists, else an .rrd file), ``spawn``, ``serve``
+            (gRPC + web viewer for a browser), ``rrd`` (headless file) or ``none``.
+        rrd_path: the .rrd file for the ``rrd`` sink (and ``auto`` without display).
+        web_port: port of the web viewer for ``serve``.
+        camera_id: the camera whose events are shown.
+        recent_events_ms: events younger than this are drawn.
+        max_points: at most this many event points per frame (subsampled beyond).
+        trail_s: length of the tip trail.
+        geometry_rate_hz: frames per second for event clouds, the tip trail and A/L.
+        amplitude_window_s: A/L is half the peak-to-peak of the tip over this much of the latest updates.
+        flush_s: a live viewer (``spawn``, ``serve``) gets what is queued at least this often, seconds.
+        rrd_flush_s: an .rrd file gets an entity's queued rows when they reach ``chunk_bytes`` or the
+            oldest has waited this long (so the file holds few large chunks; a crash loses at most this).
+        chunk_bytes: an entity's queued rows are sent when they reach this size (Rerun's target chunk
+            size for stored recordings is 2 MiB).
+    """
+
+    sink: Literal["auto", "spawn", "serve", "rrd", "none"] = "auto"
+    rrd_path: Path = Path("flagtrack.rrd")
+    web_port: int = 9090
+    camera_id: str = "cam0"
+    recent_events_ms: float = 10.0
+    max_points: int = 20_000
+    trail_s: float = 0.5
+    geometry_rate_hz: float = 30.0
+    amplitude_window_s: float = 1.0
+    flush_s: float = 0.25
+    rrd_flush_s: float = 30.0
+    chunk_bytes: int = 2 << 20
+
+    def __post_init__(self) -> None:
+        for name in ("geometry_rate_hz", "flush_s", "rrd_flush_s", "amplitude_window_s", "chunk_bytes"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(f"must be a positive number, got {value!r}", key=f"viewer.{name}")
+
+
+def effective_sink(cfg: ViewerConfig) -> str:
+    """The sink the viewer uses: ``auto`` is a window where a display exists, else the .rrd file."""
+    if cfg.sink != "auto":
+        return cfg.sink
+    return "spawn" if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") else "rrd"

@@ -1,0 +1,89 @@
+"""The viewer service: subscribes to the camera, tracker, tunnel and supervisor topics and logs them to Rerun."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any
+
+from flagtrack.daemon.problems import ProblemLog
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, SupervisorState, TunnelState
+from flagtrack.daemon.transport import Bus
+
+from .config import ViewerConfig
+from .logger import RerunLogger, open_recording
+
+log = logging.getLogger(__name__)
+
+
+class ViewerService:
+    """Subscribes to camera, tracker, tunnel and supervisor topics and logs them to Rerun."""
+
+    name = "viewer"
+
+    def __init__(self, bus: Bus, cfg: ViewerConfig, exit_after_final: bool = False) -> None:
+        self.bus = bus
+        self.cfg = cfg
+        self.exit_after_final = exit_after_final
+        self.description = ""
+        self.frames = 0
+        self.updates = 0
+        self.unusable = 0  # messages (or frames) that could not be logged
+        self.problems = ProblemLog(log, "viewer")
+        keys = bus.keys
+        self.subs: dict[str, Any] = {
+            # a live view: when it falls behind, the oldest go (and at most this much memory waits)
+            "centrelines": bus.subscribe(
+                keys.centrelines(), CentrelineMessage, capacity=100_000, ring=True, max_bytes=256 << 20
+            ),
+            "events": bus.subscribe(
+                keys.camera_events(cfg.camera_id), EventPacket, capacity=100_000, ring=True, max_bytes=64 << 20
+            ),
+            "rate": bus.subscribe(keys.event_rate(cfg.camera_id), EventRate, capacity=1000, ring=True),
+            "tunnel": bus.subscribe(keys.tunnel_state(), TunnelState, capacity=1000, ring=True),
+            "supervisor": bus.subscribe(keys.supervisor_state(), SupervisorState, capacity=1000, ring=True),
+        }
+
+    def run(self, stop: threading.Event) -> None:
+        subs = self.subs
+        self.bus.declare_alive(self.name)
+        rec, self.description = open_recording(self.cfg)
+        log.info("viewer: %s", self.description)
+        logger = RerunLogger(rec, self.cfg, self.problems)
+        handlers = (
+            ("centrelines", logger.centrelines),
+            ("events", logger.events),
+            ("rate", logger.rate),
+            ("tunnel", logger.tunnel),
+            ("supervisor", lambda msg: logger.supervisor(msg, time.time())),
+        )
+        try:
+            while not stop.is_set():
+                final = False
+                for name, handler in handlers:
+                    while (msg := subs[name].recv(timeout_s=0)) is not None:
+                        self._show(handler, msg)
+                        if name == "centrelines":
+                            self.updates += len(msg.t_s)
+                            final |= msg.final
+                self.frames += bool(self._show(logger.frame, time.monotonic(), final))
+                self.problems.flush()
+                if final and self.exit_after_final:
+                    break
+                stop.wait(min(0.25 / self.cfg.geometry_rate_hz, self.cfg.flush_s / 4))
+            self._show(logger.frame, time.monotonic(), True)
+        finally:
+            self.problems.flush(force=True)
+            rec.flush()
+            rec.disconnect()
+
+    def _show(self, step: Any, *args: Any) -> Any:
+        """Run one logging step; a message Rerun (or the logger) cannot take is counted, not fatal."""
+        try:
+            return step(*args)
+        except Exception as exc:
+            self.unusable += 1
+            log.debug("viewer: %s failed", getattr(step, "__name__", step), exc_info=exc)
+            self.problems.add("messages that could not be shown", f"{type(exc).__name__}: {exc}")
+            return None
