@@ -95,11 +95,11 @@ def plot_campaign(runs: Sequence[tuple[str, Sequence[CampaignPoint]]], path: str
             if errors:
                 ax_err.plot(*zip(*errors), color=color, marker=marker, fillstyle=fill, linewidth=0.8)
     ax_err.axhline(0.01, color="0.6", linestyle="--", linewidth=0.8)
-    ax_amp.set_ylabel("tip amplitude A/L")
-    ax_amp.set_title(title or f"campaign: {len(runs)} runs (▲ up, ▽ down)", fontsize=10)
+    ax_amp.set_ylabel("tip amplitude A/L (the runs')")
+    ax_amp.set_title(f"{title or f'campaign: {len(runs)} runs'} (▲ up, ▽ down)", fontsize=10)
     if ax_amp.get_legend_handles_labels()[0]:
         ax_amp.legend(loc="best", fontsize=7, ncol=2 if len(runs) > 8 else 1)
-    ax_err.set_ylabel("sensor RMS |e|/L")
+    ax_err.set_ylabel("sensor RMS |e|/L (recomputed)")
     ax_err.set_xlabel("wind speed U (m/s)")
     path = Path(path)
     fig.savefig(path, dpi=110)
