@@ -7,13 +7,18 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import fcntl
 import io
 import json
 import os
+import pty
+import select
 import shutil
 import signal
+import struct
 import subprocess
 import sys
+import termios
 import time
 from pathlib import Path
 
@@ -195,6 +200,51 @@ def test_bad_inputs_and_options_are_one_line_and_exit_2(campaign: Path, tmp_path
         assert code == 2, args
         assert stderr.startswith("flagtrack batch: error: ") and words in stderr and stderr.count("\n") == 1, stderr
     assert not out.exists()  # nothing was run
+
+
+def on_a_terminal(*args: str, timeout_s: float = 60.0) -> str:
+    """``flagtrack ARGS`` with stderr on a real pseudo-terminal (100 x 24); what the terminal got."""
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "flagtrack.daemon", *args],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=slave,
+        )
+    finally:
+        os.close(slave)
+    received = bytearray()
+    deadline = time.monotonic() + timeout_s
+    try:
+        while time.monotonic() < deadline:
+            if not select.select([master], [], [], 0.5)[0]:
+                continue
+            try:
+                data = os.read(master, 4096)
+            except OSError:  # EIO: every process holding the terminal has closed it
+                break
+            if not data:
+                break
+            received += data
+    finally:
+        os.close(master)
+        if proc.poll() is None:
+            proc.kill()
+        code = proc.wait(timeout=10)
+    assert code == 0, received.decode(errors="replace")
+    return received.decode(errors="replace")
+
+
+@pytest.mark.slow
+def test_a_bar_on_a_terminal_and_plain_lines_with_no_progress(campaign: Path, tmp_path: Path) -> None:
+    args = ["batch", "reconstruct", str(campaign), *TRACK, "--jobs", "1"]
+    shown = on_a_terminal(*args, "-o", str(tmp_path / "a"))
+    assert "/4 files:" in shown and "%|" in shown and "M events" in shown and "Mev/s" in shown, shown
+    assert "4 inputs: 4 done" in shown and "[1/4," not in shown  # the summary, no per-file lines
+    plain = on_a_terminal(*args, "-o", str(tmp_path / "b"), "--no-progress")
+    assert "%|" not in plain and "[1/4, " in plain and "rec0.raw: done (" in plain, plain
 
 
 def wait_until(predicate, timeout_s: float) -> bool:
