@@ -210,7 +210,7 @@ def _bar(args: argparse.Namespace) -> bool:
 def _finish(args: argparse.Namespace, result: Any, noun: str) -> int:
     counts = result.counts
     events = sum(r.events or 0 for r in result.rows if r.status == "done")
-    rate = f", {events / 1e6:.1f} M events at {events / result.seconds / 1e6:.1f} Mev/s" if events else ""
+    rate = f", {events / 1e6:.1f} M events at {events / result.seconds / 1e6:.2f} Mev/s" if events else ""
     print(
         f"flagtrack batch: {len(result.rows)} {noun}: {counts['done']} done, {counts['skipped']} skipped (up to date), "
         f"{counts['failed']} failed in {result.seconds:.1f} s{rate} -> {result.csv}",
