@@ -36,7 +36,12 @@ class ReconstructSummary:
 
 
 def reconstruct_file(
-    path: Path, output: Path, setup: TrackingSetup, *, progress: Callable[[int], None] | None = None
+    path: Path,
+    output: Path,
+    setup: TrackingSetup,
+    *,
+    progress: Callable[[int], None] | None = None,
+    atomic: bool = False,
 ) -> ReconstructSummary:
     """Stream the recording ``path`` through a fresh tracker of ``setup`` into ``output``.
 
@@ -47,6 +52,8 @@ def reconstruct_file(
         output: the centreline file to write (overwritten).
         setup: the tracking set-up; its ``attrs`` go into the file with the input's name and format.
         progress: called with the bytes of ``path`` read so far.
+        atomic: write ``output`` under a temporary name in its folder and rename it at the end, so
+            ``output`` is a whole file or absent (``flagtrack batch``); a failure removes the temporary file.
 
     Raises:
         FormatError: the recording cannot be read.
@@ -55,7 +62,7 @@ def reconstruct_file(
         info = reader.info
         tracker = setup.new_tracker((info.width or 0, info.height or 0))
         attrs = {**setup.attrs, "input_file": str(Path(path).resolve()), "input_format": info.format}
-        with CentrelineSink(output, attrs, s=tracker.s, n_joints=setup.params.chain.n_joints) as sink:
+        with CentrelineSink(output, attrs, s=tracker.s, n_joints=setup.params.chain.n_joints, atomic=atomic) as sink:
             for chunk in reader:
                 sink.add(tracker.feed(chunk.events))
                 if progress is not None:
