@@ -196,3 +196,25 @@ def test_a_state_at_a_time_rerun_cannot_place_is_refused_alone(tmp_path: Path, t
 
     texts = columns(recorded(tmp_path, feed))["/supervisor/state"]["TextDocument:text"]
     assert len(texts) == 2  # the two others, in one chunk, unharmed
+
+
+def test_the_supervisor_document_shows_the_progress_fields_it_is_given() -> None:
+    """The sweep's progress fields of SupervisorState appear when set, and not at their "not known" default."""
+    from flagtrack.daemon.services.viewer.logger import supervisor_text
+
+    text = supervisor_text(
+        SupervisorState(
+            "flapping",
+            9e4,
+            "sweep",
+            "004-up-5.00",
+            "up",
+            5.0,
+            point_index=5,
+            points_total=17,
+            amplitude_over_l=0.255,
+            eta_s=59.0,
+        )
+    )
+    assert "| point_index | 5 |" in text and "| points_total | 17 |" in text and "| amplitude_over_l | 0.255 |" in text
+    assert "lost_fraction" not in text and "sensor_error_rms_over_l" not in text  # -1: not known

@@ -86,7 +86,7 @@ def _place(t_s: float, what: str) -> float:
 
 def supervisor_text(msg: SupervisorState) -> str:
     """The supervisor's state as Markdown: flag state, mode, point, branch, speed, event rate, message,
-    then a table of every other field the message has (per-point figures, progress)."""
+    then a table of every other field the message sets (per-point figures, progress)."""
     head = f"**{msg.flag_state}** · {msg.mode}"
     if msg.point:
         head += f" · point `{msg.point}`" + (f" ({msg.branch})" if msg.branch else "")
@@ -94,9 +94,10 @@ def supervisor_text(msg: SupervisorState) -> str:
     lines = [head]
     if msg.message:
         lines += ["", msg.message]
-    extra = [f.name for f in dataclasses.fields(msg) if f.name not in SUPERVISOR_FIELDS]
-    rows = [(name, getattr(msg, name, None)) for name in extra]
-    rows = [(name, value) for name, value in rows if value is not None and value != ""]
+    # the other fields, where they say something: a field at its default means "none" or "not known"
+    extra = [f for f in dataclasses.fields(msg) if f.name not in SUPERVISOR_FIELDS]
+    rows = [(f.name, getattr(msg, f.name, None)) for f in extra]
+    rows = [(f.name, v) for f, (_, v) in zip(extra, rows, strict=True) if v is not None and v != "" and v != f.default]
     if rows:
         lines += ["", "| | |", "|---|---|"]
         lines += [f"| {name} | {f'{value:.4g}' if isinstance(value, float) else value} |" for name, value in rows]
