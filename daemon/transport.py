@@ -20,6 +20,8 @@ import zenoh
 from flagtrack.daemon.errors import ConfigError, SchemaError
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import Keys, decode, encode
+from flagtrack.daemon.security.config import REDACTED, SecurityConfig, zenoh_security
+from flagtrack.daemon.security.names import identifier_problem
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +39,11 @@ class BusConfig:
         shared_memory: let Zenoh pass large messages between processes of one host through shared
             memory (off by default: its set-up on the first large message from each peer stalls the
             receiver for 20-30 ms, see docs/live.md; off, every message goes through the socket).
+        security: mutual TLS, user/password and access control (``bus.security``, see
+            :mod:`flagtrack.daemon.security.config`); with ``tls``, every endpoint must be ``tls/``.
+        access_control: the Zenoh access-control section enforced by this session, made from the
+            rig by :func:`flagtrack.daemon.security.acl.access_control` when ``security.acl`` is on
+            (not a key of the rig file).
     """
 
     namespace: str = "flagtrack/default"
@@ -45,21 +52,69 @@ class BusConfig:
     connect: tuple[str, ...] = ()
     multicast_scouting: bool = False
     shared_memory: bool = False
+    security: SecurityConfig | None = None
+    access_control: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         if not self.namespace or self.namespace != self.namespace.strip("/") or " " in self.namespace:
             raise ValueError(f"namespace {self.namespace!r} must be slash-separated words like 'flagtrack/rig1'")
+        for word in self.namespace.split("/"):
+            problem = identifier_problem(word, "a word of the namespace")
+            if problem is not None:
+                raise ConfigError(problem, key="bus.namespace")
+        if self.security is not None and self.security.tls is not None:
+            for name in ("listen", "connect"):
+                for i, endpoint in enumerate(getattr(self, name)):
+                    if not endpoint.startswith("tls/"):
+                        raise ConfigError(
+                            f"{endpoint!r}: a bus with bus.security.tls takes tls/ endpoints only "
+                            f"(tls/HOST:PORT), so that every link is encrypted and authenticated",
+                            key=f"bus.{name}[{i}]",
+                        )
+
+    @property
+    def secured(self) -> bool:
+        """Whether every link of this session is mutual TLS."""
+        return self.security is not None and self.security.tls is not None
+
+
+def zenoh_settings(cfg: BusConfig, *, check_files: bool = True) -> dict[str, Any]:
+    """The Zenoh settings of a :class:`BusConfig`, as config path -> value (what :func:`zenoh_config`
+    inserts; ``flagtrack router --zenohd-config`` writes them as a zenohd config file, without
+    ``check_files``: the files are the router host's).
+
+    Raises:
+        ConfigError: a secured bus whose identity or files are wrong (see
+            :func:`flagtrack.daemon.security.config.zenoh_security`).
+    """
+    settings: dict[str, Any] = {
+        "mode": cfg.mode,
+        "scouting/multicast/enabled": cfg.multicast_scouting,
+        "listen/endpoints": list(cfg.listen),
+        "connect/endpoints": list(cfg.connect),
+        "transport/shared_memory/enabled": cfg.shared_memory,
+    }
+    if cfg.security is not None:
+        listens = bool(cfg.listen) or cfg.mode == "router"
+        settings.update(zenoh_security(cfg.security, listens=listens, check_files=check_files))
+    if cfg.access_control is not None:
+        settings["access_control"] = cfg.access_control
+    return settings
 
 
 def zenoh_config(cfg: BusConfig) -> zenoh.Config:
     """Translate a :class:`BusConfig` into a Zenoh configuration."""
     zcfg = zenoh.Config()
-    zcfg.insert_json5("mode", json.dumps(cfg.mode))
-    zcfg.insert_json5("scouting/multicast/enabled", json.dumps(cfg.multicast_scouting))
-    zcfg.insert_json5("listen/endpoints", json.dumps(list(cfg.listen)))
-    zcfg.insert_json5("connect/endpoints", json.dumps(list(cfg.connect)))
-    zcfg.insert_json5("transport/shared_memory/enabled", json.dumps(cfg.shared_memory))
+    for path, value in zenoh_settings(cfg).items():
+        zcfg.insert_json5(path, json.dumps(value))
     return zcfg
+
+
+def _without_secrets(text: str, cfg: BusConfig) -> str:
+    """``text`` (an error of Zenoh's, which may quote its config) with the password redacted."""
+    for secret in cfg.security.secrets() if cfg.security is not None else ():
+        text = text.replace(secret, REDACTED)
+    return text
 
 
 class Channel:
@@ -217,7 +272,7 @@ class Bus:
         try:
             self.session = zenoh.open(zenoh_config(cfg))
         except zenoh.ZError as exc:
-            raise ConfigError(f"cannot open Zenoh session ({exc})", key="bus") from exc
+            raise ConfigError(f"cannot open Zenoh session ({_without_secrets(str(exc), cfg)})", key="bus") from None
         self._declared: list[Any] = []
         self._alive: dict[str, list[Any]] = {}
         self._lock = threading.Lock()

@@ -3,37 +3,56 @@
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # zenoh is imported only when the router runs (fast --help)
     import threading
 
-    from flagtrack.daemon.transport import Bus
+    from flagtrack.daemon.transport import Bus, BusConfig
 
 COMMAND = "router"
 HELP = "run a Zenoh router (joins camera and tracker hosts; same runtime as zenohd)"
 DESCRIPTION = """\
-Run the Zenoh runtime that eclipse-zenoh carries in router mode, listening on the given endpoints,
-until Ctrl-C (or SIGTERM). Services on other hosts then use `bus: {mode: client, connect: [tcp/<router>:7447]}`
-(see deploy/rig-camera-host.yaml and deploy/rig-tracker-host.yaml), or zenohd with
-deploy/zenoh-router.json5 does the same job. The first signal closes the router gracefully, a
-second one forces the process out (exit 130), as for the other services.
+Run the Zenoh runtime that eclipse-zenoh carries in router mode, listening on the given endpoints
+(loopback by default: name the interface other hosts reach it on), until Ctrl-C (or SIGTERM).
+Services on other hosts then use `bus: {mode: client, connect: [tcp/<router>:7447]}` (see
+deploy/rig-camera-host.yaml and deploy/rig-tracker-host.yaml), or zenohd with
+deploy/zenoh-router.json5 does the same job.
+
+With -c rig.yaml the router takes the rig's `bus.security` section: mutual TLS on every link with
+the `router` identity's certificate (tls/ endpoints only), user/password, and with `acl: true` the
+access-control rules made from the rig (default deny; each identity its own keys). `--zenohd-config`
+prints the same router as a zenohd config file (deploy/zenoh-router-secure.json5), `--rules` the
+rules one line each. See docs/security.md.
+
+The first signal closes the router gracefully, a second one forces the process out (exit 130), as
+for the other services.
 """
+DEFAULT_PORT = 7447
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``flagtrack router``."""
     parser.add_argument(
+        "-c", "--config", type=Path, help="rig config whose bus.security (and namespace) the router takes"
+    )
+    parser.add_argument(
         "--listen",
         action="append",
         default=[],
         metavar="ENDPOINT",
-        help="endpoint to listen on (default tcp/0.0.0.0:7447); repeatable",
+        help=f"endpoint to listen on (default tcp/127.0.0.1:{DEFAULT_PORT}, tls/... on a secured bus; "
+        "or the rig's bus.listen when its mode is router); repeatable",
     )
     parser.add_argument(
         "--connect", action="append", default=[], metavar="ENDPOINT", help="another router to join; repeatable"
     )
     parser.add_argument("--shutdown-timeout", type=float, default=10.0, help="seconds to wait for the router to close")
+    parser.add_argument(
+        "--zenohd-config", action="store_true", help="print this router as a zenohd config (JSON5) and exit"
+    )
+    parser.add_argument("--rules", action="store_true", help="print the access-control rules, one per line, and exit")
 
 
 class RouterService:
@@ -52,21 +71,76 @@ class RouterService:
             self.bus.close()
 
 
+def router_config(args: argparse.Namespace) -> BusConfig:
+    """The router's bus: the rig's namespace, security and rules (with ``-c``), the endpoints asked for.
+
+    Raises:
+        ConfigError: a bad rig file, or endpoints a secured bus does not take (naming the key).
+    """
+    import dataclasses
+
+    from flagtrack.daemon.security.config import ROUTER
+    from flagtrack.daemon.transport import BusConfig
+
+    if args.config is None:
+        listen = tuple(args.listen or [f"tcp/127.0.0.1:{DEFAULT_PORT}"])
+        return BusConfig(namespace="flagtrack", mode="router", listen=listen, connect=tuple(args.connect))
+    from flagtrack.daemon.errors import ConfigError
+    from flagtrack.daemon.rig.config import load_rig
+
+    rig = load_rig(args.config, services=())
+    bus = rig.bus_config_for([], identity=ROUTER)
+    scheme = "tls" if bus.secured else "tcp"
+    listen = (
+        tuple(args.listen) or (bus.listen if bus.mode == "router" else ()) or (f"{scheme}/127.0.0.1:{DEFAULT_PORT}",)
+    )
+    try:
+        return dataclasses.replace(bus, mode="router", listen=listen, connect=tuple(args.connect))
+    except ConfigError as exc:  # an endpoint of the command line
+        raise ConfigError(str(exc).split(": ", 1)[-1], key="--listen/--connect", path=str(args.config)) from None
+
+
+def zenohd_config(settings: dict[str, Any]) -> dict[str, Any]:
+    """Zenoh settings (path -> value) as the nested object of a zenohd config file."""
+    config: dict[str, Any] = {}
+    for path, value in settings.items():
+        node = config
+        *parents, last = path.split("/")
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[last] = value
+    return config
+
+
 def run(args: argparse.Namespace) -> int:
     """Serve until interrupted: the first SIGINT/SIGTERM closes gracefully, a second forces (runner.py)."""
+    import json
     import sys
 
+    from flagtrack.daemon.security.config import REDACTED
     from flagtrack.daemon.services.runner import run_services
-    from flagtrack.daemon.transport import Bus, BusConfig
+    from flagtrack.daemon.transport import Bus, zenoh_settings
 
-    cfg = BusConfig(
-        namespace="flagtrack",
-        mode="router",
-        listen=tuple(args.listen or ["tcp/0.0.0.0:7447"]),
-        connect=tuple(args.connect),
-    )
+    cfg = router_config(args)
+    if args.zenohd_config:
+        head = "// zenohd -c THIS_FILE: the router of"
+        print(f"{head} {args.config or 'flagtrack router'} (made by flagtrack router --zenohd-config)")
+        settings = zenoh_settings(cfg, check_files=False)
+        if "password" in settings.get("transport/auth/usrpwd", {}):  # not printed: put it in by hand
+            settings["transport/auth/usrpwd"]["password"] = REDACTED
+        print(json.dumps(zenohd_config(settings), indent=2))
+        return 0
+    if args.rules:
+        from flagtrack.daemon.security.acl import describe
+
+        if cfg.access_control is None:
+            print("no access control (bus.security.acl is off): every peer may do everything", file=sys.stderr)
+            return 0
+        print("\n".join(describe(cfg.access_control)))
+        return 0
     bus = Bus(cfg)  # a bad endpoint or a busy port: one clear line (ConfigError), before any signal handling
-    print(f"flagtrack router: listening on {', '.join(cfg.listen)}", file=sys.stderr, flush=True)
+    what = " (mutual TLS" + (", access control" if cfg.access_control else "") + ")" if cfg.secured else ""
+    print(f"flagtrack router: listening on {', '.join(cfg.listen)}{what}", file=sys.stderr, flush=True)
     report = run_services([RouterService(bus)], shutdown_timeout_s=args.shutdown_timeout)
     if report.abandoned:
         print(f"flagtrack router: did not close within {args.shutdown_timeout:g} s", file=sys.stderr)

@@ -22,6 +22,10 @@ from pathlib import Path
 from typing import Any, Literal
 
 from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.schema import Keys
+from flagtrack.daemon.security.acl import access_control
+from flagtrack.daemon.security.config import REDACTED
+from flagtrack.daemon.security.names import identifier_problem
 from flagtrack.daemon.services.camera import CameraStreamConfig
 from flagtrack.daemon.services.recorder import RecorderConfig, recording_base
 from flagtrack.daemon.services.supervisor.section import SupervisorConfig
@@ -90,21 +94,59 @@ class RigConfig:
         unknown = [name for name in self.services if name not in SERVICE_NAMES]
         if unknown:
             raise ValueError(f"unknown service {unknown[0]!r} in services (known: {', '.join(SERVICE_NAMES)})")
+        for key, value in self.identifiers().items():  # each becomes part of file names or bus keys
+            problem = identifier_problem(value, "the name")
+            if problem is not None:
+                raise ConfigError(problem, key=key)
         if "supervisor" in self.services and self.tunnel is None:
             raise ValueError("the supervisor needs a 'tunnel:' section (driver: simulated for no hardware)")
         if "sensor" in self.services and self.sensor is None:
             raise ValueError("the sensor service needs a 'sensor:' section (driver: simulated for no hardware)")
 
+    def identifiers(self) -> dict[str, str]:
+        """The names of this rig that become parts of file names or keys, by their key."""
+        names = {"rig": self.rig, "camera.id": self.camera.id}
+        if self.sensor is not None:
+            names["sensor.id"] = self.sensor.id
+        if self.supervisor.run_name is not None:
+            names["supervisor.run_name"] = self.supervisor.run_name
+        return names
+
     @property
     def bus_config(self) -> BusConfig:
-        """The bus section, with the namespace ``flagtrack/<rig>`` unless it is given."""
+        """The bus section, with the namespace ``flagtrack/<rig>`` unless it is given, and the rig's
+        access-control rules when ``bus.security.acl`` is on (:meth:`bus_config_for` also names the
+        identity of a process that runs one service)."""
         if self.bus is None:
             return BusConfig(namespace=f"flagtrack/{self.rig}")
-        return self.bus
+        security = self.bus.security
+        if security is None or not security.acl:
+            return self.bus
+        sensors = (self.sensor.id,) if self.sensor is not None else ()
+        rules = access_control(Keys(self.bus.namespace), security, (self.camera.id,), sensors)
+        return dataclasses.replace(self.bus, access_control=rules)
+
+    def bus_config_for(self, services: Sequence[str], identity: str | None = None) -> BusConfig:
+        """:attr:`bus_config` for a process running ``services``: on a secured bus it presents
+        ``identity``, else ``bus.security.identity``, else the one service it runs (``flagtrack
+        camera`` presents ``camera``); ``flagtrack router`` presents ``router``."""
+        cfg = self.bus_config
+        security = cfg.security
+        if security is None or security.tls is None:
+            return cfg
+        chosen = identity or security.identity or (services[0] if len(services) == 1 else None)
+        if chosen is None or chosen == security.identity:
+            return cfg
+        return dataclasses.replace(cfg, security=dataclasses.replace(security, identity=chosen))
 
     def snapshot(self) -> dict[str, Any]:
-        """The whole effective config as plain values (stored beside recordings)."""
-        return to_mapping(self)
+        """The whole effective config as plain values (stored beside recordings and in run logs),
+        with the bus password replaced by ``<redacted>`` (files are named, never read into it)."""
+        mapping = to_mapping(self)
+        security = (mapping.get("bus") or {}).get("security") or {}
+        if security.get("password") is not None:
+            security["password"] = REDACTED
+        return mapping
 
 
 def load_rig(path: str | Path, services: Sequence[str] | None = None) -> RigConfig:
@@ -123,8 +165,13 @@ def load_rig(path: str | Path, services: Sequence[str] | None = None) -> RigConf
     if "path" in data:
         raise ConfigError("reserved key", key="path", path=str(path))
     bus = data.get("bus") or {}
+    if isinstance(bus, dict) and "access_control" in bus:
+        raise ConfigError("made from the rig by bus.security.acl: true, not written", key="bus.access_control")
     if isinstance(bus, dict) and "namespace" not in bus:
         rig_name = data.get("rig", "default")
+        problem = identifier_problem(rig_name, "the name")
+        if problem is not None:  # it makes the namespace: name the key the user wrote
+            raise ConfigError(problem, key="rig", path=str(path))
         data = {**data, "bus": {**bus, "namespace": f"flagtrack/{rig_name}"}}
     rig = from_mapping(RigConfig, {**data, "path": str(path)}, path=str(path))
     rig = dataclasses.replace(rig, tracker=resolve_calibration(rig.tracker, Path(path).parent))

@@ -71,7 +71,7 @@ def run_rig(
     # a hardware camera opens first: what only the device can refuse stops the rig before anything else opens
     camera = open_hardware_camera(rig) if "camera" in names else None
     try:
-        with Bus(rig.bus_config) as bus:
+        with Bus(rig.bus_config_for(names)) as bus:
             services = build_services(
                 rig,
                 bus,
