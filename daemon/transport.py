@@ -126,10 +126,12 @@ class Channel:
         max_bytes: maximum payload bytes held (None: no bound but ``capacity``); a sample that would
             go beyond is dropped (``ring``: the oldest make room), counted in ``dropped`` and
             ``dropped_bytes``. ``bytes`` is what it holds now.
+        origins: also keep where each sample came from (:meth:`get_with_origin`; for commands).
     """
 
-    def __init__(self, capacity: int, ring: bool, max_bytes: int | None = None) -> None:
+    def __init__(self, capacity: int, ring: bool, max_bytes: int | None = None, origins: bool = False) -> None:
         self._items: collections.deque[tuple[str, bytes]] = collections.deque()
+        self._origins: collections.deque[str] | None = collections.deque() if origins else None
         self._capacity = capacity
         self._ring = ring
         self._max_bytes = max_bytes
@@ -143,7 +145,7 @@ class Channel:
             self._max_bytes is not None and self.bytes + size > self._max_bytes
         )
 
-    def push(self, key: str, payload: bytes) -> None:
+    def push(self, key: str, payload: bytes, origin: str = "") -> None:
         """Called from Zenoh's thread: never blocks beyond a short lock. O(1) amortised."""
         size = len(payload)
         with self._ready:
@@ -151,6 +153,8 @@ class Channel:
                 if self._ring and (self._max_bytes is None or size <= self._max_bytes):
                     while self._items and self._full(size):
                         old = len(self._items.popleft()[1])
+                        if self._origins is not None:
+                            self._origins.popleft()
                         self.bytes -= old
                         self.dropped += 1
                         self.dropped_bytes += old
@@ -159,23 +163,33 @@ class Channel:
                     self.dropped_bytes += size
                     return
             self._items.append((key, payload))
+            if self._origins is not None:
+                self._origins.append(origin)
             self.bytes += size
             self._ready.notify()
 
     def get(self, timeout_s: float | None = None) -> tuple[str, bytes] | None:
         """Return the oldest ``(key, payload)``, waiting up to ``timeout_s``; None on timeout."""
+        item = self.get_with_origin(timeout_s)
+        return None if item is None else (item[0], item[1])
+
+    def get_with_origin(self, timeout_s: float | None = None) -> tuple[str, bytes, str] | None:
+        """Return the oldest ``(key, payload, origin)`` (origin ``""`` when not kept or not known)."""
         with self._ready:
             if not self._items and not self._ready.wait_for(lambda: bool(self._items), timeout_s):
                 return None
-            item = self._items.popleft()
-            self.bytes -= len(item[1])
-            return item
+            key, payload = self._items.popleft()
+            origin = self._origins.popleft() if self._origins is not None else ""
+            self.bytes -= len(payload)
+            return key, payload, origin
 
     def drain(self) -> list[tuple[str, bytes]]:
         """Return and remove everything queued."""
         with self._ready:
             items = list(self._items)
             self._items.clear()
+            if self._origins is not None:
+                self._origins.clear()
             self.bytes = 0
             return items
 
@@ -184,13 +198,20 @@ class Channel:
 
 
 class Subscription:
-    """Messages of one key expression, decoded on :meth:`recv`; malformed ones are counted and skipped."""
+    """Messages of one key expression, decoded on :meth:`recv`; malformed ones are counted and skipped.
+
+    ``origin`` says where the message :meth:`recv` returned last came from, when the subscription keeps
+    origins: the key it came on and, if its publisher tagged it (``Bus.publisher(tag_source=True)``),
+    the publishing session and entity. Zenoh gives no more: a sample does not carry the sender's
+    certificate, and through a router the link it came on is the router's.
+    """
 
     def __init__(self, subscriber: Any, channel: Channel, expected: type | None) -> None:
         self._subscriber = subscriber
         self.channel = channel
         self._expected = expected
         self.malformed = 0
+        self.origin = ""
         self._problems = ProblemLog(log, "bus")
 
     def recv(self, timeout_s: float | None = None) -> Any | None:
@@ -198,12 +219,14 @@ class Subscription:
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         while True:
             remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
-            item = self.channel.get(remaining)
+            item = self.channel.get_with_origin(remaining)
             if item is None:
                 return None
-            key, payload = item
+            key, payload, origin = item
             try:
-                return decode(payload, self._expected, key=key)
+                message: Any = decode(payload, self._expected, key=key)
+                self.origin = f"{key}{origin}"
+                return message
             except SchemaError as exc:
                 self.malformed += 1
                 self._problems.add("malformed messages", exc)  # counted, logged rarely
@@ -218,15 +241,22 @@ class Subscription:
 
 
 class Publisher:
-    """Publishes schema messages on one key expression."""
+    """Publishes schema messages on one key expression; ``tag_source``: each sample names this
+    publisher (session and entity ids, a sequence number) for the receiver's logs."""
 
-    def __init__(self, publisher: Any, key: str) -> None:
+    def __init__(self, publisher: Any, key: str, tag_source: bool = False) -> None:
         self._publisher = publisher
         self.key = key
+        self._tag_source = tag_source
+        self._sent = 0
 
     def put(self, message: Any) -> None:
         """Encode and publish ``message``."""
-        self._publisher.put(encode(message))
+        if self._tag_source:
+            self._sent += 1
+            self._publisher.put(encode(message), source_info=zenoh.SourceInfo(self._publisher.id, self._sent))
+        else:
+            self._publisher.put(encode(message))
 
     def put_bytes(self, payload: bytes) -> None:
         """Publish bytes already encoded (or deliberately malformed, in tests)."""
@@ -282,12 +312,13 @@ class Bus:
         with self._lock:
             self._declared.append(entity)
 
-    def publisher(self, key: str, *, block: bool = True, express: bool = False) -> Publisher:
-        """Declare a publisher; ``block`` makes it wait for slow subscribers rather than drop."""
+    def publisher(self, key: str, *, block: bool = True, express: bool = False, tag_source: bool = False) -> Publisher:
+        """Declare a publisher; ``block`` makes it wait for slow subscribers rather than drop;
+        ``tag_source``: its samples name it (for commands, whose receivers log where they came from)."""
         congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         pub = self.session.declare_publisher(key, congestion_control=congestion, express=express)
         self._keep(pub)
-        return Publisher(pub, key)
+        return Publisher(pub, key, tag_source)
 
     def subscribe(
         self,
@@ -297,15 +328,26 @@ class Bus:
         capacity: int = 10_000,
         ring: bool = False,
         max_bytes: int | None = None,
+        origins: bool = False,
     ) -> Subscription:
         """Subscribe to ``key`` into a channel (FIFO by default, ring for live views; at most
-        ``capacity`` samples and ``max_bytes`` payload bytes, see :class:`Channel`)."""
-        channel = Channel(capacity, ring, max_bytes)
+        ``capacity`` samples and ``max_bytes`` payload bytes, see :class:`Channel`); ``origins``:
+        keep where each came from (:attr:`Subscription.origin`)."""
+        channel = Channel(capacity, ring, max_bytes, origins)
 
         def on_sample(sample: Any) -> None:
             channel.push(str(sample.key_expr), sample.payload.to_bytes())
 
-        sub = self.session.declare_subscriber(key, on_sample)
+        def on_sample_with_origin(sample: Any) -> None:
+            info = sample.source_info
+            origin = (
+                f" from session {info.source_id.zid} publisher {info.source_id.eid} (its message {info.source_sn})"
+                if info is not None
+                else " (the sample names no sender: its publisher did not tag it)"
+            )
+            channel.push(str(sample.key_expr), sample.payload.to_bytes(), origin)
+
+        sub = self.session.declare_subscriber(key, on_sample_with_origin if origins else on_sample)
         self._keep(sub)
         return Subscription(sub, channel, expected)
 

@@ -155,7 +155,15 @@ def build_services(
         services.append(
             RecorderService(
                 bus,
-                replace(rig.recorder, camera_id=rig.camera.id),
+                replace(  # commands may name recordings in its folder and where the sweep's points go
+                    rig.recorder,
+                    camera_id=rig.camera.id,
+                    allowed_dirs=(
+                        *rig.recorder.allowed_dirs,
+                        rig.supervisor.runs_dir,
+                        *([resume_dir] if resume_dir else []),
+                    ),
+                ),
                 rig.snapshot(),
                 centreline_attrs=setup.attrs if setup else processing_attrs(rig.tracker),
                 exit_at_end_of_stream=exit_at_end_of_stream,

@@ -23,6 +23,12 @@ encoding or time offset cannot start a file, a centreline message that does not 
 command that cannot be carried out: each is counted (sidecar ``malformed_packets``, status) and
 logged as a rate-limited summary.
 
+**Commands stay in the recorder's folders.** A start or rotate command names a recording inside
+``directory`` (or ``allowed_dirs``: the rig builder adds the supervisor's ``runs_dir``, where sweep
+points go); a path that resolves elsewhere (an absolute path elsewhere, ``..``, a symbolic link out,
+``~user``) is refused with an error status, before anything is written or the current recording
+stopped. Every command carried out is logged with where it came from (:attr:`Subscription.origin`).
+
 **End of stream.** With ``exit_at_end_of_stream``, the recorder stops after the camera's end of
 stream only once it has the tracker's last centreline message (``final``), or after
 ``drain_timeout_s`` without any centreline message, so the last updates are in the file.
@@ -35,6 +41,7 @@ import logging
 import os
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -58,13 +65,49 @@ def recording_base(directory: str | Path, path: str) -> Path:
     return base if base.is_absolute() else Path(directory).expanduser() / base
 
 
+RECORDING_SUFFIXES = (".raw", ".json", ".json.tmp", "_centrelines.h5")
+"""The files of a recording ``BASE``: ``BASE.raw``, its sidecar (written through ``.json.tmp``), its centrelines."""
+
+
+def confined_base(path: str, roots: Sequence[str | Path]) -> Path:
+    """The base path of the recording a command names, if it stays inside one of ``roots``.
+
+    ``path`` is relative to the first root, or absolute inside one. It is refused when it is empty,
+    starts with ``~`` (not expanded: ``~user`` would name another home), has a ``..`` part, or
+    resolves (symbolic links followed) outside every root, or when one of the recording's files is a
+    symbolic link. Nothing is created. Returns the resolved path.
+
+    Raises:
+        ValueError: naming the path and why.
+    """
+    if not path or "\x00" in path:
+        raise ValueError("an empty path or one with a NUL character")
+    folders = [Path(root).expanduser().resolve() for root in roots]
+    where = " or ".join(map(str, folders))
+    if path.startswith("~"):
+        raise ValueError(f"{path!r}: '~' is not expanded in a command; name a path in {where}")
+    given = Path(path)
+    if ".." in given.parts:
+        raise ValueError(f"{path!r}: '..' is not allowed; name a path in {where}")
+    resolved = (given if given.is_absolute() else folders[0] / given).resolve()
+    if not any(resolved != folder and resolved.is_relative_to(folder) for folder in folders):
+        raise ValueError(f"{path!r} resolves to {resolved}, outside {where}")
+    for suffix in RECORDING_SUFFIXES:
+        file = resolved.with_name(resolved.name + suffix)
+        if file.is_symlink():
+            raise ValueError(f"{path!r}: {file} is a symbolic link")
+    return resolved
+
+
 @dataclass(frozen=True)
 class RecorderConfig:
     """Recorder settings.
 
     Attributes:
         camera_id: the camera recorded.
-        directory: where relative recording paths go.
+        directory: where relative recording paths go, and where commands may name recordings.
+        allowed_dirs: other folders commands may name recordings in (the rig builder adds the
+            supervisor's ``runs_dir``).
         path: start recording at launch to this path (no extension), or wait for a start command.
         centrelines: also record tracker centrelines to ``<path>_centrelines.h5``.
         flush_interval_s: hand written bytes to the OS at least this often.
@@ -79,6 +122,7 @@ class RecorderConfig:
 
     camera_id: str = "cam0"
     directory: Path = Path("recordings")
+    allowed_dirs: tuple[Path, ...] = ()
     path: str | None = None
     centrelines: bool = False
     flush_interval_s: float = 0.2
@@ -323,7 +367,10 @@ class RecorderService:
             ring=True,
         )
         self._lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000, max_bytes=256 << 20)
-        self._commands = bus.subscribe(keys.recorder_command(), RecorderCommand, capacity=1000)
+        self._commands = bus.subscribe(
+            keys.recorder_command(), RecorderCommand, capacity=1000, max_bytes=1 << 20, origins=True
+        )
+        self.refused_commands = 0
 
     def run(self, stop: threading.Event) -> None:
         keys = self.bus.keys
@@ -367,29 +414,47 @@ class RecorderService:
             self.stop_recording()
             self.problems.flush(force=True)
 
-    def handle(self, command: RecorderCommand) -> None:
+    def handle(self, command: RecorderCommand, origin: str = "") -> None:
         """Carry out a start / stop / rotate command and publish the resulting status (an error
-        status if it cannot be carried out, e.g. a path that cannot be written)."""
+        status if it cannot be carried out: a path outside the recorder's folders, one that cannot
+        be written). ``origin``: where it came from, for the log (default: the command subscription's)."""
+        origin = origin or self._commands.origin or "this process"
+        request = f" (request {command.request_id})" if command.request_id else ""
+        if command.action not in ("start", "rotate", "stop"):
+            self._refuse(command, f"unknown action {command.action!r}", origin)
+            return
+        base = None
+        if command.action != "stop":
+            try:
+                base = confined_base(command.path, [self.cfg.directory, *self.cfg.allowed_dirs])
+            except ValueError as exc:  # outside the recorder's folders: refused, nothing written or stopped
+                self._refuse(command, f"{command.action} refused: {exc}", origin)
+                return
+        log.info("recorder: %s%s%s, on %s", command.action, f" {base}" if base else "", request, origin)
         try:
-            if command.action in ("start", "rotate"):
-                if not command.path:
-                    self._status("error", message=f"{command.action} needs a path", request_id=command.request_id)
-                    return
-                self.stop_recording(request_id=command.request_id if self.current is not None else "")
-                self.start(command.path, command.centrelines, request_id=command.request_id)
-            elif command.action == "stop":
+            if base is None:
                 self.stop_recording(request_id=command.request_id)
             else:
-                self._status("error", message=f"unknown action {command.action!r}", request_id=command.request_id)
-        except (OSError, ValueError) as exc:  # e.g. a path under a file, or not allowed
-            self.problems.add("commands that failed", f"{command.action} {command.path!r}: {exc}")
+                self.stop_recording(request_id=command.request_id if self.current is not None else "")
+                self._start_at(base, command.centrelines, request_id=command.request_id)
+        except (OSError, ValueError, RuntimeError) as exc:  # e.g. a path under a file
+            self.problems.add("commands that failed", f"{command.action} {command.path!r} on {origin}: {exc}")
             self._status("error", message=f"{command.action} failed: {exc}", request_id=command.request_id)
 
+    def _refuse(self, command: RecorderCommand, why: str, origin: str) -> None:
+        self.refused_commands += 1
+        self.problems.add("commands refused", f"{why} (on {origin})")
+        self._status("error", message=why, request_id=command.request_id)
+
     def start(self, path: str, centrelines: bool, request_id: str = "") -> None:
-        """Begin a recording at ``path`` (no extension; relative to the configured directory)."""
+        """Begin a recording at ``path`` (no extension; relative to the configured directory), as the
+        config's ``path`` says (a command's path is checked first, see :meth:`handle`)."""
+        self._start_at(recording_base(self.cfg.directory, path), centrelines, request_id)
+
+    def _start_at(self, base: Path, centrelines: bool, request_id: str = "") -> None:
         self._begin(
             RecordingPart(
-                base=recording_base(self.cfg.directory, path),
+                base=base,
                 config=self.config_snapshot,
                 want_centrelines=centrelines or self.cfg.centrelines,
                 centreline_attrs=self.centreline_attrs,

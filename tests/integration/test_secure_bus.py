@@ -3,6 +3,7 @@ cannot join, and what an identity may not send. Each defence is shown failing wh
 
 from __future__ import annotations
 
+import logging
 import threading
 from contextlib import ExitStack
 from pathlib import Path
@@ -273,3 +274,51 @@ def test_a_valid_identity_cannot_send_what_is_not_its_own(pki: Pki, tmp_path: Pa
     else:
         assert 1e12 in rates_hz and len(forged_lines) == 1 and "intruder.json" in intruder_files
         assert tracker.packets == len(packets) + 10 and tracker.restarts >= 1
+
+
+@pytest.mark.parametrize("secured", [True, False], ids=["secured", "unsecured"])
+def test_a_recorder_command_naming_a_path_outside_its_folder_is_refused(
+    pki: Pki, tmp_path: Path, secured: bool, caplog: pytest.LogCaptureFixture
+) -> None:
+    """From the supervisor, which may command the recorder: an absolute path elsewhere, '..', a link
+    out of the folder and '~nosuchuser' each get an error status and write nothing; a path inside is
+    recorded, and the recorder logs the command with the session it came from."""
+    port = free_port()
+    rig = load(tmp_path / "rig.yaml", rig_text(port, pki if secured else None))
+    rec, outside = tmp_path / "rec", tmp_path / "outside"
+    rec.mkdir()
+    outside.mkdir()
+    (rec / "link").symlink_to(outside)
+    bad = {"a": str(outside / "evil"), "b": "../outside/evil", "c": "link/evil", "d": "~nosuchuser/x"}
+    with caplog.at_level(logging.INFO, logger="flagtrack.daemon.services.recorder"), ExitStack() as stack:
+        stack.enter_context(Bus(router_config(rig, port)))
+        recorder_bus, supervisor = (
+            stack.enter_context(Bus(rig.bus_config_for([n]))) for n in ("recorder", "supervisor")
+        )
+        recorder = RecorderService(recorder_bus, RecorderConfig(directory=rec))
+        start(stack, recorder)
+        keys = supervisor.keys
+        statuses = supervisor.subscribe(keys.recorder_status(), RecorderStatus)
+        commands = supervisor.publisher(keys.recorder_command(), tag_source=True)
+        wait_subscribed(supervisor, keys.recorder_command())
+        wait_subscribed(recorder_bus, keys.recorder_status())
+        for request, path in bad.items():
+            commands.put(RecorderCommand("start", path=path, request_id=request))
+        commands.put(RecorderCommand("start", path="inside", request_id="ok"))
+        replies: dict[str, RecorderStatus] = {}
+
+        def answered() -> bool:
+            while (msg := statuses.recv(timeout_s=0.05)) is not None:
+                replies[msg.request_id] = msg
+            return "ok" in replies
+
+        wait_until(answered, 10, "the answer to the command inside the folder")
+        assert recorder.current is not None and recorder.current.base == rec / "inside"
+    assert {r: replies[r].state for r in bad} == dict.fromkeys(bad, "error")
+    assert all("refused" in replies[r].message for r in bad) and replies["ok"].state == "recording"
+    assert list(outside.iterdir()) == [] and sorted(p.name for p in rec.iterdir()) == ["inside.json", "link"]
+    assert recorder.refused_commands == 4
+    accepted = [r.getMessage() for r in caplog.records if r.getMessage().startswith("recorder: start /")]
+    assert (
+        len(accepted) == 1 and "inside" in accepted[0] and f"on {keys.recorder_command()} from session" in accepted[0]
+    )

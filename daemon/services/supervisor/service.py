@@ -106,7 +106,7 @@ class SupervisorService:
         keys = self.bus.keys
         self._state_pub = self.bus.publisher(keys.supervisor_state())
         self._tunnel_pub = self.bus.publisher(keys.tunnel_state())
-        self._recorder_pub = self.bus.publisher(keys.recorder_command())
+        self._recorder_pub = self.bus.publisher(keys.recorder_command(), tag_source=True)  # the recorder logs who
         self.bus.declare_alive(self.name)
         watcher = threading.Thread(target=self._abort_on_stop, name="supervisor-abort", daemon=True)
         watcher.start()
