@@ -25,6 +25,10 @@ from flagtrack.daemon.security.names import identifier_problem
 
 log = logging.getLogger(__name__)
 
+QUEUE_BYTES = 64 << 20
+"""What a subscription holds at most when it names no bound (a forged flood of large messages must
+not grow a queue without end)."""
+
 
 @dataclass(frozen=True)
 class BusConfig:
@@ -44,6 +48,8 @@ class BusConfig:
         access_control: the Zenoh access-control section enforced by this session, made from the
             rig by :func:`flagtrack.daemon.security.acl.access_control` when ``security.acl`` is on
             (not a key of the rig file).
+        max_message_bytes: the largest message this session takes (Zenoh's default is 1 GiB, which a
+            peer could make it allocate; the largest of flagtrack's are ~1 MB).
     """
 
     namespace: str = "flagtrack/default"
@@ -54,6 +60,7 @@ class BusConfig:
     shared_memory: bool = False
     security: SecurityConfig | None = None
     access_control: dict[str, Any] | None = None
+    max_message_bytes: int = 64 << 20
 
     def __post_init__(self) -> None:
         if not self.namespace or self.namespace != self.namespace.strip("/") or " " in self.namespace:
@@ -62,6 +69,10 @@ class BusConfig:
             problem = identifier_problem(word, "a word of the namespace")
             if problem is not None:
                 raise ConfigError(problem, key="bus.namespace")
+        if self.max_message_bytes < 1 << 16:
+            raise ConfigError(
+                f"{self.max_message_bytes} bytes is too small for a camera packet", key="bus.max_message_bytes"
+            )
         if self.security is not None and self.security.tls is not None:
             for name in ("listen", "connect"):
                 for i, endpoint in enumerate(getattr(self, name)):
@@ -93,6 +104,7 @@ def zenoh_settings(cfg: BusConfig, *, check_files: bool = True) -> dict[str, Any
         "listen/endpoints": list(cfg.listen),
         "connect/endpoints": list(cfg.connect),
         "transport/shared_memory/enabled": cfg.shared_memory,
+        "transport/link/rx/max_message_size": cfg.max_message_bytes,
     }
     if cfg.security is not None:
         listens = bool(cfg.listen) or cfg.mode == "router"
@@ -327,11 +339,12 @@ class Bus:
         *,
         capacity: int = 10_000,
         ring: bool = False,
-        max_bytes: int | None = None,
+        max_bytes: int | None = QUEUE_BYTES,
         origins: bool = False,
     ) -> Subscription:
         """Subscribe to ``key`` into a channel (FIFO by default, ring for live views; at most
-        ``capacity`` samples and ``max_bytes`` payload bytes, see :class:`Channel`); ``origins``:
+        ``capacity`` samples and ``max_bytes`` payload bytes, see :class:`Channel`, by default
+        :data:`QUEUE_BYTES`); ``origins``:
         keep where each came from (:attr:`Subscription.origin`)."""
         channel = Channel(capacity, ring, max_bytes, origins)
 

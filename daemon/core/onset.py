@@ -132,16 +132,28 @@ class OnsetDetector:
         """The current state."""
         return self._state
 
+    def sample_problem(self, t_s: float, rate_hz: float) -> str | None:
+        """Why :meth:`update` would refuse this sample, or None: a time that is not finite or goes
+        backwards, a rate that is negative or infinite (``nan`` is a missing rate, taken). For a
+        caller that skips samples it cannot use (a message from the bus) instead of failing. O(1)."""
+        if not math.isfinite(t_s):
+            return f"time {t_s} is not a finite number"
+        if self._last_t_s is not None and t_s < self._last_t_s:
+            return f"time went backwards: {t_s} s after {self._last_t_s} s"
+        if rate_hz < 0 or math.isinf(rate_hz):
+            return f"{'negative' if rate_hz < 0 else 'infinite'} event rate {rate_hz} at {t_s} s"
+        return None
+
     def update(self, t_s: float, rate_hz: float) -> OnsetReading:
         """Take one sample (time s, rate events/s; ``nan`` = missing) and return the reading.
 
         Raises:
-            ValueError: time going backwards or a negative rate.
+            ValueError: a sample :meth:`sample_problem` refuses (time not finite or going backwards,
+                a negative or infinite rate); the detector is unchanged.
         """
-        if self._last_t_s is not None and t_s < self._last_t_s:
-            raise ValueError(f"time went backwards: {t_s} s after {self._last_t_s} s")
-        if rate_hz < 0:
-            raise ValueError(f"negative event rate {rate_hz} at {t_s} s")
+        problem = self.sample_problem(t_s, rate_hz)
+        if problem is not None:
+            raise ValueError(problem)
         previous = self._state
         dt_s = 0.0 if self._last_t_s is None else t_s - self._last_t_s
         if self._window and t_s - self._window[-1][0] > self.params.max_gap_s:

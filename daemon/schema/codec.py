@@ -90,6 +90,11 @@ def encode(message: Any) -> bytes:
 def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None, *, key: str | None = None) -> M:
     """Parse bytes made by :func:`encode`.
 
+    Whatever the bytes, the only exception is :class:`SchemaError` (so that a subscriber that counts
+    and skips those is never stopped by a message): JSON nested too deep to parse, integers beyond
+    64 bits, a ``bytes`` blob for an array field or an array for a ``bytes`` one are refused by name,
+    and anything else that goes wrong inside is turned into one.
+
     Args:
         data: the message bytes.
         expected: the message class wanted; another type raises SchemaError.
@@ -98,6 +103,17 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     Raises:
         SchemaError: malformed bytes, unknown version or type, or not of ``expected`` type.
     """
+    try:
+        return _decode(data, expected, key)
+    except SchemaError:
+        raise
+    except RecursionError:
+        raise SchemaError("meta nested too deeply to decode", key=key) from None
+    except Exception as exc:  # noqa: BLE001 - a message must never raise anything else (see above)
+        raise SchemaError(f"cannot be decoded ({type(exc).__name__}: {str(exc)[:200]})", key=key) from None
+
+
+def _decode(data: bytes | bytearray | memoryview, expected: type[M] | None, key: str | None) -> M:
     view = memoryview(data)
     if len(view) < _HEADER.size:
         raise SchemaError(f"{len(view)} bytes is shorter than the {_HEADER.size}-byte header", key=key)
@@ -120,7 +136,7 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
         raise SchemaError(f"meta length {meta_len} runs past the end ({len(view)} bytes)", key=key)
     try:
         meta = json.loads(bytes(view[_HEADER.size : end]))
-    except ValueError as exc:
+    except ValueError as exc:  # (~1000 nested brackets, a few kB, raise RecursionError: see decode)
         raise SchemaError(f"{cls.__name__}: meta is not valid JSON ({exc})", key=key) from None
     if not isinstance(meta, dict):
         raise SchemaError(f"{cls.__name__}: meta is not a JSON object", key=key)
@@ -247,6 +263,8 @@ def _blob_layout(cls: type, name: Any, dtype: Any, shape: Any) -> tuple[np.dtype
     shape = tuple(map(int, shape))
     if name not in _blob_fields(cls) or min(shape, default=0) < 0 or (dtype == "bytes" and len(shape) != 1):
         raise ValueError(name)
+    if (dtype == "bytes") != (name in _bytes_fields(cls)):
+        raise ValueError(f"{name}: {'bytes' if name in _bytes_fields(cls) else 'an array'} expected, got {dtype}")
     np_dtype = None if dtype == "bytes" else np.dtype(dtype)
     if np_dtype is not None and (np_dtype.hasobject or np_dtype.itemsize == 0 or np_dtype.shape):
         raise ValueError(f"{name}: not a plain array type")
@@ -264,6 +282,12 @@ def _required_blobs(cls: type) -> frozenset[str]:
 def _blob_fields(cls: type) -> frozenset[str]:
     """Names of the fields of ``cls`` carried as binary payloads (arrays, bytes)."""
     return frozenset(f.name for f in dataclasses.fields(cls) if _is_blob(f))
+
+
+@functools.cache
+def _bytes_fields(cls: type) -> frozenset[str]:
+    """Names of the fields of ``cls`` carried as raw bytes (the others of :func:`_blob_fields` are arrays)."""
+    return frozenset(f.name for f in dataclasses.fields(cls) if f.type in ("bytes", bytes))
 
 
 def _is_blob(f: dataclasses.Field) -> bool:
@@ -299,6 +323,12 @@ def _scalar_names(view_cls: type) -> frozenset[str]:
 
 
 _SIMPLE = {"str": str, "int": int, "float": float, "bool": bool}
+_I64_MIN, _I64_MAX = -(1 << 63), (1 << 63) - 1
+
+
+def _fits_int64(value: Any) -> bool:
+    """Whether an integer field's value fits numpy's int64 (what the services make of it)."""
+    return bool(_I64_MIN <= value <= _I64_MAX)
 
 
 @functools.cache
@@ -325,7 +355,7 @@ def _fast_scalars_ok(cls: type, meta: dict[str, Any]) -> bool:
         return False
     for name, value in meta.items():
         expected = types_.get(name)
-        if expected is None or type(value) is not expected:
+        if expected is None or type(value) is not expected or (expected is int and not _fits_int64(value)):
             return False
     return True
 
@@ -353,6 +383,8 @@ def _scalar(cls: type, name: str, annotation: Any, value: Any, key: str | None) 
     ok = isinstance(value, kind) if kind is not None else False
     if kind is int or kind is float:
         ok = isinstance(value, int | float if kind is float else int) and not isinstance(value, bool)
+    if ok and kind is int and not _fits_int64(value):
+        raise SchemaError(f"{cls.__name__}: field '{name}' is beyond 64 bits", key=key)
     if not ok:
         raise SchemaError(
             f"{cls.__name__}: field '{name}' expects {getattr(kind, '__name__', annotation)}, "

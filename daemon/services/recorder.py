@@ -228,6 +228,7 @@ class RecordingPart:
             self.write_sidecar()
         expected = self.sequence.next_seq
         arrival, _ = self.sequence.arrive(packet.seq, packet.stream_id)
+        self.sequence.follow_horizon(packet.t_last_us)
         if arrival is Arrival.GAP:
             self.gaps.append([expected, packet.seq])
         self.raw.write(packet.data)
@@ -502,12 +503,16 @@ class RecorderService:
         except SchemaError as exc:
             self._malformed(exc)
             return
-        problem = packet_problem(packet)
+        horizon = None  # of the stream the packet continues, if it does (its times may not jump far past it)
+        if self.current is not None:
+            arrival, _ = self.current.sequence.classify(packet.seq, packet.stream_id)
+            if self.current.new_stream(packet, arrival) is None:
+                horizon = self.current.sequence.horizon_us
+        problem = packet_problem(packet, horizon)
         if problem is not None:
             self._malformed(SchemaError(problem, key=key))
             return
         if self.current is not None:
-            arrival, _ = self.current.sequence.classify(packet.seq, packet.stream_id)
             reason = self.current.new_stream(packet, arrival)
             if reason is not None:
                 self._next_part(reason, packet)

@@ -190,6 +190,12 @@ class TrackerService:
         run: list[EventPacket] = []
         for packet in packets:
             previous = self._sequence.next_seq
+            continues = self._sequence.classify(packet.seq, packet.stream_id)[0] is not Arrival.NEW_STREAM
+            problem = packet_problem(packet, self._sequence.horizon_us if continues else None)
+            if problem is not None and not packet.end_of_stream:  # left out: the stream is as if it never came
+                self.undecodable_packets += 1
+                self.problems.add("packets whose times cannot be placed", problem)
+                continue
             arrival, missing = self._sequence.arrive(packet.seq, packet.stream_id)
             if arrival is Arrival.LATE:  # a duplicate, or a packet of this stream already passed
                 self.late_packets += 1
@@ -197,7 +203,6 @@ class TrackerService:
                     "late or duplicate packets", f"packet {packet.seq} came after {previous - 1}: dropped", 1
                 )
                 continue
-            problem = packet_problem(packet)
             if arrival is not Arrival.NEXT or problem is not None:
                 self._track_run(run)  # a gap breaks the stream: what came before is decoded apart
                 run = []
@@ -208,13 +213,14 @@ class TrackerService:
                     self.problems.add(
                         "packets missing", f"{missing} packet(s) missing before seq {packet.seq}", missing
                     )
-            if problem is not None:  # its times cannot be placed: it would throw the chain hours off
+            if problem is not None:  # its times cannot be placed (hours off): its end of stream still counts
                 self.undecodable_packets += 1
                 self.problems.add("packets whose times cannot be placed", problem)
-                if not packet.end_of_stream:
-                    continue
-                packet = dataclasses.replace(packet, data=b"", n_events=0)  # its end of stream still counts
+                horizon = self._sequence.horizon_us
+                last_us = horizon if horizon is not None else packet.t_first_us
+                packet = dataclasses.replace(packet, data=b"", n_events=0, t_last_us=last_us)
             self.packets += 1
+            self._sequence.follow_horizon(packet.t_last_us)
             if run and packet.encoding != run[0].encoding:
                 self._track_run(run)
                 run = []

@@ -21,6 +21,10 @@ from flagtrack.drivers.formats._packet_kernels import encode_packets, packet_wor
 from flagtrack.drivers.formats.codec import LOOP_US, Encoder
 
 _WORD_DTYPE = {"evt3": "<u2", "evt2": "<u4"}
+MAX_OFFSET_US = 366 * 86_400_000_000
+"""The largest time offset a packet may carry, a year of camera time: its stream preamble is then at
+most 7.5 MB (EVT 3.0, 4 bytes per 16.8 s loop). Beyond, a forged offset would make the preamble
+hundreds of MB (decades: 7 GB)."""
 
 
 @dataclass(frozen=True)
@@ -324,10 +328,15 @@ def stream_preamble(encoding: str, t_offset_us: int) -> bytes:
     Written before the first packet of a file, so a reader that starts at time 0 (every RAW reader)
     decodes the packets' times exactly: each loop is crossed as ``max`` then ``0``, which decoders
     read as one wrap of the time base.
+
+    Raises:
+        FormatError: an offset that is not a whole number of loops, or beyond :data:`MAX_OFFSET_US`.
     """
     loops = t_offset_us // LOOP_US[encoding]
     if t_offset_us % LOOP_US[encoding] or loops < 0:
         raise FormatError(f"time offset {t_offset_us} µs is not a whole number of {encoding} loops")
+    if t_offset_us > MAX_OFFSET_US:
+        raise FormatError(f"time offset {t_offset_us} µs is more than a year of camera time ({MAX_OFFSET_US} µs)")
     if encoding == "evt3":
         pair = np.array([0x8FFF, 0x8000], dtype="<u2")
     else:

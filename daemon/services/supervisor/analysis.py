@@ -15,6 +15,12 @@ from flagtrack.daemon.core.metrics import (
     travelling_wave_index,
 )
 
+MAX_CYCLES = 100_000
+"""Cycles the amplitude spread is measured over at most (a point records seconds to minutes)."""
+MAX_GAP_S = 60.0
+"""Updates of one point are at most this far apart in camera time; one further on is not the point's
+(the frequency's resampling grid would span the gap: a day of 0.25 ms steps is 3 GB)."""
+
 
 @dataclass(frozen=True)
 class PointMetrics:
@@ -40,11 +46,13 @@ def point_metrics(
     (time mean and standard deviation).
 
     Args:
-        batches: the point's centrelines, time order.
+        batches: the point's centrelines, time order (updates that are not, and batches whose samples
+            or joints differ from the first's, are left out: :func:`usable_batches`).
         length: flag length L (same units as the centrelines).
         root, direction_deg: the flag's rest frame (lateral = perpendicular to the rest direction).
         cycles_window: cycles per amplitude estimate when computing the spread.
     """
+    batches = usable_batches(batches)
     if not batches:
         return PointMetrics()
     batch = CentrelineBatch.concatenate(batches)
@@ -75,6 +83,32 @@ def point_metrics(
     )
 
 
+def usable_batches(batches: list[CentrelineBatch]) -> list[CentrelineBatch]:
+    """The batches that can be measured together: those shaped as the first (samples, joints), with
+    only their updates at finite times after every earlier update, and at most :data:`MAX_GAP_S`
+    after it, kept (a forged or restarted stream's updates that go back in time, or jump ahead, are
+    dropped, not sorted in). O(updates)."""
+    kept: list[CentrelineBatch] = []
+    last_t = -math.inf
+    for batch in batches:
+        if kept and (batch.x.shape[1] != kept[0].x.shape[1] or batch.joints_x.shape[1] != kept[0].joints_x.shape[1]):
+            continue
+        t_s = np.asarray(batch.t_s, dtype=float)
+        finite = np.isfinite(t_s)
+        before = np.maximum.accumulate(np.concatenate([[last_t], np.where(finite, t_s, -math.inf)]))[:-1]
+        keep = finite & (t_s > before)  # after every update kept so far
+        if np.isfinite(last_t):  # and not far after them (time may only step on from the first)
+            keep &= t_s - np.maximum(before, last_t) <= MAX_GAP_S
+        else:
+            keep &= t_s - np.where(np.isfinite(before), before, t_s) <= MAX_GAP_S
+        if not keep.any():
+            continue
+        chosen = batch if keep.all() else batch.select(keep)
+        kept.append(chosen)
+        last_t = float(chosen.t_s[-1])
+    return kept
+
+
 def _longest_run(t_s: np.ndarray, gap_factor: float = 5.0) -> slice:
     """The longest stretch of updates without a gap (a step over ``gap_factor`` times the median step)."""
     steps = np.diff(t_s)
@@ -91,6 +125,8 @@ def _amplitude_spread(t_s: np.ndarray, tip: np.ndarray, length: float, frequency
     if not np.isfinite(frequency_hz) or frequency_hz <= 0:
         return math.nan
     period_s = cycles / frequency_hz
+    if (t_s[-1] - t_s[0]) / period_s > MAX_CYCLES:  # (a point records seconds: times this far apart are not one)
+        return math.nan
     edges = np.arange(t_s[0], t_s[-1], period_s)
     values = [tip_amplitude_over_l(tip[(t_s >= a) & (t_s < a + period_s)], length) for a in edges[:-1]]
     values = [v for v in values if np.isfinite(v)]

@@ -10,12 +10,16 @@ import numpy as np
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.onset import FlagState, OnsetDetector, OnsetParams, OnsetReading
+from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage, EventRate, RecorderStatus, SensorSamples
+from flagtrack.daemon.services.supervisor.analysis import MAX_GAP_S
 from flagtrack.daemon.transport import Bus
 
 log = logging.getLogger(__name__)
 
 SERVICE_KEYS = {"camera": "camera/{camera_id}", "tracker": "tracker", "recorder": "recorder", "viewer": "viewer"}
+MAX_REPLIES = 256
+"""Recorder answers kept for the supervisor to pick up (the oldest go: others' request ids, forged ones)."""
 
 
 @dataclass
@@ -36,6 +40,11 @@ class Collection:
 class BusMonitor:
     """Drains the supervisor's subscriptions (call :meth:`pump` often) and keeps the flag state.
 
+    A message it cannot use is counted (``unusable``), logged rarely and skipped, never raised: an
+    event rate whose time is not finite or goes back, or whose rate is negative or infinite; a
+    centreline message whose times are not finite and increasing after those already gathered, or
+    whose samples or joints differ from the first one's. Every queue is bounded in bytes.
+
     Args:
         bus: the bus.
         camera_id: the camera watched.
@@ -48,14 +57,16 @@ class BusMonitor:
         self, bus: Bus, camera_id: str, onset: OnsetParams, required: tuple[str, ...], sensor_id: str | None = None
     ) -> None:
         keys = bus.keys
-        self.rates = bus.subscribe(keys.event_rate(camera_id), EventRate, capacity=100_000)
+        self.rates = bus.subscribe(keys.event_rate(camera_id), EventRate, capacity=100_000, max_bytes=16 << 20)
         self.lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=1_000_000, max_bytes=256 << 20)
-        self.recorder = bus.subscribe(keys.recorder_status(), RecorderStatus, capacity=1000)
+        self.recorder = bus.subscribe(keys.recorder_status(), RecorderStatus, capacity=1000, max_bytes=4 << 20)
         self.sensor = (
             None
             if sensor_id is None
-            else bus.subscribe(keys.sensor_samples(sensor_id), SensorSamples, capacity=100_000)
+            else bus.subscribe(keys.sensor_samples(sensor_id), SensorSamples, capacity=100_000, max_bytes=64 << 20)
         )
+        self.unusable = 0
+        self.problems = ProblemLog(log, "supervisor")
         self.liveliness = bus.watch_liveliness()
         self.alive_keys = {name: keys.alive(SERVICE_KEYS[name].format(camera_id=camera_id)) for name in required}
         self.detector = OnsetDetector(onset)
@@ -72,15 +83,24 @@ class BusMonitor:
         return FlagState.UNKNOWN if self.reading is None else self.reading.state
 
     def pump(self) -> None:
-        """Take in everything that arrived."""
+        """Take in everything that arrived (what cannot be used is counted and skipped)."""
         while (rate := self.rates.recv(timeout_s=0)) is not None:
-            self.reading = self.detector.update(rate.t_us * 1e-6, rate.rate_hz)
+            t_s = rate.t_us * 1e-6
+            problem = self.detector.sample_problem(t_s, rate.rate_hz)
+            if problem is not None:
+                self._unusable("event rates that cannot be used", problem)
+                continue
+            self.reading = self.detector.update(t_s, rate.rate_hz)
             self.rate_hz = rate.rate_hz
             self.last_rate_s = time.monotonic()
             if self.collection is not None:
                 self.collection.rates_hz.append(rate.rate_hz)
         while (msg := self.lines.recv(timeout_s=0)) is not None:
             if self.collection is not None and len(msg.t_s):
+                problem = centreline_problem(msg, self.collection)
+                if problem is not None:
+                    self._unusable("centreline messages that cannot be used", problem)
+                    continue
                 self.collection.batches.append(msg.batch())
                 self.collection.units = msg.units
                 if len(msg.source_ns) and msg.source_ns[-1] > 0:
@@ -91,6 +111,13 @@ class BusMonitor:
         while (status := self.recorder.recv(timeout_s=0)) is not None:
             if status.request_id:
                 self.recorder_replies[status.request_id] = status
+                while len(self.recorder_replies) > MAX_REPLIES:
+                    del self.recorder_replies[next(iter(self.recorder_replies))]
+        self.problems.flush()
+
+    def _unusable(self, kind: str, detail: str) -> None:
+        self.unusable += 1
+        self.problems.add(kind, detail)
 
     def start_collecting(self) -> None:
         """Start gathering centrelines and rates (for one point)."""
@@ -124,6 +151,27 @@ class BusMonitor:
         if self.reading is None:
             return float("nan"), float("nan")
         return self.reading.on_rate_hz, self.reading.off_rate_hz
+
+
+def centreline_problem(msg: CentrelineMessage, collection: Collection) -> str | None:
+    """Why a centreline message cannot join what ``collection`` gathered, or None: its times are not
+    finite and increasing (steps up to :data:`~.analysis.MAX_GAP_S`), do not follow the gathered
+    ones within that, or its samples or joints differ from the first message's (another tracker
+    set-up). O(updates)."""
+    t_s = np.asarray(msg.t_s, dtype=float)
+    steps = np.diff(t_s)
+    if not np.all(np.isfinite(t_s)) or np.any(steps <= 0) or np.any(steps > MAX_GAP_S):
+        return f"centreline message {msg.seq}: times not finite and increasing in steps up to {MAX_GAP_S:g} s"
+    if collection.batches:
+        first, last = collection.batches[0], collection.batches[-1]
+        if not 0 < t_s[0] - last.t_s[-1] <= MAX_GAP_S:
+            return f"centreline message {msg.seq} at {t_s[0]:.6f} s does not follow {last.t_s[-1]:.6f} s"
+        if msg.x.shape[1] != first.x.shape[1] or msg.joints_x.shape[1] != first.joints_x.shape[1]:
+            return (
+                f"centreline message {msg.seq} has {msg.x.shape[1]} samples and {msg.joints_x.shape[1]} joints, "
+                f"the point's first {first.x.shape[1]} and {first.joints_x.shape[1]}"
+            )
+    return None
 
 
 def point_state(rates_hz: list[float], on_hz: float, off_hz: float, previous: str) -> str:
