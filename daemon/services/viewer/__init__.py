@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from .config import ViewerConfig, effective_sink
 from .layout import TIMELINE, blueprint
-from .logger import RerunLogger, age_colours, open_recording, supervisor_text
+from .logger import RerunLogger, age_colours, close_recording, open_recording, supervisor_text
 from .service import ViewerService
 
 __all__ = [
@@ -31,6 +31,7 @@ __all__ = [
     "ViewerService",
     "age_colours",
     "blueprint",
+    "close_recording",
     "effective_sink",
     "open_recording",
     "supervisor_text",

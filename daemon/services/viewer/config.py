@@ -20,6 +20,9 @@ class ViewerConfig:
             (gRPC + web viewer for a browser), ``rrd`` (headless file) or ``none``.
         rrd_path: the .rrd file for the ``rrd`` sink (and ``auto`` without display).
         web_port: port of the web viewer for ``serve``.
+        serve_host: the address ``serve`` listens on (web viewer and gRPC): loopback by default,
+            ``0.0.0.0`` for every interface (see docs/security.md).
+        grpc_port: port of the gRPC server that ``serve`` streams through.
         camera_id: the camera whose events are shown.
         recent_events_ms: events younger than this are drawn.
         max_points: at most this many event points per frame (subsampled beyond).
@@ -36,6 +39,8 @@ class ViewerConfig:
     sink: Literal["auto", "spawn", "serve", "rrd", "none"] = "auto"
     rrd_path: Path = Path("flagtrack.rrd")
     web_port: int = 9090
+    serve_host: str = "127.0.0.1"
+    grpc_port: int = 9876
     camera_id: str = "cam0"
     recent_events_ms: float = 10.0
     max_points: int = 20_000

@@ -28,6 +28,7 @@ from flagtrack.drivers.formats.packets import decode_packet
 from . import layout
 from .batching import FlushPolicy, RowQueue
 from .config import ViewerConfig, effective_sink
+from .serve import RerunServer
 
 log = logging.getLogger(__name__)
 
@@ -48,10 +49,10 @@ def open_recording(cfg: ViewerConfig) -> tuple[rr.RecordingStream, str]:
     if sink == "spawn":
         rec.spawn()
         description = "Rerun viewer window"
-    elif sink == "serve":
-        url = rec.serve_grpc()
-        rr.serve_web_viewer(web_port=cfg.web_port, open_browser=False, connect_to=url)
-        description = f"web viewer on http://localhost:{cfg.web_port} (data {url})"
+    elif sink == "serve":  # Rerun's serve_grpc binds every interface: its server, bound as configured
+        server = _SERVERS[id(rec)] = RerunServer(cfg.serve_host, cfg.grpc_port, cfg.web_port)
+        rec.connect_grpc(server.url)
+        description = f"web viewer on {server.web_url} (data {server.url}, listening on {cfg.serve_host})"
     elif sink == "rrd":
         path = Path(cfg.rrd_path).expanduser()
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -63,6 +64,17 @@ def open_recording(cfg: ViewerConfig) -> tuple[rr.RecordingStream, str]:
         raise ConfigError(f"unknown sink {sink!r}", key="viewer.sink")
     rec.send_blueprint(layout.blueprint(), make_active=True, make_default=True)
     return rec, description
+
+
+def close_recording(rec: rr.RecordingStream) -> None:
+    """Disconnect ``rec`` and stop the server its ``serve`` sink started, if any."""
+    rec.disconnect()
+    server = _SERVERS.pop(id(rec), None)
+    if server is not None:
+        server.close()
+
+
+_SERVERS: dict[int, RerunServer] = {}
 
 
 def age_colours(age_s: np.ndarray, horizon_s: float) -> np.ndarray:

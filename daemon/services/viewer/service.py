@@ -12,7 +12,7 @@ from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, S
 from flagtrack.daemon.transport import Bus
 
 from .config import ViewerConfig
-from .logger import RerunLogger, open_recording
+from .logger import RerunLogger, close_recording, open_recording
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +76,7 @@ class ViewerService:
         finally:
             self.problems.flush(force=True)
             rec.flush()
-            rec.disconnect()
+            close_recording(rec)
 
     def _show(self, step: Any, *args: Any) -> Any:
         """Run one logging step; a message Rerun (or the logger) cannot take is counted, not fatal."""
