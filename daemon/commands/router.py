@@ -20,7 +20,8 @@ Services on other hosts then use `bus: {mode: client, connect: [tcp/<router>:744
 deploy/rig-camera-host.yaml and deploy/rig-tracker-host.yaml), or zenohd with
 deploy/zenoh-router.json5 does the same job.
 
-With -c rig.yaml the router takes the rig's `bus.security` section: mutual TLS on every link with
+With -c rig.yaml the router listens where the rig's clients connect (`bus.connect`) and takes the
+rig's `bus.security` section: mutual TLS on every link with
 the `router` identity's certificate (tls/ endpoints only), user/password, and with `acl: true` the
 access-control rules made from the rig (default deny; each identity its own keys). `--zenohd-config`
 prints the same router as a zenohd config file (deploy/zenoh-router-secure.json5), `--rules` the
@@ -42,8 +43,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="ENDPOINT",
-        help=f"endpoint to listen on (default tcp/127.0.0.1:{DEFAULT_PORT}, tls/... on a secured bus; "
-        "or the rig's bus.listen when its mode is router); repeatable",
+        help="endpoint to listen on; repeatable (default: with -c, the rig's bus.connect when its services "
+        "are clients of this router, or its bus.listen in router mode; else "
+        f"tcp/127.0.0.1:{DEFAULT_PORT}, tls/... on a secured bus)",
     )
     parser.add_argument(
         "--connect", action="append", default=[], metavar="ENDPOINT", help="another router to join; repeatable"
@@ -91,9 +93,8 @@ def router_config(args: argparse.Namespace) -> BusConfig:
     rig = load_rig(args.config, services=())
     bus = rig.bus_config_for([], identity=ROUTER)
     scheme = "tls" if bus.secured else "tcp"
-    listen = (
-        tuple(args.listen) or (bus.listen if bus.mode == "router" else ()) or (f"{scheme}/127.0.0.1:{DEFAULT_PORT}",)
-    )
+    rig_endpoints = bus.listen if bus.mode == "router" else bus.connect if bus.mode == "client" else ()
+    listen = tuple(args.listen) or rig_endpoints or (f"{scheme}/127.0.0.1:{DEFAULT_PORT}",)
     try:
         return dataclasses.replace(bus, mode="router", listen=listen, connect=tuple(args.connect))
     except ConfigError as exc:  # an endpoint of the command line

@@ -45,8 +45,8 @@ class TlsFiles:
 
     Attributes:
         ca: the CA certificate (PEM); every link's other end must hold a certificate it signed.
-        cert, key: this process's certificate and private key (PEM); ``{identity}`` in either is
-            replaced by the process's identity, so one rig file serves every service of a host.
+        cert, key: this process's certificate and private key (PEM); ``{identity}`` in any of the
+            three is replaced by the process's identity, so one rig file serves every service of a host.
         verify_name: check that a listener's certificate names the host or address connected to
             (``flagtrack certs issue --host``); off, any certificate of the CA is taken.
     """
@@ -60,6 +60,7 @@ class TlsFiles:
         """The files with ``{identity}`` filled in."""
         return dataclasses.replace(
             self,
+            ca=Path(str(self.ca).replace("{identity}", identity)),
             cert=Path(str(self.cert).replace("{identity}", identity)),
             key=Path(str(self.key).replace("{identity}", identity)),
         )
