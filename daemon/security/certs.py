@@ -132,6 +132,33 @@ def read_certificate(path: Path) -> x509.Certificate:
         raise ConfigError(f"{path} is not a PEM certificate ({exc})") from exc
 
 
+def read_authorities(path: Path) -> list[x509.Certificate]:
+    """Every certificate of a CA file (a bundle of the old and the new CA while rotating, see docs/security.md).
+
+    Raises:
+        ConfigError: unreadable, or no PEM certificate in it.
+    """
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"cannot read certificate {path}: {exc.strerror}") from exc
+    try:
+        return x509.load_pem_x509_certificates(data)
+    except ValueError as exc:
+        raise ConfigError(f"{path} holds no PEM certificate ({exc})") from exc
+
+
+def issued_by_any(cert: x509.Certificate, authorities: list[x509.Certificate]) -> bool:
+    """Whether one of ``authorities`` signed ``cert``."""
+    for ca in authorities:
+        try:
+            cert.verify_directly_issued_by(ca)
+            return True
+        except (ValueError, TypeError, InvalidSignature):
+            continue
+    return False
+
+
 def cert_info(path: Path) -> CertInfo:
     """Read a certificate file's common name, validity, issuer and names."""
     cert = read_certificate(path)
@@ -360,7 +387,7 @@ def check(directory: Path, *, within_days: float = WARN_DAYS, now: dt.datetime |
     ca_path = directory / CA_CERT
     if not ca_path.is_file():
         raise ConfigError(f"no {CA_CERT} in {directory} (make one with flagtrack certs init)")
-    ca = read_certificate(ca_path)
+    authorities = read_authorities(ca_path)
     results = [_expiry(cert_info(ca_path), within_days, now)]
     for path in sorted(directory.glob("*.pem")):
         if path.name == CA_CERT or IDENTITY_RE.fullmatch(path.stem) is None:
@@ -369,9 +396,7 @@ def check(directory: Path, *, within_days: float = WARN_DAYS, now: dt.datetime |
         info = cert_info(path)
         result = _expiry(info, within_days, now)
         problems = [result.problem] if result.problem else []
-        try:
-            cert.verify_directly_issued_by(ca)
-        except (ValueError, TypeError, InvalidSignature):
+        if not issued_by_any(cert, authorities):
             problems.append(f"not signed by {ca_path}")
         if info.common_name != path.stem:
             problems.append(f"its common name is {info.common_name!r}, not {path.stem!r}")
@@ -410,7 +435,7 @@ def check_identity_files(
         if not Path(path).is_file():
             raise ConfigError(f"no such file: {path}", key=f"bus.security.tls.{key}")
     try:
-        ca = read_certificate(ca_path)
+        authorities = read_authorities(ca_path)
         cert = read_certificate(cert_path)
     except ConfigError as exc:
         raise ConfigError(str(exc), key="bus.security.tls") from None
@@ -420,10 +445,8 @@ def check_identity_files(
         raise ConfigError(
             f"{cert_path} is the certificate of {info.common_name!r}; this process presents {identity!r}", key=where
         )
-    try:
-        cert.verify_directly_issued_by(ca)
-    except (ValueError, TypeError, InvalidSignature):
-        raise ConfigError(f"{cert_path} was not issued by the CA of {ca_path}", key=where) from None
+    if not issued_by_any(cert, authorities):
+        raise ConfigError(f"{cert_path} was not issued by the CA of {ca_path}", key=where)
     if info.days_left(now) < 0:
         raise ConfigError(f"{cert_path} expired on {info.not_after:%Y-%m-%d %H:%M} UTC (renew it)", key=where)
     if info.not_before > now:

@@ -130,3 +130,17 @@ def test_identity_files_are_checked_before_zenoh_reads_them(tmp_path: Path) -> N
     os.chmod(folder / "camera.key", 0o640)
     with pytest.raises(ConfigError, match="tls.key.*chmod 600"):
         certs.check_identity_files(ca, folder / "camera.pem", folder / "camera.key", "camera")
+
+
+def test_a_ca_bundle_takes_either_cas_identities_while_rotating(tmp_path: Path) -> None:
+    """Rotating the CA: ca.pem holds the old and the new CA until every identity is reissued."""
+    certs.init(tmp_path / "old", ["camera"])
+    certs.init(tmp_path / "new", ["camera"])
+    bundle = tmp_path / "bundle.pem"
+    bundle.write_bytes((tmp_path / "old" / "ca.pem").read_bytes() + (tmp_path / "new" / "ca.pem").read_bytes())
+    for folder in ("old", "new"):
+        certs.check_identity_files(bundle, tmp_path / folder / "camera.pem", tmp_path / folder / "camera.key", "camera")
+    with pytest.raises(ConfigError, match="not issued by"):
+        certs.check_identity_files(
+            tmp_path / "old" / "ca.pem", tmp_path / "new" / "camera.pem", tmp_path / "new" / "camera.key", "camera"
+        )
