@@ -14,6 +14,10 @@ centrelines and the tracker status.
    the latency the live-pipeline issue asks for) and to its arrival here (the bus hop back to a
    subscriber in another process included); p50 and p99 of both.
 
+With ``--secure`` each run is made twice, plain and then secured as ``bus.security`` secures a rig
+(mutual TLS on every link, each process its own certificate, access control made from the rig,
+default deny), and the secured figures are reported next to the plain ones with their ratio.
+
 In both runs it also reports the cores each process used while the centrelines came (from
 ``/proc``, Linux only): the camera, the tracker and this process share the machine, and when
 together they keep it busy, packets wait for a core and the latency's tail grows. Before both, it
@@ -53,6 +57,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "of camera.packet_us); the replay hands over as much per read when paced",
     )
     parser.add_argument("--cache", type=Path, default=None, help="folder for the recording")
+    parser.add_argument(
+        "--secure",
+        action="store_true",
+        help="also run both measurements secured (mutual TLS, one certificate per process, access "
+        "control) and report them next to the plain ones",
+    )
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
 
@@ -74,9 +84,19 @@ def run(args: argparse.Namespace) -> int:
     file_rate = n_events / args.seconds
     tracker = {"root": list(ROOT), "length": LENGTH, "tau_s": args.tau}
     wakeup = _wakeup_lateness_ms()
-    throughput = _measure(recording, tracker, args.packet_us, speed=0.0, loop=False, wall_s=None)
     speed = args.latency_rate * 1e6 / file_rate
-    latency = _measure(recording, tracker, args.packet_us, speed=speed, loop=True, wall_s=args.latency_seconds)
+    runs: dict[str, dict[str, Any]] = {}
+    for secure in (False, True) if args.secure else (False,):  # each secured run right after its plain twin
+        suffix = "_secure" if secure else ""
+        runs["throughput" + suffix] = _measure(
+            recording, tracker, args.packet_us, speed=0.0, loop=False, wall_s=None, secure=secure
+        )
+    for secure in (False, True) if args.secure else (False,):
+        suffix = "_secure" if secure else ""
+        runs["latency" + suffix] = _measure(
+            recording, tracker, args.packet_us, speed=speed, loop=True, wall_s=args.latency_seconds, secure=secure
+        )
+    throughput, latency = runs["throughput"], runs["latency"]
     results = {
         "events": n_events,
         "file_rate_mev_s": file_rate / 1e6,
@@ -96,6 +116,8 @@ def run(args: argparse.Namespace) -> int:
         "wakeup_late_p50_ms": wakeup[0],
         "wakeup_late_p99_ms": wakeup[1],
     }
+    if args.secure:
+        results.update(_secure_results(n_events, runs, results))
     if args.json:
         print(json.dumps(results))
     else:
@@ -127,7 +149,60 @@ def run(args: argparse.Namespace) -> int:
             if cores:
                 used = ", ".join(f"{name} {value:.2f}" for name, value in cores.items())
                 print(f"  CPU in the {label} (cores; this machine has {os.cpu_count()}): {used}")
+        if args.secure:
+            _print_secure(results)
     return 0
+
+
+def _secure_results(n_events: int, runs: dict[str, dict[str, Any]], plain: dict[str, Any]) -> dict[str, Any]:
+    """The secured runs' figures and their ratios to the plain ones (secured / plain)."""
+    throughput, latency = runs["throughput_secure"], runs["latency_secure"]
+    secure = {
+        "secure_sustained_mev_s": n_events / throughput["elapsed_s"] / 1e6 if throughput["complete"] else None,
+        "secure_throughput_missing_packets": throughput["missing_packets"],
+        "secure_latency_updates": latency["updates"],
+        "secure_latency_p50_ms": latency["p50_ms"],
+        "secure_latency_p99_ms": latency["p99_ms"],
+        "secure_publish_latency_p50_ms": latency["publish_p50_ms"],
+        "secure_publish_latency_p99_ms": latency["publish_p99_ms"],
+        "secure_latency_missing_packets": latency["missing_packets"],
+        "secure_throughput_cpu_cores": throughput["cpu_cores"],
+        "secure_latency_cpu_cores": latency["cpu_cores"],
+    }
+    for name in ("sustained_mev_s", "latency_p50_ms", "latency_p99_ms", "publish_latency_p50_ms",
+                 "publish_latency_p99_ms"):  # fmt: skip
+        a, b = plain[name], secure[f"secure_{name}"]
+        secure[f"ratio_{name}"] = b / a if a and b else None
+    return secure
+
+
+def _print_secure(results: dict[str, Any]) -> None:
+    def ratio(name: str) -> str:
+        value = results[f"ratio_{name}"]
+        return f"x{value:.2f}" if value else "-"
+
+    sustained = results["secure_sustained_mev_s"]
+    print("  secured (mutual TLS, a certificate per process, access control), next to the plain runs:")
+    print(
+        f"    throughput: {sustained:.1f} Mev/s ({ratio('sustained_mev_s')}), "
+        f"{results['secure_throughput_missing_packets']} packets lost"
+        if sustained
+        else "    throughput: the tracker did not finish the stream"
+    )
+    print(
+        f"    to publication: p50 {results['secure_publish_latency_p50_ms']:.2f} ms "
+        f"({ratio('publish_latency_p50_ms')}), p99 {results['secure_publish_latency_p99_ms']:.2f} ms "
+        f"({ratio('publish_latency_p99_ms')})"
+    )
+    print(
+        f"    to a subscriber: p50 {results['secure_latency_p50_ms']:.2f} ms ({ratio('latency_p50_ms')}), "
+        f"p99 {results['secure_latency_p99_ms']:.2f} ms ({ratio('latency_p99_ms')}), "
+        f"{results['secure_latency_missing_packets']} packets lost"
+    )
+    for label in ("throughput", "latency"):
+        cores = results[f"secure_{label}_cpu_cores"]
+        if cores:
+            print(f"    CPU in the secured {label} run (cores): " + ", ".join(f"{k} {v:.2f}" for k, v in cores.items()))
 
 
 def _measure(  # noqa: PLR0915 - one measurement, step by step
@@ -138,23 +213,29 @@ def _measure(  # noqa: PLR0915 - one measurement, step by step
     speed: float,
     loop: bool,
     wall_s: float | None,
+    secure: bool = False,
 ) -> dict[str, Any]:
     import numpy as np
 
+    from flagtrack.daemon.rig.config import load_rig
     from flagtrack.daemon.schema import CentrelineMessage, TrackerStatus
-    from flagtrack.daemon.transport import Bus, BusConfig
+    from flagtrack.daemon.transport import Bus
 
     port = _free_port()
     rig = f"bench{os.getpid()}{int(time.time() * 1000) % 100000}"
     with tempfile.TemporaryDirectory() as tmp:
         tracker_cfg, camera_cfg = Path(tmp) / "tracker.yaml", Path(tmp) / "camera.yaml"
         common = {"rig": rig, "tracker": tracker, "tracker_service": {"batch_updates": 64, "max_batch_delay_s": 0.001}}
-        tracker_cfg.write_text(json.dumps({**common, "bus": {"listen": [f"tcp/127.0.0.1:{port}"]}}))
+        endpoint = f"{'tls' if secure else 'tcp'}/127.0.0.1:{port}"
+        security = _secure_section(Path(tmp) / "certs") if secure else {}
+        tracker_cfg.write_text(json.dumps({**common, "bus": {"listen": [endpoint], **security}}))
+        bench_cfg = Path(tmp) / "bench.yaml"
+        bench_cfg.write_text(json.dumps({**common, "bus": {"connect": [endpoint], **security}}))
         camera_cfg.write_text(
             json.dumps(
                 {
                     **common,
-                    "bus": {"connect": [f"tcp/127.0.0.1:{port}"]},
+                    "bus": {"connect": [endpoint], **security},
                     "camera": {
                         "adapter": "replay",
                         "packet_us": packet_us,
@@ -166,7 +247,7 @@ def _measure(  # noqa: PLR0915 - one measurement, step by step
         tracker_proc = _start("tracker", tracker_cfg)
         procs = [tracker_proc]
         try:
-            with Bus(BusConfig(namespace=f"flagtrack/{rig}", connect=(f"tcp/127.0.0.1:{port}",))) as bus:
+            with Bus(load_rig(bench_cfg, services=()).bus_config_for(["operator"])) as bus:
                 lines = bus.subscribe(bus.keys.centrelines(), CentrelineMessage, capacity=10_000_000)
                 status = bus.subscribe(bus.keys.tracker_status(), TrackerStatus, capacity=10_000, ring=True)
                 if status.recv(timeout_s=60) is None:  # the tracker is up (it reports once a second)
@@ -221,6 +302,16 @@ def _measure(  # noqa: PLR0915 - one measurement, step by step
         "publish_p50_ms": float(np.percentile(pub, 50)) if len(pub) else float("nan"),
         "publish_p99_ms": float(np.percentile(pub, 99)) if len(pub) else float("nan"),
     }
+
+
+def _secure_section(folder: Path) -> dict[str, Any]:
+    """``bus.security`` of the secured runs: a new CA and certificates for the camera, the tracker and
+    this process (the ``operator``, which may read every key), mutual TLS, access control."""
+    from flagtrack.daemon.security import certs
+
+    certs.init(folder, ["camera", "tracker", "operator"])
+    tls = {"ca": str(folder / "ca.pem"), "cert": str(folder / "{identity}.pem"), "key": str(folder / "{identity}.key")}
+    return {"security": {"tls": tls, "acl": True, "operators": ["operator"]}}
 
 
 def _wakeup_lateness_ms(n: int = 1000) -> tuple[float, float]:
