@@ -76,7 +76,8 @@ def role_rights(keys: Keys, role: str, camera_ids: Sequence[str], sensor_ids: Se
         )
     if role == "viewer":
         return Rights(
-            subscribe=(keys.centrelines(), *events, *rates, keys.tunnel_state()), tokens=(keys.alive("viewer"),)
+            subscribe=(keys.centrelines(), *events, *rates, keys.tunnel_state(), keys.supervisor_state()),
+            tokens=(keys.alive("viewer"),),
         )
     if role == "supervisor":
         return Rights(
