@@ -167,6 +167,10 @@ def load_rig(path: str | Path, services: Sequence[str] | None = None) -> RigConf
     bus = data.get("bus") or {}
     if isinstance(bus, dict) and "access_control" in bus:
         raise ConfigError("made from the rig by bus.security.acl: true, not written", key="bus.access_control")
+    security = bus.get("security") if isinstance(bus, dict) else None
+    password = security.get("password") if isinstance(security, dict) else None
+    if password is not None and not isinstance(password, str):  # (the type error would print it)
+        raise ConfigError("must be text: quote it", key="bus.security.password", path=str(path))
     if isinstance(bus, dict) and "namespace" not in bus:
         rig_name = data.get("rig", "default")
         problem = identifier_problem(rig_name, "the name")

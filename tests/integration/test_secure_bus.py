@@ -3,6 +3,7 @@ cannot join, and what an identity may not send. Each defence is shown failing wh
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 from contextlib import ExitStack
@@ -14,6 +15,7 @@ import zenoh
 
 from flagtrack.daemon.core.onset import OnsetParams
 from flagtrack.daemon.core.tracker import Tracker
+from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, RecorderCommand, RecorderStatus
 from flagtrack.daemon.services.recorder import RecorderConfig, RecorderService
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor
@@ -326,3 +328,24 @@ def test_a_recorder_command_naming_a_path_outside_its_folder_is_refused(
     assert (
         len(accepted) == 1 and "inside" in accepted[0] and f"on {keys.recorder_command()} from session" in accepted[0]
     )
+
+
+def test_user_and_password_on_top_of_tls(pki: Pki, tmp_path: Path) -> None:
+    """The router takes the users of its users_file: the rig's password joins, another is refused, and
+    neither appears in the error or the records."""
+    users = tmp_path / "users"
+    users.write_text("rig:s3cret-pw\n")
+    users.chmod(0o600)
+    port = free_port()
+
+    def rig(password: str):
+        auth = f"    user: rig\n    password: {password}\n    users_file: {users}\n"
+        return load(tmp_path / "rig.yaml", rig_text(port, pki) + auth)
+
+    with Bus(router_config(rig("s3cret-pw"), port)):
+        with Bus(rig("s3cret-pw").bus_config_for(["camera"])) as camera:
+            assert camera.session.info.routers_zid()
+        with pytest.raises(ConfigError) as refused:
+            Bus(rig("not-it").bus_config_for(["camera"]))
+    assert "not-it" not in str(refused.value) and "s3cret" not in str(refused.value)
+    assert "s3cret" not in json.dumps(rig("s3cret-pw").snapshot())

@@ -190,3 +190,13 @@ def test_rules_for_a_sensor_and_its_samples(tmp_path: Path) -> None:
     assert rules["sensor-publish"]["key_exprs"] == ["flagtrack/s/sensor/om70/samples"]
     assert "flagtrack/s/sensor/om70/samples" in rules["supervisor-subscribe"]["key_exprs"]
     assert rules["sensor-token"]["key_exprs"] == ["flagtrack/s/alive/sensor/om70"]
+
+
+def test_a_password_of_another_type_is_refused_without_being_printed(tmp_path: Path) -> None:
+    path = secured_rig(tmp_path)
+    path.write_text(
+        path.read_text().replace("    acl: true\n", "    acl: true\n    user: rig\n    password: 98765432\n")
+    )
+    with pytest.raises(ConfigError, match="quote it") as info:
+        load_rig(path, services=())
+    assert "98765432" not in str(info.value) and info.value.key == "bus.security.password"
