@@ -31,6 +31,7 @@ from typing import Any, Literal
 
 from flagtrack.daemon import __version__
 from flagtrack.daemon.errors import ConfigError, FormatError
+from flagtrack.daemon.security.names import identifier_problem
 from flagtrack.daemon.sweep.plan import Point, SweepConfig, plan_points
 from flagtrack.daemon.typed_yaml import from_mapping, to_mapping
 
@@ -230,10 +231,22 @@ def _assemble(
 def _point_from_json(record: dict[str, Any], path: Path, offset: int) -> PointResult:
     names = {f.name for f in dataclasses.fields(PointResult)}
     values = {k: (math.nan if v is None and k in _FLOAT_FIELDS else v) for k, v in record.items() if k in names}
+    problem = identifier_problem(values.get("point_id"), "point_id")  # it names files (validate, resume)
+    for name in ("raw_file", "centreline_file"):  # paths inside the run folder
+        file = values.get(name)
+        if problem is None and file is not None and (not isinstance(file, str) or not _inside(file)):
+            problem = f"{name} {str(file)[:80]!r} is not a path inside the run folder"
+    if problem is not None:
+        raise FormatError(f"point record: {problem}", path=str(path), offset=offset)
     try:
         return PointResult(**values)
     except TypeError as exc:
         raise FormatError(f"point record: {exc}", path=str(path), offset=offset) from exc
+
+
+def _inside(relative: str) -> bool:
+    parts = Path(relative).parts
+    return bool(parts) and not Path(relative).is_absolute() and ".." not in parts and not relative.startswith("~")
 
 
 def stored_sweep(record: RunRecord, section: str = "sweep") -> SweepConfig:
