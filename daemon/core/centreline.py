@@ -20,6 +20,8 @@ class CentrelineBatch:
         joints_y: (n_t, n_joints + 1) float64 chain joints y, root first.
         delta_rms: (n_t,) float64 RMS distance of the window's events to the centreline (NaN if none).
         n_events: (n_t,) int64 events used by each update.
+        lost: (n_t,) uint8, 1 where the flag was not found in the update (its shape is not to be
+            trusted); ``None`` when constructed: zeros (a tracker without loss detection).
     """
 
     t_s: np.ndarray
@@ -30,10 +32,16 @@ class CentrelineBatch:
     joints_y: np.ndarray
     delta_rms: np.ndarray
     n_events: np.ndarray
+    lost: np.ndarray = None  # type: ignore[assignment]  # None: zeros, set in __post_init__
 
     def __post_init__(self) -> None:
         n_t, n_s = len(self.t_s), len(self.s)
-        for name, want in (("x", (n_t, n_s)), ("y", (n_t, n_s)), ("delta_rms", (n_t,)), ("n_events", (n_t,))):
+        if self.lost is None:
+            object.__setattr__(self, "lost", np.zeros(n_t, dtype=np.uint8))
+        else:
+            object.__setattr__(self, "lost", np.asarray(self.lost, dtype=np.uint8))
+        checks = (("x", (n_t, n_s)), ("y", (n_t, n_s)), ("delta_rms", (n_t,)), ("n_events", (n_t,)), ("lost", (n_t,)))
+        for name, want in checks:
             got = getattr(self, name).shape
             if got != want:
                 raise ValueError(f"CentrelineBatch.{name} has shape {got}, expected {want}")
@@ -64,6 +72,7 @@ class CentrelineBatch:
             joints_y=self.joints_y[index],
             delta_rms=self.delta_rms[index],
             n_events=self.n_events[index],
+            lost=self.lost[index],
         )
 
     @staticmethod
@@ -81,4 +90,5 @@ class CentrelineBatch:
             joints_y=np.concatenate([b.joints_y for b in batches]),
             delta_rms=np.concatenate([b.delta_rms for b in batches]),
             n_events=np.concatenate([b.n_events for b in batches]),
+            lost=np.concatenate([b.lost for b in batches]),
         )

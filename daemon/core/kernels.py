@@ -21,6 +21,7 @@ import numpy as np
 
 from flagtrack.daemon.core.delta_rms import LANES, lanes_end, window_delta
 from flagtrack.daemon.core.jit import njit
+from flagtrack.daemon.core.lost import N_BINS, count_near, folded, verdict, wide_search
 from flagtrack.daemon.core.smoothing import smooth_one
 
 _F = np.float32
@@ -267,6 +268,9 @@ def run_updates(
     out_sy: np.ndarray,
     out_delta: np.ndarray,
     out_n: np.ndarray,
+    lost_cfg: np.ndarray,
+    lost_prev: np.ndarray,
+    out_lost: np.ndarray,
 ) -> None:
     """Run K consecutive updates (chain, smoothing, Delta_RMS) on a time-sorted float32 event buffer.
 
@@ -279,6 +283,11 @@ def run_updates(
         length, rel_tol: flag length and tolerance of the smoothed length (relative).
         out_jx, out_jy: (K, N_j + 1) joints (tip shortened); out_sx, out_sy: (K, n_s) centrelines;
         out_delta: (K,) Delta_RMS (NaN if no event in an area); out_n: (K,) events in an area.
+        lost_cfg: (8,) loss of track (:mod:`.lost`): enabled (0/1), min_events, min_fit, band^2
+            (squared length), region rho, re-acquire (0/1), cone and refining half-angle (radians); disabled: the paper's
+            update, untouched, and ``out_lost`` zeros.
+        lost_prev: (1,) int64, the previous update's verdict, carried in place.
+        out_lost: (K,) uint8 written: 1 where the flag was not found.
     """
     n_links = len(angles)
     n_max = 0
@@ -298,48 +307,79 @@ def run_updates(
     work = np.empty(4 * (n_links + 1) + 3)
     seg = np.empty((7, out_sx.shape[1] - 1))
     inv_width = 1.0 / bucket_width
+    lost_on = lost_cfg[0] != 0.0
+    region_end = min(int(lost_cfg[4] * inv_width), n_buckets - 1) + 1  # buckets of the flag's region
+    trial = angles.copy()
+    hist = np.zeros(N_BINS, dtype=np.int64)
+    t_jx, t_jy = np.empty(n_links + 1), np.empty(n_links + 1)
+    t_sx, t_sy = np.empty(out_sx.shape[1]), np.empty(out_sx.shape[1])
     for w in range(len(lo_idx)):
         bucket_sort(x, y, lo_idx[w], hi_idx[w], root_x, root_y, inv_width, xs, ys, bucket, offsets)
-        jx, jy = out_jx[w], out_jy[w]
-        update_sorted(
-            xs,
-            ys,
-            offsets,
-            inv_width,
-            root_x,
-            root_y,
-            angles,
-            lengths,
-            reach,
-            r2_min,
-            r2_max,
-            cl2,
-            cr2,
-            half_angle,
-            min_events,
-            area,
-            jx,
-            jy,
-            counts,
-        )
-        smooth_one(jx, jy, lengths, length, rel_tol, work, out_sx[w], out_sy[w])
-        total, used = window_delta(
-            xs,
-            ys,
-            offsets,
-            bucket_width,
-            group,
-            root_x,
-            root_y,
-            area,
-            r2_min,
-            r2_max,
-            cl2,
-            out_sx[w],
-            out_sy[w],
-            seg,
-            inside,
-            best,
-        )
+        jx, jy, sx, sy = out_jx[w], out_jy[w], out_sx[w], out_sy[w]
+        geometry = (lengths, reach, r2_min, r2_max, cl2, cr2, half_angle, min_events, length, rel_tol, group)
+        total, used = _update_measure(
+            xs, ys, offsets, bucket_width, root_x, root_y, angles, geometry, area, jx, jy, counts, work, sx, sy, seg,
+            inside, best,
+        )  # fmt: skip
+        lost = 0
+        if lost_on:
+            n_region = offsets[region_end]
+            n_near = count_near(best, n_region, lost_cfg[3])
+            fold = folded(angles, lost_cfg[6])
+            lost = verdict(n_region, n_near, int(lost_cfg[1]), lost_cfg[2], fold, lost_prev[0])
+            if lost and lost_cfg[5] != 0.0 and n_region >= lost_cfg[1]:
+                trial[:] = angles
+                wide_search(
+                    xs, ys, offsets, inv_width, root_x, root_y, trial, lengths, r2_min, r2_max, lost_cfg[6],
+                    lost_cfg[7], min_events, hist,
+                )  # fmt: skip
+                t_total, t_used = _update_measure(
+                    xs, ys, offsets, bucket_width, root_x, root_y, trial, geometry, area, t_jx, t_jy, counts, work,
+                    t_sx, t_sy, seg, inside, best,
+                )  # fmt: skip
+                t_near = count_near(best, n_region, lost_cfg[3])
+                t_fold = folded(trial, lost_cfg[6])
+                if (t_near > n_near or fold) and not t_fold:
+                    angles[:] = trial
+                    jx[:], jy[:], sx[:], sy[:] = t_jx, t_jy, t_sx, t_sy
+                    total, used = t_total, t_used
+                    lost = verdict(n_region, t_near, int(lost_cfg[1]), lost_cfg[2], False, 1)
+            lost_prev[0] = lost
+        out_lost[w] = lost
         out_n[w] = used
         out_delta[w] = math.sqrt(total / used) if used > 0 else math.nan
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _update_measure(
+    xs: np.ndarray,
+    ys: np.ndarray,
+    offsets: np.ndarray,
+    bucket_width: float,
+    root_x: float,
+    root_y: float,
+    angles: np.ndarray,
+    geometry: tuple,
+    area: np.ndarray,
+    jx: np.ndarray,
+    jy: np.ndarray,
+    counts: np.ndarray,
+    work: np.ndarray,
+    sx: np.ndarray,
+    sy: np.ndarray,
+    seg: np.ndarray,
+    inside: np.ndarray,
+    best: np.ndarray,
+) -> tuple[float, int]:
+    """One update of ``angles`` from a window's sorted events, its centreline (sx, sy) and Delta_RMS's
+    (sum of squares, events in an area); ``best`` is left with each event's squared distance to it."""
+    lengths, reach, r2_min, r2_max, cl2, cr2, half_angle, min_events, length, rel_tol, group = geometry
+    inv_width = 1.0 / bucket_width
+    update_sorted(
+        xs, ys, offsets, inv_width, root_x, root_y, angles, lengths, reach, r2_min, r2_max, cl2, cr2, half_angle,
+        min_events, area, jx, jy, counts,
+    )  # fmt: skip
+    smooth_one(jx, jy, lengths, length, rel_tol, work, sx, sy)
+    return window_delta(
+        xs, ys, offsets, bucket_width, group, root_x, root_y, area, r2_min, r2_max, cl2, sx, sy, seg, inside, best
+    )

@@ -20,6 +20,7 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.chain import AreaGeometry, ChainParams, ChainState
 from flagtrack.daemon.core.denoise import BackgroundActivityFilter, DenoiseParams
 from flagtrack.daemon.core.kernels import run_updates
+from flagtrack.daemon.core.lost_params import LostParams
 from flagtrack.daemon.core.mapping import PointMapping
 from flagtrack.daemon.core.smoothing import REL_TOL, n_samples
 from flagtrack.daemon.core.windows import UpdateClock, WindowSchedule
@@ -43,6 +44,8 @@ class TrackerParams:
             not emitted (the chain would not move; keeps a long pause from making millions of
             identical updates); ``None``: emit every window.
         rel_tol: tolerance of the smoothed length, relative to L.
+        lost: loss-of-track detection and re-acquisition (the robust method); ``None``: the
+            paper's update, every ``lost`` 0.
     """
 
     chain: ChainParams
@@ -51,6 +54,7 @@ class TrackerParams:
     denoise: DenoiseParams | None = None
     max_gap_s: float | None = 1.0
     rel_tol: float = REL_TOL
+    lost: LostParams | None = None
 
     @property
     def n_s(self) -> int:
@@ -71,6 +75,8 @@ class TrackerStats:
     events_kept: int = 0
     events_out_of_order: int = 0
     updates: int = 0
+    lost_updates: int = 0
+    lost_stretches: int = 0
     first_t_us: int | None = None
     last_t_us: int | None = None
 
@@ -128,6 +134,8 @@ class Tracker:
         if self._angles.shape != (chain.n_joints,):
             raise ValueError(f"initial state has {self._angles.shape} angles for {chain.n_joints} joints")
         self._geo = AreaGeometry.of(chain)
+        self._lost_cfg = _lost_config(params)
+        self._lost_prev = np.zeros(1, dtype=np.int64)  # the last update's verdict (carried like the angles)
         self._mapping = mapping
         self._filter = BackgroundActivityFilter(params.denoise, *sensor_size)
         self._buffer = _Buffer()
@@ -246,7 +254,8 @@ class Tracker:
         k, n_j, n_s = len(t_us), chain.n_joints, len(self.s)
         jx, jy = np.empty((k, n_j + 1)), np.empty((k, n_j + 1))
         sx, sy = np.empty((k, n_s)), np.empty((k, n_s))
-        delta, used = np.empty(k), np.empty(k, dtype=np.int64)
+        delta, used, lost = np.empty(k), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.uint8)
+        was_lost = int(self._lost_prev[0])
         run_updates(
             buf.x,
             buf.y,
@@ -273,10 +282,16 @@ class Tracker:
             sy,
             delta,
             used,
+            self._lost_cfg,
+            self._lost_prev,
+            lost,
         )
         self.stats.updates += k
+        if k:
+            self.stats.lost_updates += int(lost.sum())
+            self.stats.lost_stretches += int(np.count_nonzero(np.diff(lost, prepend=np.uint8(was_lost)) == 1))
         return CentrelineBatch(
-            t_s=t_us * 1e-6, s=self.s, x=sx, y=sy, joints_x=jx, joints_y=jy, delta_rms=delta, n_events=used
+            t_s=t_us * 1e-6, s=self.s, x=sx, y=sy, joints_x=jx, joints_y=jy, delta_rms=delta, n_events=used, lost=lost
         )
 
     def _empty(self) -> CentrelineBatch:
@@ -291,6 +306,27 @@ class Tracker:
             delta_rms=np.empty(0),
             n_events=np.empty(0, dtype=np.int64),
         )
+
+
+def _lost_config(params: TrackerParams) -> np.ndarray:
+    """(8,) float64 the kernel's loss-of-track settings (see :func:`.kernels.run_updates`)."""
+    lost, chain = params.lost, params.chain
+    if lost is None:
+        return np.zeros(8)
+    lengths = chain.lengths()
+    refine_deg = chain.refine_deg if chain.refine_deg is not None else 10.0
+    return np.array(
+        [
+            1.0,
+            lost.min_events,
+            lost.min_fit,
+            (lost.band * chain.length) ** 2,
+            chain.length + chain.alpha * float(lengths.max()),  # the chain's reach: the flag's region
+            1.0 if lost.reacquire else 0.0,
+            math.radians(lost.cone_deg),
+            math.radians(refine_deg),
+        ]
+    )
 
 
 def track(

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from flagtrack.daemon.core.denoise_params import DenoiseParams
+from flagtrack.daemon.core.lost_params import LostParams
 from flagtrack.daemon.core.windows import WindowSegment
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.typed_yaml import from_mapping, load_yaml, to_mapping
@@ -43,6 +44,14 @@ ROBUST_DENOISE = DenoiseSection(max_neighbours=3)
 
 
 @dataclass(frozen=True)
+class LostSection(LostParams):
+    """The ``lost:`` section: loss-of-track detection and re-acquisition (:class:`LostParams`, defined
+    there once) and whether the robust method detects at all (``enabled``)."""
+
+    enabled: bool = True
+
+
+@dataclass(frozen=True)
 class TrackingConfig:
     """Parameters of a reconstruction (YAML section ``tracker:``).
 
@@ -62,6 +71,7 @@ class TrackingConfig:
         min_events: robust method: fewest events in an arc that move its link.
         refine_deg: robust method: half-angle of the refining arc around the first mean.
         denoise: robust method: background-activity filter.
+        lost: robust method: loss-of-track detection and re-acquisition (``/lost`` of the files).
         t_start_s: first update time (default: first event + tau/2).
         t_stop_s: last update time (default: end of the events).
         max_gap_s: windows without events starting more than this after the last event are not
@@ -84,6 +94,7 @@ class TrackingConfig:
     min_events: int = 5
     refine_deg: float = 10.0
     denoise: DenoiseSection = ROBUST_DENOISE
+    lost: LostSection = LostSection()
     t_start_s: float | None = None
     t_stop_s: float | None = None
     max_gap_s: float | None = 1.0
@@ -134,7 +145,13 @@ class TrackingConfig:
             raise ConfigError(f"must be positive, got {self.ds}", key=f"{SECTION}.ds", path=path)
         if self.max_gap_s is not None and not self.max_gap_s > 0:
             raise ConfigError(f"must be positive, got {self.max_gap_s}", key=f"{SECTION}.max_gap_s", path=path)
-        return TrackerParams(chain=chain, schedule=schedule, ds=self.ds, denoise=denoise, max_gap_s=self.max_gap_s)
+        lost = None
+        if not paper and self.lost.enabled:
+            fields = {f.name: getattr(self.lost, f.name) for f in dataclasses.fields(LostParams)}
+            lost = _build(LostParams, path, "lost", **fields)
+        return TrackerParams(
+            chain=chain, schedule=schedule, ds=self.ds, denoise=denoise, max_gap_s=self.max_gap_s, lost=lost
+        )
 
     def attrs(self) -> dict[str, Any]:
         """Every processing parameter as flat HDF5-friendly attributes (effective values).
@@ -151,8 +168,10 @@ class TrackingConfig:
         denoise = values.pop("denoise")
         values.update({f"denoise_{k}": v for k, v in denoise.items()})
         values["denoise_neighbourhood"] = "3x3 without the event's own pixel"
+        lost = values.pop("lost")
+        values.update({f"lost_{k}": v for k, v in lost.items()})
         if paper:
-            values.update(min_events=1, refine_deg=None, denoise_enabled=False)
+            values.update(min_events=1, refine_deg=None, denoise_enabled=False, lost_enabled=False)
         segments = [(seg.t_from_s, seg.dt_s, seg.tau_s) for seg in self.schedule]
         segments = segments or [(0.0, self.dt_s or self.tau_s, self.tau_s)]
         values["dt_s"], values["tau_s"] = segments[0][1], segments[0][2]

@@ -1,7 +1,8 @@
 """Centreline HDF5 files (DESIGN.md layout), readable from MATLAB and Python.
 
 ``/t`` (n_t,) s, ``/s`` (n_s,), ``/x`` ``/y`` (n_t, n_s), ``/joints/x`` ``/joints/y`` (n_t, N_j+1),
-``/delta_rms`` (n_t,), ``/n_events`` (n_t,) int64; root attributes hold every processing
+``/delta_rms`` (n_t,), ``/n_events`` (n_t,) int64, ``/lost`` (n_t,) uint8 (1: the flag was not found
+in that update, its shape is not to be trusted; a file written before it reads as zeros); root attributes hold every processing
 parameter, ``units``, ``input_file`` and ``flagtrack_version``. Files are written incrementally
 (resizable datasets, flushed per append) so memory is bounded and a crash keeps what was flushed.
 
@@ -28,7 +29,7 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import FormatError
 
 _PER_UPDATE = ("t", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events")
-_LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events")
+_LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost")
 
 
 class CentrelineWriter:
@@ -53,6 +54,7 @@ class CentrelineWriter:
             self._file.create_dataset(name, (0, width), maxshape=(None, width), dtype="f8", chunks=(chunk_t, width))
         self._file.create_dataset("delta_rms", (0,), maxshape=(None,), dtype="f8", chunks=(chunk_t,))
         self._file.create_dataset("n_events", (0,), maxshape=(None,), dtype="i8", chunks=(chunk_t,))
+        self._file.create_dataset("lost", (0,), maxshape=(None,), dtype="u1", chunks=(chunk_t,))
         write_attrs(self._file, {"flagtrack_version": __version__, **attrs})
         self.n_updates = 0
 
@@ -69,6 +71,7 @@ class CentrelineWriter:
             "joints/y": batch.joints_y,
             "delta_rms": batch.delta_rms,
             "n_events": batch.n_events,
+            "lost": batch.lost,
         }
         start = self.n_updates
         for name, values in columns.items():
@@ -379,6 +382,7 @@ def read_centrelines(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any]]
                 joints_y=f["joints/y"][()],
                 delta_rms=f["delta_rms"][()],
                 n_events=f["n_events"][()],
+                lost=f["lost"][()] if "lost" in f else None,
             )
             attrs = {name: _decode_attr(value) for name, value in f.attrs.items()}
     except OSError as exc:
@@ -431,6 +435,7 @@ def read_truth(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any], tuple
             joints_y=np.asarray(data["joints/y"], dtype=np.float64) if joints else np.empty((n_t, 0)),
             delta_rms=np.asarray(data.get("delta_rms", np.full(n_t, np.nan)), dtype=np.float64),
             n_events=np.asarray(data.get("n_events", np.zeros(n_t)), dtype=np.int64),
+            lost=np.asarray(data.get("lost", np.zeros(n_t)), dtype=np.uint8),
         )
     except ValueError as exc:
         raise FormatError(f"ground truth: {exc}", path=str(path)) from exc

@@ -52,7 +52,8 @@ def test_layout_attributes_and_times(raw_file: Path, tmp_path: Path, events: np.
     out = tmp_path / "out.h5"
     assert main(["reconstruct", str(raw_file), "-o", str(out), *ARGS]) == 0
     with h5py.File(out, "r") as f:
-        assert set(f) == {"t", "s", "x", "y", "joints", "delta_rms", "n_events"}
+        assert set(f) == {"t", "s", "x", "y", "joints", "delta_rms", "n_events", "lost"}
+        assert f["lost"].dtype == np.uint8 and f["lost"].shape == (f["t"].shape[0],)
         assert set(f["joints"]) == {"x", "y"}
         n_t = f["t"].shape[0]
         assert f["x"].shape == f["y"].shape == (n_t, 51) and f["joints/x"].shape == (n_t, 11)
@@ -72,6 +73,8 @@ def test_layout_attributes_and_times(raw_file: Path, tmp_path: Path, events: np.
         "min_events",
         "refine_deg",
         "denoise_window_us",
+        "lost_enabled",
+        "lost_min_fit",
         "flagtrack_version",
     ):
         assert key in attrs, key
@@ -205,7 +208,8 @@ def _run(path: Path, out: Path, *extra: str) -> tuple[CentrelineBatch, dict]:
 
 def test_direction_is_degrees_from_x_towards_y(down_file: Path, tmp_path: Path) -> None:
     """A flag hanging along +y (down the image) is tracked from the first update with --direction 90;
-    with --direction -90 the chain points up the image, away from every event, and stays there."""
+    with --direction -90 the paper's chain points up the image, away from every event, and stays
+    there, while the robust method's says it lost the flag and finds it (issue 19)."""
     common = ("--root", "320", "60", "--length", "180", "--tau", "0.0003")
     down, attrs = _run(down_file, tmp_path / "down.h5", *common, "--direction", "90")
     assert attrs["direction_deg"] == 90.0
@@ -213,9 +217,14 @@ def test_direction_is_degrees_from_x_towards_y(down_file: Path, tmp_path: Path) 
     error = np.sqrt(np.mean((down.x - x_ref) ** 2 + (down.y - y_ref) ** 2, axis=1))
     assert error.max() < 0.01 * 180, error.max()  # every update, the first included
     assert np.all(np.diff(down.joints_y[0]) > 0) and down.joints_y[0, -1] > 60 + 150
-    up, _ = _run(down_file, tmp_path / "up.h5", *common, "--direction", "-90")
+    up, _ = _run(down_file, tmp_path / "up.h5", *common, "--direction", "-90", "--method", "paper")
     np.testing.assert_allclose(up.joints_x, 320.0, atol=1e-9)
     np.testing.assert_allclose(up.joints_y[:, -1], 60.0 - 180.0, atol=1e-9)
+    assert not up.lost.any()  # the paper's method does not detect
+    found, _ = _run(down_file, tmp_path / "found.h5", *common, "--direction", "-90")
+    error = np.sqrt(np.mean((found.x - x_ref) ** 2 + (found.y - y_ref) ** 2, axis=1))
+    assert found.lost[0] == 1 or error[0] < 0.01 * 180  # lost at the start, unless found in the first update
+    assert error[5:].max() < 0.01 * 180 and not found.lost[5:].any(), (error[:10], found.lost[:10])
 
 
 def test_dt_sets_the_number_of_updates_and_the_time_step(raw_file: Path, events: np.ndarray, tmp_path: Path) -> None:

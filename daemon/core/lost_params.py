@@ -1,0 +1,42 @@
+"""Parameters of the loss-of-track detection and re-acquisition, apart from their compiled kernels
+(a config can be read without importing numba)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class LostParams:
+    """When an update has lost the flag, and how the chain finds it again.
+
+    An update is judged on the window's events within the chain's reach of the root (the flag's
+    region): the flag is found when at least ``min_fit`` of them lie within ``band`` L of the
+    smoothed centreline. A window with no event there is not lost (a still flag); one with fewer
+    than ``min_events`` keeps the previous update's verdict.
+
+    Attributes:
+        min_events: fewest events in the flag's region that decide an update.
+        min_fit: smallest fraction of the region's events near the centreline of a found flag.
+        band: "near the centreline", as a fraction of the flag length L.
+        reacquire: on a lost update, search the window again root to tip with wide areas and keep
+            that chain if it fits the events better.
+        cone_deg: half-angle of that search around the previous link's new direction, degrees
+            (the first link searches the whole circle).
+    """
+
+    min_events: int = 40
+    min_fit: float = 0.5
+    band: float = 0.03
+    reacquire: bool = True
+    cone_deg: float = 90.0
+
+    def __post_init__(self) -> None:
+        if self.min_events < 1:
+            raise ValueError(f"min_events must be at least 1, got {self.min_events}")
+        if not 0 < self.min_fit < 1:
+            raise ValueError(f"min_fit must be in (0, 1), got {self.min_fit}")
+        if not 0 < self.band <= 0.04:
+            raise ValueError(f"band must be in (0, 0.04], got {self.band}")
+        if not 0 < self.cone_deg <= 180:
+            raise ValueError(f"cone_deg must be in (0, 180], got {self.cone_deg}")
