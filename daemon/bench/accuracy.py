@@ -26,7 +26,7 @@ examples:
 )
 
 METHOD_CHOICES = ("paper", "robust-classic", "robust")
-PART_CHOICES = ("family", "leak", "shot", "params")
+PART_CHOICES = ("family", "leak", "shot", "params", "lost")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -119,27 +119,33 @@ def disrupted(
     events: np.ndarray,
     root: tuple[float, float],
     length: float,
+    direction_deg: float = 0.0,
     seed: int = 0,
     width: int = 640,
     height: int = 480,
 ) -> Scenario:
-    """Apply scenario ``name`` to a flapping recording of a flag of ``length`` (pixels) at ``root``.
+    """Apply scenario ``name`` to a flapping recording of a flag of ``length`` (pixels) at ``root``
+    whose rest direction is ``direction_deg``.
 
-    Times are relative to the first event: ``occlusion``: no events for 100 ms from 150 ms;
-    ``crossing``: a 25 px disc crosses the flag at 0.6 L, top to bottom, in 150 ms from 150 ms;
-    ``reflection``: 20 000 events in a 30 px square at 0.8 L along and 0.25 L across the rest line,
-    for 20 ms from 150 ms; ``blackout+crossing``: the issue's case, 100 ms blocked from 150 ms then the crossing from
-    300 ms; ``start-90``: the chain starts 90 degrees off; ``clean``: nothing.
+    Times are relative to the first event; places are along the rest line (a L) and across it (b L):
+    ``occlusion``: no events for 100 ms from 150 ms; ``crossing``: a disc of 0.125 L radius crosses
+    the flag at a = 0.6, from b = -1 to b = 1, in 150 ms from 150 ms; ``reflection``: 20 000 events
+    in a square of 0.15 L at a = 0.8, b = 0.25, for 20 ms from 150 ms; ``blackout+crossing``: the
+    issue's case, 100 ms blocked from 150 ms then the crossing from 300 ms; ``start-90``: the chain
+    starts 90 degrees off; ``clean``: nothing.
     """
     if name not in SCENARIOS:
         raise ValueError(f"unknown scenario {name!r} (one of {', '.join(SCENARIOS)})")
     rng = np.random.default_rng([seed, SCENARIOS.index(name)])
     t0 = int(events["t"][0])
     ms = 1000
-    cx = root[0] + 0.6 * length
+    ux, uy = np.cos(np.deg2rad(direction_deg)), np.sin(np.deg2rad(direction_deg))
+
+    def at(a: float, b: float) -> tuple[float, float]:
+        return (root[0] + length * (a * ux - b * uy), root[1] + length * (a * uy + b * ux))
 
     def cross(start_us: int) -> tuple[np.ndarray, tuple[int, int]]:
-        obj = CrossingObject(start_us, start_us + 150 * ms, (cx, root[1] - 1.0 * length), (cx, root[1] + 1.0 * length))
+        obj = CrossingObject(start_us, start_us + 150 * ms, at(0.6, -1.0), at(0.6, 1.0), radius_px=0.125 * length)
         return crossing(events, obj, rng, width, height), (start_us, start_us + 150 * ms)
 
     offset, spans = 0.0, ()
@@ -150,8 +156,7 @@ def disrupted(
         spans = (span,)
     elif name == "reflection":
         span = (t0 + 150 * ms, t0 + 170 * ms)
-        centre = (root[0] + 0.8 * length, root[1] + 0.25 * length)
-        events, spans = reflection(events, *span, centre, 15.0, 20_000, rng), (span,)
+        events, spans = reflection(events, *span, at(0.8, 0.25), 0.075 * length, 20_000, rng), (span,)
     elif name == "blackout+crossing":
         events = occlusion(events, t0 + 150 * ms, t0 + 250 * ms)
         events, span = cross(t0 + 300 * ms)

@@ -149,6 +149,10 @@ def recording_spec(task: Task) -> Any:
     spec = RecordingSpec(seed=task.seed, width=task.width, height=task.height)
     _, kin = optics_and_kinematics(spec)
     duration = None if task.cycles is None else task.cycles / kin.frequency_hz
+    if task.part == "lost":  # the disruptions end at 0.45 s: a few periods after that
+        from flagtrack.daemon.bench.accuracy_suite.disruptions import MIN_DURATION_S
+
+        duration = max(duration or 0.0, MIN_DURATION_S + 3.0 / kin.frequency_hz)
     dvs = DvsParams(leak_rate_hz=task.leak_over_f * kin.frequency_hz, shot_noise_hz=task.shot_noise_hz)
     return RecordingSpec(seed=task.seed, duration_s=duration, width=task.width, height=task.height, dvs=dvs)
 
@@ -160,7 +164,13 @@ def run_task(task: Task, work_dir: str, keep_files: bool = False) -> Outcome:
     result = simulate_recording(recording_spec(task), work_dir, name=task.name)
     events, truth, attrs = read_recording(result.events_path, result.truth_path)
     rows = []
-    for variant in task.variants:
+    if task.part == "lost":
+        from flagtrack.daemon.bench.accuracy_suite.disruptions import lost_rows
+
+        base = {**task_columns(task, attrs, result.n_events), "width": task.width, "height": task.height}
+        runs = [(v, tracking_config(v, attrs), initial_state(truth, v.joints)) for v in task.variants]
+        rows = lost_rows(events, truth, attrs, runs, base)
+    for variant in task.variants if task.part != "lost" else ():
         config = tracking_config(variant, attrs)
         start = time.perf_counter()
         state = initial_state(truth, variant.joints) if START_ON_TRUTH else None

@@ -9,7 +9,9 @@ Parts (Raynaud & Mulleners 2024, section 3):
 - ``shot``: the same kinematics at shot-noise levels given as the paper's f_snr/f; the paper's
   N_evs/N_evs,0 grows linearly, reaching 2 at f_snr/f = 37, so level x adds x/37 N_evs,0 noise events
   (our per-pixel rate is derived from the clean recording's event count);
-- ``params``: N_j and tau sweeps on the clean recording and on the noisy one at f_snr/f = 20 (fig. 6).
+- ``params``: N_j and tau sweeps on the clean recording and on the noisy one at f_snr/f = 20 (fig. 6);
+- ``lost``: each sweep kinematics through occlusions, crossing objects, reflections and a chain
+  started 90 degrees off (issue 19, :mod:`.disruptions`).
 
 Seeds derive from the benchmark seed alone, so results do not depend on ``--jobs`` or on the order
 in which tasks finish.
@@ -174,6 +176,23 @@ def sweep_clean_tasks(seed: int, preset: Preset, methods: tuple[str, ...], param
             kinematics_seed(seed, k),
             cycles=preset.cycles,
             variants=variants,
+            width=preset.width,
+            height=preset.height,
+        )
+        for k in range(preset.n_sweep)
+    ]
+
+
+def lost_tasks(seed: int, preset: Preset, methods: tuple[str, ...]) -> list[Task]:
+    """Part ``lost``: one recording per sweep kinematics (its scenarios are applied to its events)."""
+    return [
+        Task(
+            f"lost_{k:02d}",
+            "lost",
+            k,
+            kinematics_seed(seed, k),
+            cycles=preset.cycles,
+            variants=paper_variants(methods),
             width=preset.width,
             height=preset.height,
         )

@@ -9,7 +9,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.bench.accuracy_suite import figures, tables
+from flagtrack.daemon.bench.accuracy_suite import disruptions, figures, tables
 from flagtrack.daemon.bench.accuracy_suite.runner import RunResult, RunSettings
 
 NOTES = """\
@@ -188,13 +188,13 @@ def targets_section(
 def rows_from_folder(out: Path) -> tuple[RunResult, dict[str, Any]]:
     """The rows and run figures of a results folder (its CSV tables and run.json), to rewrite its report."""
     rows: dict[tuple, dict[str, Any]] = {}
-    for name in ("family", "leak", "shot_noise", "params_joints", "params_tau"):
+    for name in ("family", "leak", "shot_noise", "params_joints", "params_tau", "lost"):
         path = out / f"{name}.csv"
         if path.is_file():
             for row in tables.read_csv(path):
                 row.pop("condition", None)
                 row.pop("n_over_n0", None)
-                rows[(row["name"], row["method"], row["joints"], row["tau_over_t"])] = row
+                rows[(row["name"], row["method"], row["joints"], row["tau_over_t"], row.get("disruption"))] = row
     run = json.loads((out / "run.json").read_text())
     result = RunResult(
         rows=list(rows.values()),
@@ -213,13 +213,16 @@ def write_results(out: Path, result: RunResult, settings: RunSettings, command: 
     parts = tables.split_parts(result.rows)
     for name, rows in parts.items():
         if rows:
-            tables.write_csv(out / f"{name}.csv", rows, tables.COLUMNS if name == "family" else tables.SWEEP_COLUMNS)
+            columns = {"family": tables.COLUMNS, "lost": disruptions.COLUMNS}.get(name, tables.SWEEP_COLUMNS)
+            tables.write_csv(out / f"{name}.csv", rows, columns)
     family = tables.family_summary(parts["family"])
     leak = tables.sweep_summary(parts["leak"]) if parts["leak"] else []
     shot = tables.sweep_summary(parts["shot_noise"]) if parts["shot_noise"] else []
     joints = tables.param_summary(parts["params_joints"], "joints")
     tau = tables.param_summary(parts["params_tau"], "tau_over_t")
+    lost = disruptions.lost_summary(parts["lost"])
     for name, rows in (
+        ("summary_lost", lost),
         ("summary_family", family),
         ("summary_leak", leak),
         ("summary_shot_noise", shot),
@@ -258,6 +261,7 @@ def write_results(out: Path, result: RunResult, settings: RunSettings, command: 
         text.append("![params](fig6_params.png)\n\n")
     if family or leak or shot:
         text.append(targets_section(leak, shot, family))
+    text.append(disruptions.lost_section(lost) if lost else "")
     text.append(NOTES)
     (out / "report.md").write_text("".join(text))
     headline = {
@@ -269,6 +273,7 @@ def write_results(out: Path, result: RunResult, settings: RunSettings, command: 
         "family": family,
         "leak": leak,
         "shot_noise": shot,
+        "lost": lost,
     }
     settings_json = {**asdict(settings), "work_dir": str(settings.work_dir)}
     (out / "run.json").write_text(json.dumps({**headline, "settings": settings_json}, indent=1, default=_json) + "\n")

@@ -22,7 +22,7 @@ from flagtrack.daemon.bench.accuracy_suite.evaluate import Outcome, run_task
 
 log = logging.getLogger(__name__)
 
-PARTS = ("family", "leak", "shot", "params")
+PARTS = ("family", "leak", "shot", "params", "lost")
 
 
 @dataclass(frozen=True)
@@ -72,6 +72,8 @@ def initial_tasks(settings: RunSettings) -> list[plan.Task]:
         tasks += plan.leak_tasks(clean, p, m)
     if "family" in settings.parts:
         tasks += plan.family_tasks(settings.seed, p, m)
+    if "lost" in settings.parts:
+        tasks += plan.lost_tasks(settings.seed, p, m)
     return tasks
 
 

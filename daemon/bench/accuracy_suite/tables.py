@@ -88,12 +88,13 @@ def with_noise_ratio(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def split_parts(rows: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
-    """The CSV tables: ``family``, ``leak``, ``shot_noise``, ``params_joints``, ``params_tau``."""
-    sweep = with_noise_ratio(r for r in rows if r["part"] != "family")
+    """The CSV tables: ``family``, ``lost``, ``leak``, ``shot_noise``, ``params_joints``, ``params_tau``."""
+    sweep = with_noise_ratio(r for r in rows if r["part"] not in ("family", "lost"))
     paper = [r for r in sweep if at_paper_params(r)]
     fig6 = [r for r in sweep if r["part"] == "clean" or (r["part"] == "shot" and r["level"] == 20.0)]
     tables = {
         "family": [r for r in rows if r["part"] == "family"],
+        "lost": [r for r in rows if r["part"] == "lost"],
         "leak": [r for r in paper if r["part"] in ("clean", "leak")],
         "shot_noise": [r for r in paper if r["part"] in ("clean", "shot")],
         "params_joints": [r for r in fig6 if math.isclose(r["tau_over_t"], PAPER_TAU_OVER_T)],
