@@ -206,6 +206,7 @@ _SHAPES: dict[type, tuple[tuple[str, tuple[str, ...], str], ...]] = {
         ("delta_rms", ("n",), _REAL),
         ("n_events", ("n",), _INT),
         ("source_ns", ("n",), _INT),
+        ("lost", ("n",), _INT),
     ),
     SensorSamples: (("t_us", ("n",), _INT), ("value", ("n",), _REAL), ("trigger_t_us", ("m",), _INT)),
 }

@@ -149,6 +149,10 @@ class EventRate:
     bytes: int = 0
 
 
+def _not_said() -> np.ndarray:
+    return np.zeros(0, dtype=np.uint8)
+
+
 @dataclass(frozen=True)
 class CentrelineMessage:
     """A batch of tracker updates: t, joints, smoothed centreline, tip, Δ_RMS, events used.
@@ -161,6 +165,8 @@ class CentrelineMessage:
     ``published_ns`` is the wall-clock time (ns) the tracker published the message (0: not said).
     ``stream`` numbers the camera streams the tracker has tracked (0 for the first; one more after
     each end of stream or camera restart), so a recorder knows which stream's file the updates go to.
+    ``lost`` (n_t,) uint8: 1 where the flag was not found in the update (optional: a message without
+    it, from an older tracker, decodes as all found).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.CENTRELINES
@@ -181,6 +187,11 @@ class CentrelineMessage:
     final: bool = False
     published_ns: int = 0
     stream: int = 0
+    lost: np.ndarray = field(default_factory=_not_said)
+
+    def __post_init__(self) -> None:
+        if len(self.lost) == 0 and len(self.t_s) > 0:  # not said (an older tracker): all found
+            object.__setattr__(self, "lost", np.zeros(len(self.t_s), dtype=np.uint8))
 
     @classmethod
     def from_batch(
@@ -214,6 +225,7 @@ class CentrelineMessage:
             delta_rms=batch.delta_rms,
             n_events=batch.n_events,
             source_ns=np.asarray(source_ns, np.int64),
+            lost=batch.lost,
         )
 
     def batch(self) -> CentrelineBatch:
@@ -227,6 +239,7 @@ class CentrelineMessage:
             joints_y=self.joints_y,
             delta_rms=self.delta_rms,
             n_events=self.n_events,
+            lost=self.lost,
         )
 
 
@@ -238,6 +251,8 @@ class TrackerStatus:
     used; ``dropped_packets``: packets its full queue turned away (they also show as gaps);
     ``restarts``: new camera streams that began without the end of the last one (a restarted camera);
     ``late_packets``: duplicates and late packets of the stream, dropped.
+    ``lost_updates``, ``lost_stretches``: updates that did not find the flag, and runs of them
+    (since the service started).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.TRACKER_STATUS
@@ -253,6 +268,8 @@ class TrackerStatus:
     dropped_packets: int = 0
     restarts: int = 0
     late_packets: int = 0
+    lost_updates: int = 0
+    lost_stretches: int = 0
 
 
 @dataclass(frozen=True)

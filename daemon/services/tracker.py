@@ -32,6 +32,7 @@ from flagtrack.daemon.core.events import empty_events
 from flagtrack.daemon.errors import FormatError
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, TrackerStatus
+from flagtrack.daemon.services.lost_count import LostCount
 from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.formats.packets import decode_packet
@@ -115,6 +116,7 @@ class TrackerService:
         self.missing_packets = 0
         self.undecodable_packets = 0  # well-formed messages whose EVT bytes are corrupt
         self.updates = 0
+        self.lost = LostCount()  # updates that did not find the flag, and their stretches
         self.events = 0
         self.streams_ended = 0
         self.restarts = 0  # new streams that began without the end of the last one
@@ -317,6 +319,7 @@ class TrackerService:
         if end_of_stream:
             self._publish_if_due(force=True, final=True)
             self.stream += 1
+            self.lost.end_stream()
 
     def _failed(self, run: list[EventPacket], exc: Exception) -> None:
         """Count the packets of a run that raised while decoded or tracked (a bug or data the core
@@ -346,6 +349,7 @@ class TrackerService:
         self._pending.append(batch)
         self._pending_ns.append(source_ns)
         self.updates += len(batch)
+        self.lost.add(batch.lost)
         if sum(len(b) for b in self._pending) >= self.cfg.batch_updates:
             self._publish_if_due(force=True)
 
@@ -416,4 +420,6 @@ class TrackerService:
             dropped_packets=self.dropped_packets,
             restarts=self.restarts,
             late_packets=self.late_packets,
+            lost_updates=self.lost.updates,
+            lost_stretches=self.lost.stretches,
         )
