@@ -54,6 +54,7 @@ def plot_amplitude(
         ax_rate.plot(
             speeds, [p.event_rate_mev_s for p in mine], color=color, marker=marker, fillstyle=fill, linewidth=0.8
         )
+    _mark_suspect(ax_amp, [p for p in points if p.status == "done"])
     onset, decay = transitions
     for speed, color, name in ((onset, "C0", "onset"), (decay, "C1", "decay")):
         if speed is not None:
@@ -72,6 +73,15 @@ def plot_amplitude(
     path = Path(path)
     fig.savefig(path, dpi=120)
     return path
+
+
+def _mark_suspect(ax: Any, points: Sequence[PointResult]) -> None:
+    """Ring in red the points marked suspect (the tracker lost the flag too often there)."""
+    suspect = [p for p in points if getattr(p, "suspect", False)]
+    if suspect:
+        ax.scatter([p.speed_mps for p in suspect], [_zero(p.amplitude_over_l) for p in suspect], s=140,
+                   facecolors="none", edgecolors="red", linewidths=1.5, zorder=5,
+                   label=f"suspect: flag lost ({len(suspect)})")  # fmt: skip
 
 
 def plot_sweep(points: Sequence[Any], path: str | Path, title: str = "") -> Path:

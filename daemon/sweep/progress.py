@@ -17,14 +17,15 @@ from flagtrack.daemon.sweep.runlog import PointResult
 
 
 def lost_fraction(result: PointResult) -> float:
-    """Fraction of the point's updates the tracker flagged lost, or NaN when the record has none.
-
-    The hook for the tracker's ``/lost`` flag (not built yet, see docs/architecture.md): point
-    records have no ``lost_fraction`` today, so every point gives NaN (shown as ``-``); once they
-    have one, it is shown and published as is.
-    """
+    """Fraction of the point's updates the tracker flagged lost, or NaN when the record has none
+    (a run log written before ``/lost``, or a point without updates: shown as ``-``)."""
     value = getattr(result, "lost_fraction", None)
     return math.nan if value is None else float(value)
+
+
+def is_suspect(lost_fraction: float, bound: float) -> bool:
+    """Whether a point whose updates were lost this often (NaN: not known) is suspect (above ``bound``)."""
+    return math.isfinite(lost_fraction) and lost_fraction > bound
 
 
 @dataclass(frozen=True)
@@ -37,7 +38,7 @@ class PointFacts:
         status: ``done`` or ``failed``.
         state: flag state over the recording (``still``, ``flapping``, ``unknown``).
         amplitude_over_l, frequency_hz: tip amplitude A/L and flapping frequency (Hz), NaN if none.
-        lost_fraction: see :func:`lost_fraction` (NaN today).
+        lost_fraction: see :func:`lost_fraction`.
         sensor_error_rms_over_l: RMS of |e|/L against the point sensor, NaN without a comparison.
         error: why a failed point failed.
     """

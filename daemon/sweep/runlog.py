@@ -76,6 +76,9 @@ class PointResult:
             is compared when the reconstruction has updates around it).
         sensor_file, sensor_figure: the point's sensor record and figure, relative to the run folder.
         actions: how the point's actions went (``command ok; pause ok``), ``None`` without actions.
+        lost_fraction: fraction of the point's updates that did not find the flag (``/lost``).
+        suspect: ``lost_fraction`` is above the supervisor's ``suspect_lost_fraction``: the point's
+            numbers may be those of something else than the flag.
     """
 
     point_id: str
@@ -115,6 +118,8 @@ class PointResult:
     sensor_file: str | None = None
     sensor_figure: str | None = None
     actions: str | None = None
+    lost_fraction: float = math.nan
+    suspect: bool = False
 
     @classmethod
     def planned(cls, point: Point, **values: Any) -> PointResult:

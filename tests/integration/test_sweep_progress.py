@@ -132,7 +132,7 @@ def test_sweep_on_a_terminal_shows_a_line_per_point_above_a_progress_bar(tmp_pat
     assert [line.split()[4] for line in lines] == ["up", "up", "down"]
     assert [line.split()[5] for line in lines] == ["still", "flapping", "still"], lines
     assert "A/L 0.2" in lines[1] or "A/L 0.3" in lines[1], lines[1]
-    assert all("lost -" in line and "ETA" in line for line in lines)
+    assert all(re.search(r"lost (\d+\.\d%|-)", line) and "ETA" in line for line in lines)  # the tracker's /lost
     assert re.search(r"sweep [0-3]/3 \|[^|\n]*\| \d+:\d\d elapsed, ETA \d+:\d\d \| point \d", shown), shown  # live bar
     assert "sweep 3/3 |" in shown and "\r" in shown  # redrawn in place, ending full
     assert "flagtrack sweep: finished; run folder" in shown
@@ -200,7 +200,8 @@ def test_a_remote_subscriber_receives_the_facts_of_each_point(tmp_path: Path, ca
         )
         assert state.last_status == "done" and state.amplitude_over_l == point.amplitude_over_l
         expected_f = point.frequency_hz if point.state == "flapping" else -1.0  # still: no frequency, -1 on the wire
-        assert state.frequency_hz == expected_f and state.lost_fraction == -1.0
+        assert state.frequency_hz == expected_f and state.lost_fraction == point.lost_fraction  # the tracker's /lost
+        assert 0.0 <= point.lost_fraction <= 0.05 and not point.suspect
         assert state.sensor_error_rms_over_l == -1.0  # no sensor on this rig
     assert 8 < finished[POINTS[1]].frequency_hz < 20 and finished[POINTS[1]].amplitude_over_l > 0.1
     assert finished[POINTS[-1]].eta_s == 0.0 and finished[POINTS[0]].eta_s > 0

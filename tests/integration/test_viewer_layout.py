@@ -99,20 +99,11 @@ def flapping(seq: int, amplitude: float, direction_deg: float, n_t: int = 100, l
     lateral = amplitude * L * np.sin(2 * np.pi * 5.0 * t)[:, None] * (s / L)[None, :]
     x = 150.0 + s[None, :] * np.cos(d) - lateral * np.sin(d)
     y = 240.0 + s[None, :] * np.sin(d) + lateral * np.cos(d)
-    batch = CentrelineBatch(t, s, x, y, x[:, ::3], y[:, ::3], np.ones(n_t), np.ones(n_t, np.int64))
-    msg = CentrelineMessage.from_batch(
+    flags = (np.arange(n_t) % 10 == 0) if lost else None  # the tracker's /lost: every tenth update
+    batch = CentrelineBatch(t, s, x, y, x[:, ::3], y[:, ::3], np.ones(n_t), np.ones(n_t, np.int64), lost=flags)
+    return CentrelineMessage.from_batch(
         batch, source="tracker", seq=seq, units="px", source_ns=np.zeros(n_t, dtype=np.int64)
     )
-    if lost:  # a tracker that says when it lost the flag (not yet in the schema)
-        return WithLost(
-            **{f.name: getattr(msg, f.name) for f in dataclasses.fields(msg)}, lost=(np.arange(n_t) % 10 == 0)
-        )
-    return msg
-
-
-@dataclasses.dataclass(frozen=True)
-class WithLost(CentrelineMessage):
-    lost: Any = None
 
 
 def test_a_over_l_of_a_flapping_tip_in_a_tilted_frame(tmp_path: Path) -> None:
@@ -128,9 +119,10 @@ def test_a_over_l_of_a_flapping_tip_in_a_tilted_frame(tmp_path: Path) -> None:
     assert values["SeriesLines:names"] == [["A/L"]]
 
 
-def test_lost_flags_are_a_series_when_messages_carry_them(tmp_path: Path) -> None:
+def test_lost_flags_are_a_series(tmp_path: Path) -> None:
     plain = columns(recorded(tmp_path, lambda logger: logger.centrelines(flapping(0, 0.1, 0.0))))
-    assert "/plots/lost" not in plain and "/plots/tip_y" in plain
+    found = np.array([v[0] for v in plain["/plots/lost"]["Scalars:scalars"]])
+    assert "/plots/tip_y" in plain and len(found) == 100 and not found.any()
     (tmp_path / "view.rrd").unlink()
     flagged = columns(recorded(tmp_path, lambda logger: logger.centrelines(flapping(0, 0.1, 0.0, lost=True))))
     lost = np.array([v[0] for v in flagged["/plots/lost"]["Scalars:scalars"]])

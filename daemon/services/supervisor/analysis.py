@@ -24,7 +24,8 @@ MAX_GAP_S = 60.0
 
 @dataclass(frozen=True)
 class PointMetrics:
-    """What a point's centrelines say (NaN when they cannot say it)."""
+    """What a point's centrelines say (NaN when they cannot say it); ``lost_fraction``: of the
+    updates, those whose ``lost`` is 1."""
 
     amplitude_over_l: float = math.nan
     amplitude_std_over_l: float = math.nan
@@ -33,6 +34,7 @@ class PointMetrics:
     delta_rms_over_l: float = math.nan
     updates: int = 0
     delta_rms_std_over_l: float = math.nan
+    lost_fraction: float = math.nan
 
 
 def point_metrics(
@@ -58,7 +60,7 @@ def point_metrics(
     batch = CentrelineBatch.concatenate(batches)
     n = len(batch)
     if n < 8:
-        return PointMetrics(updates=n)
+        return PointMetrics(updates=n, lost_fraction=float(batch.lost.mean()) if n else math.nan)
     lateral = lateral_displacement(batch.x, batch.y, root, direction_deg)
     tip = lateral[:, -1]
     amplitude = tip_amplitude_over_l(tip, length)
@@ -80,6 +82,7 @@ def point_metrics(
         float(delta.mean()) if len(delta) else math.nan,
         n,
         float(delta.std()) if len(delta) else math.nan,
+        float(batch.lost.mean()),
     )
 
 

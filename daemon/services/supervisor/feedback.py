@@ -16,6 +16,14 @@ class ControllerState:
     speed_mps: float = 0.0
 
 
+def measured_amplitude(amplitude_over_l: float, lost_fraction: float, cfg: FeedbackConfig) -> float:
+    """The window's amplitude for :func:`control_step`, or NaN (hold) while the flag is lost in more
+    than ``cfg.max_lost_fraction`` of its updates."""
+    if math.isfinite(lost_fraction) and lost_fraction > cfg.max_lost_fraction:
+        return math.nan
+    return amplitude_over_l
+
+
 def control_step(state: ControllerState, amplitude_over_l: float, dt_s: float, cfg: FeedbackConfig) -> ControllerState:
     """Next speed command from the measured amplitude (NaN: hold the speed).
 

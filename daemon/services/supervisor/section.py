@@ -25,6 +25,8 @@ class FeedbackConfig:
         min_speed_mps, max_speed_mps: bounds of the commanded speed.
         max_step_mps: largest change per period (rate limit = max_step_mps / period_s).
         duration_s: run this long (0: until stopped).
+        max_lost_fraction: the speed is held while more than this fraction of the window's updates
+            did not find the flag (their shape is not to be trusted).
     """
 
     target_amplitude_over_l: float = 0.25
@@ -38,6 +40,7 @@ class FeedbackConfig:
     max_speed_mps: float = 10.0
     max_step_mps: float = 0.3
     duration_s: float = 60.0
+    max_lost_fraction: float = 0.05
 
     def __post_init__(self) -> None:
         if not 0 <= self.min_speed_mps <= self.start_speed_mps <= self.max_speed_mps:
@@ -63,6 +66,8 @@ class SupervisorConfig:
         publish_interval_s: period of the supervisor and tunnel state messages.
         recorder_timeout_s: how long the recorder may take to acknowledge a command.
         exit_when_done: end the service (and ``flagtrack up``) when the sweep or loop ends.
+        suspect_lost_fraction: a point whose updates are lost more often than this is marked
+            ``suspect`` (run log, summary CSV, figure).
     """
 
     mode: Literal["monitor", "sweep", "feedback"] = "monitor"
@@ -77,9 +82,12 @@ class SupervisorConfig:
     publish_interval_s: float = 0.2
     recorder_timeout_s: float = 10.0
     exit_when_done: bool = True
+    suspect_lost_fraction: float = 0.05
 
     def __post_init__(self) -> None:
         if self.mode == "sweep" and self.sweep is None:
             raise ValueError("mode 'sweep' needs a 'sweep:' section")
         if self.silence_timeout_s <= 0 or self.publish_interval_s <= 0:
             raise ValueError("silence_timeout_s and publish_interval_s must be positive")
+        if not 0 <= self.suspect_lost_fraction <= 1:
+            raise ValueError(f"suspect_lost_fraction must be in [0, 1], got {self.suspect_lost_fraction}")

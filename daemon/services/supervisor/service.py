@@ -24,12 +24,12 @@ import numpy as np
 from flagtrack.daemon.errors import DriverError, FlagtrackError
 from flagtrack.daemon.schema import RecorderCommand, SupervisorState, TunnelState
 from flagtrack.daemon.services.supervisor.analysis import point_metrics
-from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step
+from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step, measured_amplitude
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor, point_state
 from flagtrack.daemon.services.supervisor.section import SupervisorConfig
 from flagtrack.daemon.sweep.actions import ActionOutcome, PauseAction, parse_action, run_command
 from flagtrack.daemon.sweep.plan import Action, EndPoint, Point, Record, SetSpeed, Wait, plan_points, sweep_plan
-from flagtrack.daemon.sweep.progress import SweepProgress
+from flagtrack.daemon.sweep.progress import SweepProgress, is_suspect
 from flagtrack.daemon.sweep.runfiles import command_line
 from flagtrack.daemon.sweep.runlog import POINTS_DIR, PointResult, RunLog, completed_points, point_paths, stored_sweep
 from flagtrack.daemon.sweep.summary import write_summary
@@ -406,6 +406,7 @@ class SupervisorService:
                 delta_rms_over_l=metrics.delta_rms_over_l,
                 updates=metrics.updates,
                 delta_rms_std_over_l=metrics.delta_rms_std_over_l,
+                lost_fraction=metrics.lost_fraction,
             )
         raw, lines = (self.run_dir / path for path in point_paths(point.point_id))  # type: ignore[operator]
         readback = [v for v in readbacks if np.isfinite(v)]
@@ -426,6 +427,8 @@ class SupervisorService:
             t_start_unix=t_start,
             t_stop_unix=time.time(),
             delta_rms_std_over_l=metrics.delta_rms_std_over_l,
+            lost_fraction=metrics.lost_fraction,
+            suspect=is_suspect(metrics.lost_fraction, self.cfg.suspect_lost_fraction),
             **sensor_fields,
         )
 
@@ -457,9 +460,8 @@ class SupervisorService:
             recent = _last_seconds(collection.batches, fb.window_s)
             self.monitor.start_collecting()
             self.monitor.collection.batches.extend(recent)  # type: ignore[union-attr]
-            amplitude = point_metrics(
-                recent, self.flag.length, self.flag.root, self.flag.direction_deg
-            ).amplitude_over_l
+            window = point_metrics(recent, self.flag.length, self.flag.root, self.flag.direction_deg)
+            amplitude = measured_amplitude(window.amplitude_over_l, window.lost_fraction, fb)
             state = control_step(state, amplitude, fb.period_s, fb)
             self.feedback_trace.append((time.monotonic() - started, amplitude, state.speed_mps))
             log.info("feedback: A/L %.3f -> %.2f m/s", amplitude, state.speed_mps)

@@ -19,7 +19,7 @@ EVENT_RATE = "plots/event_rate_hz"
 WIND_SPEED = "plots/wind_speed_mps"
 DELTA_RMS = "plots/delta_rms"
 EVENTS_PER_UPDATE = "plots/events_per_update"
-LOST = "plots/lost"  # when centreline messages carry a lost flag (they do not yet)
+LOST = "plots/lost"  # the tracker's lost flag of each update (1: the flag was not found)
 SUPERVISOR_STATE = "supervisor/state"
 SUPERVISOR_LOG = "supervisor/log"
 

@@ -159,8 +159,8 @@ class RerunLogger:
     # -- messages: queue rows -------------------------------------------------------------------
 
     def centrelines(self, msg: CentrelineMessage) -> None:
-        """Queue a batch of tracker updates: centreline, joints, tip y, Δ_RMS, events used (and a lost flag
-        when the message has one); note the tip and root for the trail and A/L."""
+        """Queue a batch of tracker updates: centreline, joints, tip y, Δ_RMS, events used and the lost
+        flags; note the tip and root for the trail and A/L."""
         n = len(msg.t_s)
         if not n:
             return
@@ -176,9 +176,7 @@ class RerunLogger:
         self._scalars(layout.TIP_Y, t, msg.tip_y)
         self._scalars(layout.DELTA_RMS, t, msg.delta_rms)
         self._scalars(layout.EVENTS_PER_UPDATE, t, msg.n_events)
-        lost = getattr(msg, "lost", None)
-        if lost is not None:
-            self._scalars(layout.LOST, t, lost)
+        self._scalars(layout.LOST, t, msg.lost)
         self._units = msg.units or self._units
         self._length = float(msg.s[-1] - msg.s[0]) if len(msg.s) > 1 else math.nan
         self._track.append(np.stack([t, x[:, 0], y[:, 0], x[:, -1], y[:, -1]], axis=1))

@@ -1,0 +1,28 @@
+"""A sweep point whose tracker did not find the flag is marked suspect (issue 19), on the simulated rig."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from flagtrack.daemon.sweep.runlog import read_run
+from flagtrack.daemon.tracking.section import LostSection
+from tests.integration.test_supervisor import rig, run
+
+
+@pytest.mark.slow
+def test_a_point_tracked_off_the_flag_is_suspect(tmp_path: Path) -> None:
+    """The chain rests 90 degrees off the flag and may not search (re-acquisition off): the flapping
+    point's updates are lost and the point is suspect in the run log and the summary CSV."""
+    config = rig(tmp_path, sweep={"speeds": [5.5], "branches": ["up"], "settle_s": 0.5, "record_s": 1.0})
+    tracker = config.tracker.with_overrides(direction_deg=90.0, lost=LostSection(reacquire=False))
+    supervisor, report, _ = run(dataclasses.replace(config, tracker=tracker))
+    assert supervisor.stop_reason == "finished" and not report.errors
+    (point,) = read_run(tmp_path / "runs" / "run").latest_points().values()
+    assert point.state == "flapping" and point.lost_fraction > 0.5 and point.suspect
+    with open(tmp_path / "runs" / "run" / "summary.csv") as handle:
+        (row,) = csv.DictReader(handle)
+    assert row["suspect"] == "True" and float(row["lost_fraction"]) == pytest.approx(point.lost_fraction)
