@@ -308,7 +308,9 @@ def run_updates(
     seg = np.empty((7, out_sx.shape[1] - 1))
     inv_width = 1.0 / bucket_width
     lost_on = lost_cfg[0] != 0.0
-    region_end = min(int(lost_cfg[4] * inv_width), n_buckets - 1) + 1  # buckets of the flag's region
+    region_end = min(int(lost_cfg[4] * inv_width), n_buckets - 2) + 1  # buckets of the flag's region
+    # the ring of whole buckets beyond it, up to the overflow bucket: region area / ring area
+    ring_ratio = region_end**2 / max((n_buckets - 1) ** 2 - region_end**2, 1)
     trial = angles.copy()
     hist = np.zeros(N_BINS, dtype=np.int64)
     t_jx, t_jy = np.empty(n_links + 1), np.empty(n_links + 1)
@@ -324,10 +326,11 @@ def run_updates(
         lost = 0
         if lost_on:
             n_region = offsets[region_end]
+            noise = (offsets[n_buckets - 1] - n_region) * ring_ratio
             n_near = count_near(best, n_region, lost_cfg[3])
             fold = folded(angles, lost_cfg[6])
-            lost = verdict(n_region, n_near, int(lost_cfg[1]), lost_cfg[2], fold, lost_prev[0])
-            if lost and lost_cfg[5] != 0.0 and n_region >= lost_cfg[1]:
+            lost = verdict(n_region, noise, n_near, int(lost_cfg[1]), lost_cfg[2], fold, lost_prev[0])
+            if lost and lost_cfg[5] != 0.0 and n_region - noise >= lost_cfg[1]:
                 trial[:] = angles
                 wide_search(
                     xs, ys, offsets, inv_width, root_x, root_y, trial, lengths, r2_min, r2_max, lost_cfg[6],
@@ -343,7 +346,7 @@ def run_updates(
                     angles[:] = trial
                     jx[:], jy[:], sx[:], sy[:] = t_jx, t_jy, t_sx, t_sy
                     total, used = t_total, t_used
-                    lost = verdict(n_region, t_near, int(lost_cfg[1]), lost_cfg[2], False, 1)
+                    lost = verdict(n_region, noise, t_near, int(lost_cfg[1]), lost_cfg[2], False, 1)
             lost_prev[0] = lost
         out_lost[w] = lost
         out_n[w] = used

@@ -3,7 +3,8 @@
 Compiled helpers of :func:`.kernels.run_updates` for the robust method (:class:`.lost_params.LostParams`).
 The verdict uses what the update measures anyway: Delta_RMS's distance of each window event to the
 smoothed centreline (:func:`.delta_rms.window_delta` leaves it in ``best``), counted over the events
-within the chain's reach of the root. The search (:func:`wide_search`) rebuilds the chain root to tip
+within the chain's reach of the root, less the background expected there (the density of the events
+in the ring just outside that reach, times the region's area). The search (:func:`wide_search`) rebuilds the chain root to tip
 from one window: for each link, the direction histogram of the events at the link's distance from
 its (new) first joint, within a wide cone, gives the densest direction, refined by a circular mean.
 """
@@ -41,17 +42,21 @@ def folded(angles: np.ndarray, max_bend_rad: float) -> bool:
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def verdict(n_region: int, n_near: int, min_events: int, min_fit: float, fold: bool, previous: int) -> int:
+def verdict(
+    n_region: int, noise: float, n_near: int, min_events: int, min_fit: float, fold: bool, previous: int
+) -> int:
     """1 if the flag is lost in this update: enough events in its region, and too few near the
     chain or the chain folded.
 
-    No event in the region: found (a still flag); fewer than ``min_events``: ``previous``.
+    ``noise``: the region's expected background events (from the ring around it), taken off its
+    count. No event in the region: found (a still flag); fewer than ``min_events`` left: ``previous``.
     """
     if n_region == 0:
         return 0
-    if n_region < min_events:
+    signal = n_region - noise
+    if signal < min_events:
         return previous
-    return 1 if fold or n_near < min_fit * n_region else 0
+    return 1 if fold or n_near < min_fit * signal else 0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

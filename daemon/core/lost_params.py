@@ -26,7 +26,7 @@ class LostParams:
     """
 
     min_events: int = 40
-    min_fit: float = 0.5
+    min_fit: float = 0.7
     band: float = 0.03
     reacquire: bool = True
     cone_deg: float = 90.0

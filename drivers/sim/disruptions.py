@@ -88,6 +88,16 @@ def reflection(
     return _merge(events, burst)
 
 
+def background(events: np.ndarray, n_events: int, rng: np.random.Generator, width: int, height: int) -> np.ndarray:
+    """Add ``n_events`` at uniform random times (over the events' span), pixels and polarities."""
+    noise = np.empty(n_events, dtype=EVENT_DTYPE)
+    noise["t"] = rng.integers(int(events["t"][0]), int(events["t"][-1]) + 1, n_events)
+    noise["x"] = rng.integers(0, width, n_events)
+    noise["y"] = rng.integers(0, height, n_events)
+    noise["p"] = rng.integers(0, 2, n_events)
+    return _merge(events, noise)
+
+
 def rotated_start(state: ChainState, offset_deg: float) -> ChainState:
     """``state`` with every link turned by ``offset_deg`` about the root (a chain started off)."""
     return ChainState(np.asarray(state.angles_rad, dtype=np.float64) + np.deg2rad(offset_deg))
@@ -110,7 +120,7 @@ class Scenario:
     spans_us: tuple[tuple[int, int], ...]
 
 
-SCENARIOS = ("clean", "occlusion", "crossing", "reflection", "blackout+crossing", "start-90")
+SCENARIOS = ("clean", "noisy", "occlusion", "crossing", "reflection", "blackout+crossing", "start-90")
 """Scenario names, each on a recording of at least 0.5 s (10 periods at 20 Hz)."""
 
 
@@ -132,7 +142,8 @@ def disrupted(
     the flag at a = 0.6, from b = -1 to b = 1, in 150 ms from 150 ms; ``reflection``: 20 000 events
     in a square of 0.15 L at a = 0.8, b = 0.25, for 20 ms from 150 ms; ``blackout+crossing``: the
     issue's case, 100 ms blocked from 150 ms then the crossing from 300 ms; ``start-90``: the chain
-    starts 90 degrees off; ``clean``: nothing.
+    starts 90 degrees off; ``noisy``: uniform background events, twice as many as the recording's
+    (the paper's N/N0 = 3, f_snr/f = 74), no disruption; ``clean``: nothing.
     """
     if name not in SCENARIOS:
         raise ValueError(f"unknown scenario {name!r} (one of {', '.join(SCENARIOS)})")
@@ -163,4 +174,6 @@ def disrupted(
         spans = ((t0 + 150 * ms, t0 + 250 * ms), span)
     elif name == "start-90":
         offset, spans = 90.0, ((t0, t0),)
+    elif name == "noisy":
+        events = background(events, 2 * len(events), rng, width, height)
     return Scenario(name, events, offset, spans)

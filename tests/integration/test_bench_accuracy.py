@@ -77,7 +77,7 @@ def test_tiny_run_writes_tables_figures_and_report(tmp_path: Path, capsys: pytes
         assert {r["condition"] for r in csv.DictReader(handle)} == {"clean", "shot 20"}
     with open(out / "lost.csv") as handle:
         lost = list(csv.DictReader(handle))
-    assert len(lost) == 6 * 3 and {r["disruption"] for r in lost} >= {"crossing", "start-90", "reflection"}
+    assert len(lost) == 7 * 3 and {r["disruption"] for r in lost} >= {"crossing", "start-90", "reflection"}
     robust = {r["disruption"]: r for r in lost if r["method"] == "robust"}
     # at 320 x 240 even the clean error reaches ~2 % L: the chain started 90 degrees off is as good from 1 T on
     clean_eps = float(robust["clean"]["max_eps_rms_over_l_after"])
