@@ -92,7 +92,7 @@ def test_lost_is_set_while_the_chain_is_off_the_flag() -> None:
     assert scores.n_off > 0.9 * len(batch) and scores.hit >= 0.95, scores
 
 
-@pytest.mark.parametrize("name", ["clean", "noisy"])
+@pytest.mark.parametrize("name", ["clean", pytest.param("noisy", marks=pytest.mark.slow)])  # noisy: ~6 s
 def test_an_undisturbed_recording_is_not_lost(name: str) -> None:
     batch, scores = _run(name, _params())
     assert scores.false_lost <= 0.02 and batch.lost.mean() <= 0.02, scores
@@ -124,6 +124,33 @@ def test_chunking_does_not_change_lost_or_the_recovery() -> None:
     np.testing.assert_array_equal(got.x, ref.x)
     assert chunked.stats.lost_stretches == whole.stats.lost_stretches
     assert whole.stats.lost_updates == int(ref.lost.sum())
+
+
+def test_the_detector_does_not_touch_the_chain_without_reacquisition() -> None:
+    """The paper's update with the detector watching (as the benchmark runs it) is the paper's update."""
+    import dataclasses
+
+    events = _scenario("crossing").events
+    paper = _params(Method.PAPER)
+    plain = Tracker(paper, initial_state(KIN, 0.0)).feed(events)
+    watched = Tracker(dataclasses.replace(paper, lost=LostParams(reacquire=False)), initial_state(KIN, 0.0)).feed(
+        events
+    )
+    np.testing.assert_array_equal(watched.x, plain.x)
+    np.testing.assert_array_equal(watched.delta_rms, plain.delta_rms)
+    assert watched.lost.any() and not plain.lost.any()
+
+
+def test_lost_count_of_the_tracker_service() -> None:
+    from flagtrack.daemon.services.lost_count import LostCount
+
+    count = LostCount()
+    for flags in ([0, 1, 1], [1, 0, 1], [], [1]):
+        count.add(np.array(flags, dtype=np.uint8))
+    assert (count.updates, count.stretches) == (5, 2)
+    count.end_stream()
+    count.add(np.array([1, 0], dtype=np.uint8))
+    assert (count.updates, count.stretches) == (6, 3)
 
 
 def test_lost_stretches_are_counted() -> None:
