@@ -21,7 +21,7 @@ import numpy as np
 
 from flagtrack.daemon.core.delta_rms import LANES, lanes_end, window_delta
 from flagtrack.daemon.core.jit import njit
-from flagtrack.daemon.core.lost import N_BINS, count_near, folded, verdict, wide_search
+from flagtrack.daemon.core.lost import N_BINS, count_near, folded, hold, verdict, wide_search
 from flagtrack.daemon.core.smoothing import smooth_one
 
 _F = np.float32
@@ -283,10 +283,12 @@ def run_updates(
         length, rel_tol: flag length and tolerance of the smoothed length (relative).
         out_jx, out_jy: (K, N_j + 1) joints (tip shortened); out_sx, out_sy: (K, n_s) centrelines;
         out_delta: (K,) Delta_RMS (NaN if no event in an area); out_n: (K,) events in an area.
-        lost_cfg: (8,) loss of track (:mod:`.lost`): enabled (0/1), min_events, min_fit, band^2
-            (squared length), region rho, re-acquire (0/1), cone and refining half-angle (radians); disabled: the paper's
+        lost_cfg: (9,) loss of track (:mod:`.lost`): enabled (0/1), min_events, min_fit, band^2
+            (squared length), region rho, re-acquire (0/1), cone and refining half-angle (radians),
+            updates held lost after a lost one; disabled: the paper's
             update, untouched, and ``out_lost`` zeros.
-        lost_prev: (1,) int64, the previous update's verdict, carried in place.
+        lost_prev: (3,) int64, the previous update's verdict, the updates still to hold lost and the
+            length of the current lost stretch (:func:`.lost.hold`), carried in place.
         out_lost: (K,) uint8 written: 1 where the flag was not found.
     """
     n_links = len(angles)
@@ -348,6 +350,7 @@ def run_updates(
                     total, used = t_total, t_used
                     lost = verdict(n_region, noise, t_near, int(lost_cfg[1]), lost_cfg[2], False, 1)
             lost_prev[0] = lost
+            lost = hold(lost, lost_prev, int(lost_cfg[8]))
         out_lost[w] = lost
         out_n[w] = used
         out_delta[w] = math.sqrt(total / used) if used > 0 else math.nan

@@ -19,6 +19,8 @@ from flagtrack.daemon.core.jit import njit
 
 N_BINS = 72
 """Direction bins of the search (5 degrees)."""
+HOLD_AFTER = 5
+"""Lost stretches shorter than this many updates are not held (a blip of noise is not a loss)."""
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
@@ -57,6 +59,23 @@ def verdict(
     if signal < min_events:
         return previous
     return 1 if fold or n_near < min_fit * signal else 0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def hold(lost: int, state: np.ndarray, max_hold: int) -> int:
+    """The update's reported flag: a found update right after a stretch of lost ones (of at least
+    :data:`HOLD_AFTER`) is still said lost, for as many updates as the stretch lasted, at most
+    ``max_hold`` (the chain may be on something else for a while); ``state[1:3]`` (updates to
+    hold, stretch length) is carried."""
+    if lost:
+        state[2] += 1
+        state[1] = min(max_hold, state[2]) if state[2] >= HOLD_AFTER else 0
+        return 1
+    state[2] = 0
+    if state[1] > 0:
+        state[1] -= 1
+        return 1
+    return 0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

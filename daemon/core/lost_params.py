@@ -23,6 +23,9 @@ class LostParams:
             that chain if it fits the events better.
         cone_deg: half-angle of that search around the previous link's new direction, degrees
             (the first link searches the whole circle).
+        hold_updates: after a stretch of lost updates, as many updates (at most this many) are still
+            said lost (a chain just back may be on something else than the flag for a while); 0:
+            off (the default: measured in docs/tracking.md, it doubles false verdicts on heavy noise).
     """
 
     min_events: int = 40
@@ -30,6 +33,7 @@ class LostParams:
     band: float = 0.03
     reacquire: bool = True
     cone_deg: float = 90.0
+    hold_updates: int = 0
 
     def __post_init__(self) -> None:
         if self.min_events < 1:
@@ -38,5 +42,7 @@ class LostParams:
             raise ValueError(f"min_fit must be in (0, 1), got {self.min_fit}")
         if not 0 < self.band <= 0.04:
             raise ValueError(f"band must be in (0, 0.04], got {self.band}")
+        if self.hold_updates < 0:
+            raise ValueError(f"hold_updates must be at least 0, got {self.hold_updates}")
         if not 0 < self.cone_deg <= 180:
             raise ValueError(f"cone_deg must be in (0, 180], got {self.cone_deg}")

@@ -135,7 +135,9 @@ class Tracker:
             raise ValueError(f"initial state has {self._angles.shape} angles for {chain.n_joints} joints")
         self._geo = AreaGeometry.of(chain)
         self._lost_cfg = _lost_config(params)
-        self._lost_prev = np.zeros(1, dtype=np.int64)  # the last update's verdict (carried like the angles)
+        # the last update's verdict, updates to hold lost, lost stretch (carried like the angles)
+        self._lost_prev = np.zeros(3, dtype=np.int64)
+        self._last_lost = 0  # the last update's lost flag (stretches are counted across calls)
         self._mapping = mapping
         self._filter = BackgroundActivityFilter(params.denoise, *sensor_size)
         self._buffer = _Buffer()
@@ -255,7 +257,6 @@ class Tracker:
         jx, jy = np.empty((k, n_j + 1)), np.empty((k, n_j + 1))
         sx, sy = np.empty((k, n_s)), np.empty((k, n_s))
         delta, used, lost = np.empty(k), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.uint8)
-        was_lost = int(self._lost_prev[0])
         run_updates(
             buf.x,
             buf.y,
@@ -289,7 +290,8 @@ class Tracker:
         self.stats.updates += k
         if k:
             self.stats.lost_updates += int(lost.sum())
-            self.stats.lost_stretches += int(np.count_nonzero(np.diff(lost, prepend=np.uint8(was_lost)) == 1))
+            self.stats.lost_stretches += int(np.count_nonzero(np.diff(lost, prepend=np.uint8(self._last_lost)) == 1))
+            self._last_lost = int(lost[-1])
         return CentrelineBatch(
             t_s=t_us * 1e-6, s=self.s, x=sx, y=sy, joints_x=jx, joints_y=jy, delta_rms=delta, n_events=used, lost=lost
         )
@@ -309,10 +311,10 @@ class Tracker:
 
 
 def _lost_config(params: TrackerParams) -> np.ndarray:
-    """(8,) float64 the kernel's loss-of-track settings (see :func:`.kernels.run_updates`)."""
+    """(9,) float64 the kernel's loss-of-track settings (see :func:`.kernels.run_updates`)."""
     lost, chain = params.lost, params.chain
     if lost is None:
-        return np.zeros(8)
+        return np.zeros(9)
     lengths = chain.lengths()
     refine_deg = chain.refine_deg if chain.refine_deg is not None else 10.0
     return np.array(
@@ -325,6 +327,7 @@ def _lost_config(params: TrackerParams) -> np.ndarray:
             1.0 if lost.reacquire else 0.0,
             math.radians(lost.cone_deg),
             math.radians(refine_deg),
+            lost.hold_updates,
         ]
     )
 

@@ -188,3 +188,15 @@ def test_the_lost_section_is_checked_and_recorded(tmp_path: Path) -> None:
     path.write_text("tracker: {root: [0, 0], length: 100, lost: {min_fit: 2}}\n")
     with pytest.raises(ConfigError, match="lost"):
         load_tracking_config(path)
+
+
+def test_holding_extends_only_real_stretches() -> None:
+    """hold_updates: a stretch of 5+ lost updates is followed by as many held ones (at most the bound);
+    a shorter blip is not held."""
+    from flagtrack.daemon.core.lost import hold
+
+    state = np.zeros(3, dtype=np.int64)
+    measured = [1, 1, 0, 0] + [1] * 6 + [0] * 12 + [1] * 30 + [0] * 12
+    reported = [hold(m, state, 10) for m in measured]
+    assert reported == [1, 1, 0, 0] + [1] * 6 + [1] * 6 + [0] * 6 + [1] * 30 + [1] * 10 + [0] * 2
+    assert LostParams().hold_updates == 0  # off by default
