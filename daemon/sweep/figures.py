@@ -54,6 +54,7 @@ def plot_amplitude(
         ax_rate.plot(
             speeds, [p.event_rate_mev_s for p in mine], color=color, marker=marker, fillstyle=fill, linewidth=0.8
         )
+    _mark_bad(ax_amp, points)
     onset, decay = transitions
     for speed, color, name in ((onset, "C0", "onset"), (decay, "C1", "decay")):
         if speed is not None:
@@ -72,6 +73,16 @@ def plot_amplitude(
     path = Path(path)
     fig.savefig(path, dpi=120)
     return path
+
+
+def _mark_bad(ax: Any, points: Sequence[PointResult]) -> None:
+    """Mark the points not measured as planned (``failed``, ``lossy``) as crosses at the foot of the
+    amplitude panel, one per speed, labelled with their status."""
+    for status, color in (("failed", "red"), ("lossy", "darkorange")):
+        bad = [p for p in points if p.status == status]
+        if bad:
+            ax.plot([p.speed_mps for p in bad], [0.02] * len(bad), "x", color=color, markersize=8,
+                    transform=ax.get_xaxis_transform(), label=f"{status} ({len(bad)} points)")  # fmt: skip
 
 
 def plot_sweep(points: Sequence[Any], path: str | Path, title: str = "") -> Path:

@@ -7,7 +7,8 @@ Records (one JSON object per line, each with ``type`` and the format version ``v
 - ``resume``: appended when an interrupted run is resumed, with the points already done (and the
   command line);
 - ``point``: one per measured point: id, branch, speed, state, metrics, pointers to the raw and
-  centreline files (relative to the run folder), status ``done`` or ``failed``;
+  centreline files (relative to the run folder), status ``done``, ``failed`` or ``lossy`` (with its
+  ``reason``; only ``done`` counts as finished, the others are measured again on resume);
 - ``stop``: reason (``finished``, ``SIGTERM``, an error), appended on any orderly end.
 
 Every line is written, flushed and fsync'ed before the writer returns, so after a power loss the
@@ -50,7 +51,8 @@ class PointResult:
     Attributes:
         point_id, index, branch: as planned (:class:`~flagtrack.daemon.sweep.plan.Point`).
         speed_mps: the set-point, m/s.
-        status: ``done`` (counts as finished on resume) or ``failed``.
+        status: ``done`` (counts as finished on resume), ``failed`` (the tunnel went silent, faulted
+            or left its tolerance, or an action failed) or ``lossy`` (the recording lost packets).
         state: flag state over the recording (``still``, ``flapping``, ``unknown``).
         speed_readback_mps: mean tunnel readback during the recording, m/s.
         amplitude_over_l, amplitude_std_over_l: tip amplitude A/L, time mean and std.
@@ -76,13 +78,14 @@ class PointResult:
             is compared when the reconstruction has updates around it).
         sensor_file, sensor_figure: the point's sensor record and figure, relative to the run folder.
         actions: how the point's actions went (``command ok; pause ok``), ``None`` without actions.
+        reason: why the point is ``failed`` or ``lossy`` (one line), ``None`` for a good point.
     """
 
     point_id: str
     index: int
     branch: str
     speed_mps: float
-    status: Literal["done", "failed"] = "done"
+    status: Literal["done", "failed", "lossy"] = "done"
     state: str = "unknown"
     speed_readback_mps: float = math.nan
     amplitude_over_l: float = math.nan
@@ -115,6 +118,7 @@ class PointResult:
     sensor_file: str | None = None
     sensor_figure: str | None = None
     actions: str | None = None
+    reason: str | None = None
 
     @classmethod
     def planned(cls, point: Point, **values: Any) -> PointResult:

@@ -63,6 +63,11 @@ class SupervisorConfig:
         publish_interval_s: period of the supervisor and tunnel state messages.
         recorder_timeout_s: how long the recorder may take to acknowledge a command.
         exit_when_done: end the service (and ``flagtrack up``) when the sweep or loop ends.
+        readback_grace_s: during a point's settle and record, how long the tunnel's readback may stay
+            out of ``tunnel.safety.tolerance_mps`` (or its link silent) before the point fails, s.
+        expected_rate_mev_s: event rate a point is expected to record at, Mev/s (free-space check).
+        bytes_per_event: bytes one event takes in a recording (free-space check).
+        free_space_margin_mb: free space kept beyond a point's expected size, MB.
     """
 
     mode: Literal["monitor", "sweep", "feedback"] = "monitor"
@@ -77,9 +82,17 @@ class SupervisorConfig:
     publish_interval_s: float = 0.2
     recorder_timeout_s: float = 10.0
     exit_when_done: bool = True
+    readback_grace_s: float = 1.0
+    expected_rate_mev_s: float = 5.0
+    bytes_per_event: float = 2.0
+    free_space_margin_mb: float = 50.0
 
     def __post_init__(self) -> None:
         if self.mode == "sweep" and self.sweep is None:
             raise ValueError("mode 'sweep' needs a 'sweep:' section")
         if self.silence_timeout_s <= 0 or self.publish_interval_s <= 0:
             raise ValueError("silence_timeout_s and publish_interval_s must be positive")
+        if min(self.readback_grace_s, self.expected_rate_mev_s, self.bytes_per_event, self.free_space_margin_mb) < 0:
+            raise ValueError(
+                "readback_grace_s, expected_rate_mev_s, bytes_per_event, free_space_margin_mb must be >= 0"
+            )

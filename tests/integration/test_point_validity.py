@@ -1,0 +1,71 @@
+"""A point is good only if it was measured as planned (issue 20): on the simulated rig, a fan that
+stalls or a tunnel that goes silent while a point records makes that point ``failed`` with the
+reason, never ``done``; it is measured again (its first attempt's files kept) or the sweep stops
+safe, as the plan's ``on_bad_point`` says."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+
+from flagtrack.daemon.services.runner import ServiceGroup
+from flagtrack.daemon.sweep.runlog import read_run
+from flagtrack.drivers.formats import read_events
+from tests.fakes.helpers import wait_until
+from tests.integration.test_supervisor import rig, run
+
+SECOND = "001-up-5.50"
+
+
+def fault_while_recording(fault: str, clear: bool):
+    """Inject ``fault`` into the simulated tunnel while the second point records; clear it once the
+    point is recorded as failed (``clear``)."""
+
+    def during(services: list, group: ServiceGroup) -> None:
+        supervisor = services[0]
+        simulator = supervisor.tunnel.simulator
+        wait_until(lambda: supervisor._point == SECOND and supervisor._readbacks is not None, 60, "point 2 recording")
+        simulator.inject(mute=True) if fault == "mute" else simulator.inject(stall_mps=4.2)
+        wait_until(lambda: any(p.status == "failed" for p in supervisor.points_done), 30, "a failed point")
+        if clear:
+            simulator.clear_faults()
+
+    return during
+
+
+@pytest.mark.slow
+def test_a_fan_stalling_while_a_point_records_fails_it_and_the_retry_measures_it(tmp_path: Path) -> None:
+    sweep = {"speeds": [4.0, 5.5], "branches": ["up"], "settle_s": 0.5, "record_s": 2.0}
+    config = rig(tmp_path, sweep=sweep, readback_grace_s=0.2)
+    supervisor, _, simulator = run(config, during=fault_while_recording("stall", clear=True))
+    run_dir = tmp_path / "runs" / "run"
+    record = read_run(run_dir)
+    assert record.stop["reason"] == "finished", record.stop
+    second = [p for p in record.points if p.point_id == SECOND]
+    assert [p.status for p in second] == ["failed", "done"]
+    bad = second[0]
+    assert "tunnel left its tolerance" in bad.reason and "set-point 5.50" in bad.reason
+    assert bad.raw_file == f"points/{SECOND}.bad1.raw"  # the first attempt is kept beside the good one
+    assert len(read_events(run_dir / bad.raw_file).events) > 0
+    assert len(read_events(run_dir / second[1].raw_file).events) > 0 and second[1].raw_file == f"points/{SECOND}.raw"
+    assert abs(second[1].speed_readback_mps - 5.5) < 0.15
+    assert simulator.setpoint_mps == 0.0
+
+
+@pytest.mark.slow
+def test_a_tunnel_going_silent_while_a_point_records_stops_the_sweep_as_the_plan_says(tmp_path: Path) -> None:
+    sweep = {"speeds": [4.0, 5.5], "branches": ["up"], "settle_s": 0.5, "record_s": 2.0, "on_bad_point": "stop"}
+    config = rig(tmp_path, sweep=sweep, readback_grace_s=0.2)
+    _, _, simulator = run(config, during=fault_while_recording("mute", clear=False))
+    run_dir = tmp_path / "runs" / "run"
+    record = read_run(run_dir)
+    assert f"point {SECOND} failed: tunnel silent" in record.stop["reason"], record.stop
+    latest = record.latest_points()
+    assert latest[SECOND].status == "failed" and "tunnel silent" in latest[SECOND].reason
+    rows = {row["point_id"]: row for row in csv.DictReader((run_dir / "summary.csv").read_text().splitlines())}
+    assert rows[SECOND]["status"] == "failed" and "tunnel silent" in rows[SECOND]["reason"]
+    assert rows["000-up-4.00"]["status"] == "done"
+    wait_until(lambda: simulator.speed_mps <= 0.2, 5, "the tunnel at zero by its own watchdog")
+    assert simulator.watchdog_trips >= 1
