@@ -68,6 +68,10 @@ class SupervisorConfig:
         expected_rate_mev_s: event rate a point is expected to record at, Mev/s (free-space check).
         bytes_per_event: bytes one event takes in a recording (free-space check).
         free_space_margin_mb: free space kept beyond a point's expected size, MB.
+        resume_interrupted: on start in sweep mode, decide from the run folders (restart means
+            resume: an interrupted run is resumed, a stopped or finished one held, never a new
+            sweep on its own; :mod:`~flagtrack.daemon.sweep.restart`). ``flagtrack sweep -c``
+            turns it off (a person starts a new run there).
     """
 
     mode: Literal["monitor", "sweep", "feedback"] = "monitor"
@@ -86,6 +90,7 @@ class SupervisorConfig:
     expected_rate_mev_s: float = 5.0
     bytes_per_event: float = 2.0
     free_space_margin_mb: float = 50.0
+    resume_interrupted: bool = True
 
     def __post_init__(self) -> None:
         if self.mode == "sweep" and self.sweep is None:

@@ -39,6 +39,7 @@ from flagtrack.daemon.services.supervisor.validity import (
 from flagtrack.daemon.sweep.actions import ActionOutcome, PauseAction, parse_action, run_command
 from flagtrack.daemon.sweep.plan import Action, EndPoint, Point, Record, SetSpeed, Step, Wait, plan_points, sweep_plan
 from flagtrack.daemon.sweep.progress import SweepProgress
+from flagtrack.daemon.sweep.restart import start_decision
 from flagtrack.daemon.sweep.runfiles import command_line
 from flagtrack.daemon.sweep.runlock import RunLock
 from flagtrack.daemon.sweep.runlog import POINTS_DIR, PointResult, RunLog, completed_points, point_paths, stored_sweep
@@ -129,6 +130,8 @@ class SupervisorService:
         reason, error = "finished", None
         try:
             self.tunnel.start()
+            if self.cfg.mode == "sweep" and self.resume_dir is None and self.cfg.resume_interrupted:
+                self._take_up_runs()
             self._wait_for_services()
             if self.cfg.mode == "sweep":
                 runlog = self._open_run()
@@ -329,6 +332,15 @@ class SupervisorService:
             raise RunStopped(self._stop_reason())
 
     # -- sweep -----------------------------------------------------------------------------
+
+    def _take_up_runs(self) -> None:
+        """Restart means resume: take up an interrupted run, or hold (RunStopped, tunnel to zero)."""
+        decision = start_decision(Path(self.cfg.runs_dir).expanduser(), self.cfg.run_name)
+        if decision.action == "hold":
+            raise RunStopped(decision.why)
+        if decision.action == "resume":
+            log.warning("supervisor: %s", decision.why)
+            self.resume_dir = decision.run_dir
 
     def _lock_run(self, run_dir: Path) -> None:
         """Own the run folder (one supervisor per run), or stop naming its holder."""
