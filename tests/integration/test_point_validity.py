@@ -6,6 +6,9 @@ safe, as the plan's ``on_bad_point`` says."""
 from __future__ import annotations
 
 import csv
+import dataclasses
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -69,3 +72,29 @@ def test_a_tunnel_going_silent_while_a_point_records_stops_the_sweep_as_the_plan
     assert rows["000-up-4.00"]["status"] == "done"
     wait_until(lambda: simulator.speed_mps <= 0.2, 5, "the tunnel at zero by its own watchdog")
     assert simulator.watchdog_trips >= 1
+
+
+@pytest.mark.slow
+def test_a_hung_supervisor_loop_lets_the_tunnels_watchdog_stop_the_fan(tmp_path: Path) -> None:
+    config = rig(tmp_path, sweep={"speeds": [4.0, 5.5], "branches": ["up"], "settle_s": 0.5, "record_s": 2.0})
+    safety = dataclasses.replace(config.tunnel.safety, loop_timeout_s=0.5)
+    config = dataclasses.replace(config, tunnel=dataclasses.replace(config.tunnel, safety=safety))
+    seen: dict[str, float] = {}
+
+    def hang(services: list, group: ServiceGroup) -> None:
+        supervisor = services[0]
+        simulator = supervisor.tunnel.simulator
+        wait_until(lambda: supervisor._point == SECOND and supervisor._readbacks is not None, 60, "point 2 recording")
+        release = threading.Event()
+        supervisor.add_observer(lambda state: release.wait())  # the supervisor's own loop hangs here
+        hung_at = time.monotonic()
+        wait_until(lambda: simulator.watchdog_trips >= 1, 10, "the tunnel's watchdog trip")
+        seen["trip_after_s"] = time.monotonic() - hung_at
+        wait_until(lambda: simulator.speed_mps < 0.2, 5, "the fan stopped")
+        seen["setpoint"] = simulator.setpoint_mps
+        release.set()
+        group.stop.request("test over")
+
+    _, _, simulator = run(config, during=hang)
+    assert seen["setpoint"] == 0.0  # stopped by the controller while the supervisor hung
+    assert seen["trip_after_s"] < 0.5 + 1.0 + 1.5  # loop_timeout_s + the controller's watchdog_s + slack

@@ -198,6 +198,7 @@ class SupervisorService:
         """Wait ``duration_s`` watching the bus; raise RunStopped on a stop request or a silent service."""
         deadline = time.monotonic() + duration_s
         while True:
+            self._heartbeat()
             self.monitor.pump()
             self._publish()
             if self._stop.is_set():
@@ -211,6 +212,12 @@ class SupervisorService:
             if remaining <= 0:
                 return
             self._stop.wait(min(0.02, remaining))
+
+    def _heartbeat(self) -> None:
+        """Tell the tunnel this loop is alive: its keep-alive stops when the loop hangs."""
+        beat = getattr(self.tunnel, "heartbeat", None)
+        if beat is not None:
+            beat()
 
     def _check_point(self) -> None:
         """Raise BadPoint if the point under way is spoilt: the recorder failed (the sweep stops), the
