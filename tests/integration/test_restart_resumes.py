@@ -26,14 +26,17 @@ from tests.fakes.helpers import wait_until
 FLAGTRACK = [sys.executable, "-m", "flagtrack.daemon"]
 
 
-def rig_file(tmp_path: Path, port: str, sweep: dict[str, Any]) -> Path:
-    """A whole simulated rig in one process, its tunnel a controller on ``port``."""
+def rig_file(
+    tmp_path: Path, port: str, sweep: dict[str, Any], recorder: dict[str, Any] | None = None, **supervisor: Any
+) -> Path:
+    """A whole simulated rig in one process, its tunnel a controller on ``port`` (``recorder``,
+    ``supervisor``: more keys of their sections)."""
     rig = {
         "rig": f"restart{tmp_path.name[-12:]}".replace("-", "").replace("_", "").lower(),
         "camera": {"adapter": "simulated", "packet_us": 4000,
                    "simulated": {"events_per_px2": 0.5, "noise_rate_hz": 5000, "max_lag_s": 1.0}},
         "tracker": {"root": [150, 240], "length": 300, "tau_s": 0.002},
-        "recorder": {"directory": str(tmp_path / "rec"), "allowed_dirs": [str(tmp_path / "runs")]},
+        "recorder": {"directory": str(tmp_path / "rec"), "allowed_dirs": [str(tmp_path / "runs")], **(recorder or {})},
         "tunnel": {
             "driver": "ascii",
             "port": port,
@@ -42,7 +45,7 @@ def rig_file(tmp_path: Path, port: str, sweep: dict[str, Any]) -> Path:
                        "settle_timeout_s": 3.0, "poll_period_s": 0.05, "keepalive_s": 0.25, "watchdog_s": 1.0},
         },
         "supervisor": {"mode": "sweep", "runs_dir": str(tmp_path / "runs"), "run_name": "night",
-                       "onset": {"learn_s": 1.0}, "silence_timeout_s": 3.0, "sweep": sweep},
+                       "onset": {"learn_s": 1.0}, "silence_timeout_s": 3.0, "sweep": sweep, **supervisor},
         "services": ["camera", "tracker", "recorder", "supervisor"],
     }  # fmt: skip
     path = tmp_path / "rig.yaml"

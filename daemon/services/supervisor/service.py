@@ -182,15 +182,23 @@ class SupervisorService:
             self._publish(force=True)
             self.tunnel.close()
             if runlog is not None:
-                runlog.stop(reason, error=error)
-                runlog.close()
-                try:
-                    write_summary(runlog.run_dir)
-                except Exception as exc:  # noqa: BLE001 - the run is recorded; the summary is a convenience
-                    log.error("supervisor: summary failed: %s", exc)
+                self._close_run(runlog, reason, error)
             if self._run_lock is not None:
                 self._run_lock.release()
             log.info("supervisor: tunnel at zero (%s)", reason)
+
+    def _close_run(self, runlog: RunLog, reason: str, error: str | None) -> None:
+        """Write the stop record and the summary; a disk that refuses them is said in one line."""
+        try:
+            runlog.stop(reason, error=error)
+        except OSError as exc:
+            log.error("supervisor: could not write the stop record to %s: %s", runlog.path, exc.strerror or exc)
+        finally:
+            runlog.close()
+        try:
+            write_summary(runlog.run_dir)
+        except Exception as exc:  # noqa: BLE001 - the run is recorded; the summary is a convenience
+            log.error("supervisor: summary failed: %s", exc)
 
     # -- helpers ---------------------------------------------------------------------------
 
