@@ -61,7 +61,7 @@ def sim() -> Iterator[SimulatedTunnel]:
 
 @pytest.mark.slow
 def test_a_supervisor_killed_and_started_again_resumes_its_run(sim: SimulatedTunnel, tmp_path: Path) -> None:
-    sweep = {"speeds": [3.0, 4.0, 5.0], "branches": ["up"], "settle_s": 0.5, "record_s": 1.0}
+    sweep = {"speeds": [3.0, 4.0], "branches": ["up"], "settle_s": 0.5, "record_s": 1.0}
     command = [*FLAGTRACK, "up", "-c", str(rig_file(tmp_path, sim.port, sweep))]
     run_dir = tmp_path / "runs" / "night"
     first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -80,7 +80,7 @@ def test_a_supervisor_killed_and_started_again_resumes_its_run(sim: SimulatedTun
     record = read_run(run_dir)
     assert len(record.resumes) == 1 and record.stop["reason"] == "finished"
     ids = [p.point_id for p in record.points if p.status == "done"]
-    assert sorted(ids) == ["000-up-3.00", "001-up-4.00", "002-up-5.00"]  # each once: none lost, none repeated
+    assert sorted(ids) == ["000-up-3.00", "001-up-4.00"]  # each once: none lost, none repeated
     assert [p.name for p in (tmp_path / "runs").iterdir()] == ["night"]  # no new run
     assert sim.setpoint_mps == 0.0
 

@@ -105,6 +105,7 @@ class SupervisorService:
         self._observer_failed = False
         self._current_point: Point | None = None
         self._run_lock: RunLock | None = None
+        self._earlier_points: list[PointResult] = []  # a resumed run's points before this session
         self._watch: TunnelWatch | None = None  # set during a point's settle and record
         self._tunnel_problem: str | None = None
         self._readbacks: list[float] | None = None  # the tunnel's readbacks while a point records
@@ -371,6 +372,7 @@ class SupervisorService:
             self.run_dir = runlog.run_dir
             self._sweep = stored_sweep(record)
             self._done = completed_points(self.run_dir)
+            self._earlier_points = list(record.points)
             log.info("supervisor: resuming %s (%d points done)", self.run_dir, len(self._done))
             return runlog
         name = self.cfg.run_name or datetime.now().strftime("run-%Y%m%d-%H%M%S")
@@ -471,13 +473,9 @@ class SupervisorService:
 
     def _check_free_space(self, point: Point) -> None:
         """Stop safe rather than start a point the disk cannot hold (expected size from the config and
-        from the rate this run's points were recorded at)."""
+        from the rate this run's points, before a resume too, filled the disk at)."""
         assert self.run_dir is not None
-        measured = [
-            p.raw_bytes / (p.t_stop_unix - p.t_start_unix)
-            for p in self.points_done
-            if p.raw_bytes > 0 and p.t_stop_unix > p.t_start_unix
-        ]
+        measured = [self._bytes_per_s(p) for p in (*self._earlier_points, *self.points_done)]
         cfg = self.cfg
         need = expected_point_bytes(
             self._sweep.record_s, cfg.expected_rate_mev_s, cfg.bytes_per_event, max(measured, default=0.0)
@@ -486,6 +484,14 @@ class SupervisorService:
         problem = free_space_problem(free, need, cfg.free_space_margin_mb * 1e6, str(self.run_dir))
         if problem is not None:
             raise RunStopped(f"point {point.point_id} not started: {problem}")
+
+    def _bytes_per_s(self, p: PointResult) -> float:
+        """Bytes per second a recorded point wrote (its .raw and centreline files), 0 when unknown."""
+        duration_s = p.t_stop_unix - p.t_start_unix
+        if not duration_s > 0 or self.run_dir is None:
+            return 0.0
+        files = [self.run_dir / f for f in (p.raw_file, p.centreline_file) if f]
+        return sum(f.stat().st_size for f in files if f.exists()) / duration_s
 
     def _set_aside(self, result: PointResult) -> PointResult:
         """Rename a bad attempt's files (``<id>.bad<N>.raw`` ...) so that measuring the point again
@@ -563,6 +569,7 @@ class SupervisorService:
                     bad.result,
                     raw_file=str(raw.relative_to(self.run_dir)) if raw.exists() else None,  # type: ignore[arg-type]
                     raw_bytes=raw.stat().st_size if raw.exists() else 0,
+                    centreline_file=str(lines.relative_to(self.run_dir)) if lines.exists() else None,  # type: ignore[arg-type]
                     t_start_unix=t_start,
                     t_stop_unix=time.time(),
                 ),
