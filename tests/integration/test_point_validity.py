@@ -19,6 +19,7 @@ from flagtrack.drivers.formats import read_events
 from tests.fakes.helpers import wait_until
 from tests.integration.test_supervisor import rig, run
 
+FIRST = "000-up-4.00"
 SECOND = "001-up-5.50"
 
 
@@ -45,17 +46,32 @@ THIRD = "002-up-6.00"
 def test_a_stalled_fan_fails_the_point_the_retry_measures_it_and_a_hung_loop_lets_the_watchdog_stop_the_fan(
     tmp_path: Path,
 ) -> None:
-    """One run: point 2 records while the fan stalls at 4.2 m/s (failed, measured again: done); point 3
-    records while the supervisor's own loop hangs (the controller's watchdog stops the fan)."""
+    """One run: the recorder falls behind while point 1 records (its small queue drops packets: lossy,
+    measured again: done); point 2 records while the fan stalls at 4.2 m/s (failed, measured again:
+    done); point 3 records while the supervisor's own loop hangs (the controller's watchdog stops the fan)."""
     sweep = {"speeds": [4.0, 5.5, 6.0], "branches": ["up"], "settle_s": 0.5, "record_s": 2.0}
     config = rig(tmp_path, sweep=sweep, readback_grace_s=0.2)
-    safety = dataclasses.replace(config.tunnel.safety, loop_timeout_s=0.5)
-    config = dataclasses.replace(config, tunnel=dataclasses.replace(config.tunnel, safety=safety))
+    safety = dataclasses.replace(config.tunnel.safety, loop_timeout_s=2.0)
+    recorder_cfg = dataclasses.replace(config.recorder, max_queue_packets=100)
+    config = dataclasses.replace(config, recorder=recorder_cfg)
+    config = dataclasses.replace(config, tunnel=dataclasses.replace(config.tunnel, safety=safety, timeout_s=1.0))
     seen: dict[str, float] = {}
 
     def faults(services: list, group: ServiceGroup) -> None:
-        fault_while_recording("stall", clear=True)(services, group)
         supervisor = services[0]
+        recorder = next(s for s in services if s.name == "recorder")
+        wait_until(lambda: supervisor._point == FIRST and supervisor._readbacks is not None, 60, "point 1 recording")
+        take_lines = recorder._take_lines
+        stalled = threading.Event()
+
+        def slow_disk(now: float) -> None:  # the recorder's loop is held up once, as by a slow disk
+            if not stalled.is_set():
+                stalled.set()
+                time.sleep(1.0)
+            take_lines(now)
+
+        recorder._take_lines = slow_disk
+        fault_while_recording("stall", clear=True)(services, group)
         simulator = supervisor.tunnel.simulator
         wait_until(lambda: supervisor._point == THIRD and supervisor._readbacks is not None, 60, "point 3 recording")
         release = threading.Event()
@@ -71,6 +87,9 @@ def test_a_stalled_fan_fails_the_point_the_retry_measures_it_and_a_hung_loop_let
     _, _, simulator = run(config, during=faults)
     run_dir = tmp_path / "runs" / "run"
     record = read_run(run_dir)
+    first = [p for p in record.points if p.point_id == FIRST]
+    assert [p.status for p in first] == ["lossy", "done"]
+    assert "of them dropped by the recorder's full queue" in first[0].reason and first[0].raw_file.endswith(".bad1.raw")
     second = [p for p in record.points if p.point_id == SECOND]
     assert [p.status for p in second] == ["failed", "done"]
     bad = second[0]
@@ -80,7 +99,7 @@ def test_a_stalled_fan_fails_the_point_the_retry_measures_it_and_a_hung_loop_let
     assert len(read_events(run_dir / second[1].raw_file).events) > 0 and second[1].raw_file == f"points/{SECOND}.raw"
     assert abs(second[1].speed_readback_mps - 5.5) < 0.15
     assert seen["setpoint"] == 0.0  # stopped by the controller while the supervisor hung
-    assert seen["trip_after_s"] < 0.5 + 1.0 + 1.5  # loop_timeout_s + the controller's watchdog_s + slack
+    assert seen["trip_after_s"] < 2.0 + 1.0 + 2.0  # loop_timeout_s + the controller's watchdog_s + slack
     assert simulator.setpoint_mps == 0.0
 
 

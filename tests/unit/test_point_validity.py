@@ -49,10 +49,13 @@ def test_recording_problem_counts_every_kind_of_loss() -> None:
     started = RecorderStatus("recording", dropped_packets=7)
     assert recording_problem(started, RecorderStatus("idle", packets=100, dropped_packets=7)) is None
     text = recording_problem(
-        started, RecorderStatus("idle", missing_packets=2, malformed_packets=1, dropped_packets=10)
+        started, RecorderStatus("idle", missing_packets=3, malformed_packets=1, dropped_packets=10)
+    )
+    assert recording_problem(started, RecorderStatus("idle", missing_packets=2)) == (
+        "recording lost packets (2 missing in sequence)"
     )
     assert text == (
-        "recording lost packets (2 missing in sequence, 1 malformed, 3 dropped by the recorder's full queue)"
+        "recording lost packets (3 missing in sequence, 3 of them dropped by the recorder's full queue; 1 malformed)"
     )
 
 

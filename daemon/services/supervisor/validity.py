@@ -69,22 +69,20 @@ def tunnel_problem(
 def recording_problem(started: RecorderStatus | None, stopped: RecorderStatus | None) -> str | None:
     """Why a recording is lossy from the recorder's replies to start and stop, or None.
 
-    Counts packets missing in the camera's sequence, turned away as malformed, and dropped by the
-    recorder's full queue between the two replies.
+    Counts packets missing in the camera's sequence (those the recorder's full queue dropped are
+    among them, and said apart) and packets turned away as malformed.
     """
     if stopped is None:
         return None
-    dropped = stopped.dropped_packets - (started.dropped_packets if started is not None else 0)
-    parts = [
-        f"{n} {what}"
-        for n, what in (
-            (stopped.missing_packets, "missing in sequence"),
-            (stopped.malformed_packets, "malformed"),
-            (max(0, dropped), "dropped by the recorder's full queue"),
-        )
-        if n > 0
-    ]
-    return f"recording lost packets ({', '.join(parts)})" if parts else None
+    dropped = max(0, stopped.dropped_packets - (started.dropped_packets if started is not None else 0))
+    missing = max(stopped.missing_packets, dropped)
+    parts = []
+    if missing:
+        queue = f", {dropped} of them dropped by the recorder's full queue" if dropped else ""
+        parts.append(f"{missing} missing in sequence{queue}")
+    if stopped.malformed_packets:
+        parts.append(f"{stopped.malformed_packets} malformed")
+    return f"recording lost packets ({'; '.join(parts)})" if parts else None
 
 
 def expected_point_bytes(
