@@ -1,5 +1,6 @@
 """Restart means resume (issue 20): a real ``flagtrack up`` process with the supervisor sweeping,
-killed by SIGKILL mid-sweep and started again with the same command line (what systemd's
+killed by SIGKILL mid-sweep (a second one started meanwhile on the same tunnel is refused, naming
+the first) and started again with the same command line (what systemd's
 ``Restart=on-failure`` does), resumes the interrupted run: no new sweep, no point lost or repeated,
 the tunnel (a simulated controller on a real pty, outside the killed process) stopped by its own
 watchdog meanwhile. Started once more, the finished run is held: tunnel at zero, nothing new."""
@@ -11,11 +12,13 @@ import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
 import yaml
 
+from flagtrack.daemon.errors import FormatError
 from flagtrack.daemon.sweep.plan import SweepConfig, plan_points
 from flagtrack.daemon.sweep.restart import start_decision
 from flagtrack.daemon.sweep.runlog import RunLog, read_run
@@ -53,6 +56,14 @@ def rig_file(
     return path
 
 
+def so_far(run_dir: Path) -> Any:
+    """The run log as written so far (empty before its start record is complete)."""
+    try:
+        return read_run(run_dir)
+    except FormatError:  # not there yet, or the start record half-written
+        return SimpleNamespace(points=(), resumes=())
+
+
 @pytest.fixture
 def sim() -> Iterator[SimulatedTunnel]:
     with SimulatedTunnel(SimParams(tau_s=0.1, ramp_mps2=6.0, watchdog_s=1.0)) as tunnel:
@@ -61,12 +72,12 @@ def sim() -> Iterator[SimulatedTunnel]:
 
 @pytest.mark.slow
 def test_a_supervisor_killed_and_started_again_resumes_its_run(sim: SimulatedTunnel, tmp_path: Path) -> None:
-    sweep = {"speeds": [3.0, 4.0], "branches": ["up"], "settle_s": 0.5, "record_s": 1.0}
+    sweep = {"speeds": [3.0, 4.0, 5.0], "branches": ["up"], "settle_s": 0.5, "record_s": 1.0}
     command = [*FLAGTRACK, "up", "-c", str(rig_file(tmp_path, sim.port, sweep))]
     run_dir = tmp_path / "runs" / "night"
     first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
-        wait_until(lambda: (run_dir / "run.jsonl").exists() and read_run(run_dir).points, 90, "a point recorded")
+        wait_until(lambda: so_far(run_dir).points, 90, "a point recorded")
         wait_until(lambda: sim.setpoint_mps >= 3.9, 30, "the ramp to the second point")
     finally:
         first.send_signal(signal.SIGKILL)
@@ -74,13 +85,25 @@ def test_a_supervisor_killed_and_started_again_resumes_its_run(sim: SimulatedTun
     wait_until(lambda: sim.watchdog_trips >= 1 and sim.speed_mps < 0.2, 10, "the tunnel stopped by its watchdog")
     assert read_run(run_dir).stop is None  # killed: no stop record
 
-    again = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    again_proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_until(lambda: so_far(run_dir).resumes, 90, "the run resumed")
+        # meanwhile a second supervisor on the same tunnel is refused, naming the first
+        second = subprocess.run(command, capture_output=True, text=True, timeout=60)
+        _, err = again_proc.communicate(timeout=120)
+    finally:
+        again_proc.kill()
+    again = subprocess.CompletedProcess(command, again_proc.returncode, "", err)
+    assert second.returncode != 0
+    refusal = [line for line in second.stderr.splitlines() if "port in use" in line]
+    assert len(refusal) == 1 and f"held by pid {again_proc.pid} (" in refusal[0], second.stderr[-2000:]
+    assert "Traceback" not in second.stderr
     assert again.returncode == 0, again.stderr[-2000:]
     assert "resuming the interrupted run" in again.stderr
     record = read_run(run_dir)
     assert len(record.resumes) == 1 and record.stop["reason"] == "finished"
     ids = [p.point_id for p in record.points if p.status == "done"]
-    assert sorted(ids) == ["000-up-3.00", "001-up-4.00"]  # each once: none lost, none repeated
+    assert sorted(ids) == ["000-up-3.00", "001-up-4.00", "002-up-5.00"]  # each once: none lost, none repeated
     assert [p.name for p in (tmp_path / "runs").iterdir()] == ["night"]  # no new run
     assert sim.setpoint_mps == 0.0
 
