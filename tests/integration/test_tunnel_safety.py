@@ -207,3 +207,19 @@ def test_a_hung_owner_loop_lets_the_controllers_watchdog_stop_the_fan(sim: Simul
         assert tunnel.owner_silent
         wait_until(lambda: sim.speed_mps < 0.1, 2, "the fan stopped")
         assert tunnel.status().link_ok  # the link itself was fine all along
+
+
+def test_a_controller_fault_is_read_through_the_protocol_and_spoils_a_point(sim: SimulatedTunnel) -> None:
+    from flagtrack.daemon.services.supervisor.validity import TunnelWatch
+
+    tunnel, _ = make_tunnel(sim)
+    with tunnel:
+        tunnel.set_speed_mps(5.0)
+        watch = TunnelWatch(5.0, SAFETY.tolerance_mps, grace_s=1.0)
+        status = tunnel.status()
+        assert status.fault is None and watch.check(status.speed_mps, status.fault, status.link_ok, 0.0) is None
+        sim.inject(fault="OVERCURRENT")
+        status = tunnel.status()
+        expected = "OVERCURRENT" if sim.params.protocol == "ascii" else "fault code 2"
+        assert expected in (status.fault or "")
+        assert "tunnel fault" in watch.check(status.speed_mps, status.fault, status.link_ok, 0.1)
