@@ -47,8 +47,8 @@ def point_line(state: SupervisorState) -> str:
     width = len(str(state.points_total))
     head = f"point {state.last_index:>{width}}/{state.points_total}  {state.last_speed_mps:5.2f} m/s {state.last_branch:<4}"
     times = f"[{clock(state.elapsed_s)}, ETA {clock(state.eta_s)}]"
-    if state.last_status == "failed":
-        return f"{head}  FAILED (the run log says why)  {times}"
+    if state.last_status in ("failed", "lossy"):
+        return f"{head}  {state.last_status.upper()} (the run log says why)  {times}"
     lost = f"{state.lost_fraction:.1%}" if state.lost_fraction >= 0 else "-"
     sensor = f"  e/L {state.sensor_error_rms_over_l:.2%}" if state.sensor_error_rms_over_l >= 0 else ""
     return (

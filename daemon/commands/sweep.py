@@ -55,7 +55,11 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("needs a 'sweep:' plan", key="supervisor.sweep", path=str(args.config))
     try:
         supervisor = dataclasses.replace(
-            rig.supervisor, mode="sweep", exit_when_done=True, runs_dir=args.runs_dir or rig.supervisor.runs_dir
+            rig.supervisor,
+            mode="sweep",
+            exit_when_done=True,
+            runs_dir=args.runs_dir or rig.supervisor.runs_dir,
+            resume_interrupted=False,  # a person starts this run (or names the one to resume)
         )
     except ValueError as exc:
         raise ConfigError(str(exc), key="supervisor", path=str(args.config or args.resume)) from exc

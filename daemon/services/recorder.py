@@ -36,9 +36,11 @@ stream only once it has the tracker's last centreline message (``final``), or af
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import os
+import shutil
 import threading
 import time
 from collections.abc import Sequence
@@ -118,6 +120,8 @@ class RecorderConfig:
             gap; the newest, and so the end of stream, are kept); the camera is never held up.
         drain_timeout_s: after the end of a stream (or a restart), how long to wait for more of its
             centrelines once none come.
+        min_free_mb: a recording stops (one error line, an ``error`` status) when its disk has less
+            than this free, MB, before the disk is full: the HDF5 library does not survive a full disk.
     """
 
     camera_id: str = "cam0"
@@ -130,6 +134,7 @@ class RecorderConfig:
     max_queue_packets: int = 1_000_000
     max_queue_bytes: int = 512 << 20
     drain_timeout_s: float = 5.0
+    min_free_mb: float = 64.0
 
 
 @dataclass
@@ -155,6 +160,7 @@ class RecordingPart:
     malformed: int = 0
     late: int = 0  # duplicates and late packets of the stream, dropped
     dropped: int = 0
+    flushed_at: int = 0  # size of the .raw file at its last flush (what a failed write cuts it back to)
     started_wall: float = field(default_factory=time.time)
     first_t_us: int | None = None
     last_t_us: int | None = None
@@ -225,6 +231,8 @@ class RecordingPart:
             self.geometry = {"width": packet.width, "height": packet.height, "encoding": packet.encoding}
             self._stream_key = (packet.encoding, packet.width, packet.height)
             self.raw.write(start)
+            self.raw.flush()
+            self.flushed_at = self.raw.tell()
             self.write_sidecar()
         expected = self.sequence.next_seq
         arrival, _ = self.sequence.arrive(packet.seq, packet.stream_id)
@@ -263,6 +271,7 @@ class RecordingPart:
             self.centrelines.flush()
         if self.raw is not None and (force or now - self._last_flush >= cfg.flush_interval_s):
             self.raw.flush()
+            self.flushed_at = self.raw.tell()
             self._last_flush = now
             if force or now - self._last_fsync >= cfg.fsync_interval_s:
                 os.fsync(self.raw.fileno())
@@ -311,6 +320,27 @@ class RecordingPart:
         if self.centrelines is not None:
             self.centrelines.close()
         self.write_sidecar(stopped=True)
+
+    def abandon(self) -> None:
+        """After a failed write (a full disk): close everything as far as it goes and cut the .raw
+        file back to its last flush, so it reads back whole up to there. Never raises."""
+        for step in (self._close_raw_file, self._cut_back, self._close_centrelines, lambda: self.write_sidecar(True)):
+            try:
+                step()
+            except (OSError, RuntimeError, ValueError) as exc:
+                log.debug("recorder: abandoning %s: %s", self.raw_path, exc)
+
+    def _close_raw_file(self) -> None:
+        if self.raw is not None and not self.raw.closed:
+            self.raw.close()
+
+    def _cut_back(self) -> None:
+        if self.raw is not None:
+            os.truncate(self.raw_path, self.flushed_at)
+
+    def _close_centrelines(self) -> None:
+        if self.centrelines is not None:
+            self.centrelines.close()
 
     def next_part(self) -> RecordingPart:
         """The recording of the next camera stream: ``<first base>_stream<part + 1>``, linked to this one."""
@@ -372,6 +402,7 @@ class RecorderService:
             keys.recorder_command(), RecorderCommand, capacity=1000, max_bytes=1 << 20, origins=True
         )
         self.refused_commands = 0
+        self._free_checked_s = 0.0
 
     def run(self, stop: threading.Event) -> None:
         keys = self.bus.keys
@@ -404,7 +435,11 @@ class RecorderService:
                     self.lost_packets = packets.channel.dropped
                 if self.current is not None:
                     self.current.dropped = self.lost_packets - self._dropped_before
-                    self.current.sync(self.cfg)
+                    try:
+                        self.current.sync(self.cfg)
+                        self._check_free_space(now)
+                    except (OSError, RuntimeError) as exc:  # a full disk
+                        self._write_failed(exc)
                 if self._draining is not None and now - self._last_line_s >= self.cfg.drain_timeout_s:
                     self._close_draining()
                 self.problems.flush()
@@ -481,8 +516,42 @@ class RecorderService:
         self._close(recording)
         self._status("idle", recording=recording, request_id=request_id)
 
+    def _check_free_space(self, now_s: float) -> None:
+        """Raise OSError(ENOSPC) when the current recording's disk has less than ``min_free_mb`` free
+        (looked at every 0.25 s at most)."""
+        if self.current is None or now_s - self._free_checked_s < 0.25:
+            return
+        self._free_checked_s = now_s
+        free = shutil.disk_usage(self.current.raw_path.parent).free
+        if free < self.cfg.min_free_mb * 1e6:
+            raise OSError(
+                errno.ENOSPC, f"No space left on device: {free / 1e6:.1f} MB free, below recorder.min_free_mb"
+            )
+
+    def _write_failed(self, exc: BaseException, recording: RecordingPart | None = None) -> None:
+        """Writing a recording (by default the current one) failed (a full disk): stop it, its .raw
+        file cut back to its last flush; say so in one line and in an ``error`` status. The recorder
+        goes on, idle."""
+        if recording is None or recording is self.current:
+            recording, self.current = self.current, None
+        if recording is None:
+            return
+        why = getattr(exc, "strerror", None) or str(exc)
+        message = (
+            f"recording stopped: writing {recording.raw_path} failed: {why}; the file is kept up to its "
+            f"last flush ({recording.flushed_at} bytes)"
+        )
+        log.error("recorder: %s", message)
+        recording.abandon()
+        self.finished.append(recording.raw_path)
+        self._status("error", recording=recording, message=message)
+
     def _close(self, recording: RecordingPart) -> None:
-        recording.close()
+        try:
+            recording.close()
+        except (OSError, RuntimeError) as exc:  # a full disk at the last flush
+            self._write_failed(exc, recording)
+            return
         self.finished.append(recording.raw_path)
         log.info(
             "recorder: closed %s (%d packets, %d bytes, %d gaps)",
@@ -525,6 +594,9 @@ class RecorderService:
                 self.current.write_packet(packet)
             except FormatError as exc:  # the first packet cannot start the file: nothing was written
                 self._malformed(exc)
+                return
+            except OSError as exc:  # a full disk
+                self._write_failed(exc)
                 return
         if packet.end_of_stream:
             self._stream_ended = True

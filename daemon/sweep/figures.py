@@ -55,6 +55,7 @@ def plot_amplitude(
             speeds, [p.event_rate_mev_s for p in mine], color=color, marker=marker, fillstyle=fill, linewidth=0.8
         )
     _mark_suspect(ax_amp, [p for p in points if p.status == "done"])
+    _mark_bad(ax_amp, points)
     onset, decay = transitions
     for speed, color, name in ((onset, "C0", "onset"), (decay, "C1", "decay")):
         if speed is not None:
@@ -82,6 +83,16 @@ def _mark_suspect(ax: Any, points: Sequence[PointResult]) -> None:
         ax.scatter([p.speed_mps for p in suspect], [_zero(p.amplitude_over_l) for p in suspect], s=140,
                    facecolors="none", edgecolors="red", linewidths=1.5, zorder=5,
                    label=f"suspect: flag lost ({len(suspect)})")  # fmt: skip
+
+
+def _mark_bad(ax: Any, points: Sequence[PointResult]) -> None:
+    """Mark the points not measured as planned (``failed``, ``lossy``) as crosses at the foot of the
+    amplitude panel, one per speed, labelled with their status."""
+    for status, color in (("failed", "red"), ("lossy", "darkorange")):
+        bad = [p for p in points if p.status == status]
+        if bad:
+            ax.plot([p.speed_mps for p in bad], [0.02] * len(bad), "x", color=color, markersize=8,
+                    transform=ax.get_xaxis_transform(), label=f"{status} ({len(bad)} points)")  # fmt: skip
 
 
 def plot_sweep(points: Sequence[Any], path: str | Path, title: str = "") -> Path:

@@ -11,6 +11,8 @@ listing what they yield. Example (section ``sweep`` of a run config)::
       record_s: 20                # recording per point, s
       actions:                    # per point (see daemon/sweep/actions.py): command, pause
         - {name: command, when: after_record, params: {argv: [flagtrack, events, info, "{raw}"]}}
+      on_bad_point: retry         # a failed or lossy point: measure it again (retry) or stop safe (stop)
+      retries: 1                  # how many times a bad point is measured again before the sweep stops
 
 Each point yields: ``Point`` (metadata), ``SetSpeed``, ``Wait`` (settle), the ``before_record``
 actions, ``Record``, the ``after_record`` actions, ``EndPoint``; the plan ends with
@@ -82,6 +84,10 @@ class SweepConfig:
         record_s: recording time per point, s.
         repeat_turning_point: measure the speed where the branch direction turns twice.
         actions: per-point actions.
+        on_bad_point: what follows a point that was not measured as planned (tunnel silent, faulted
+            or out of tolerance, packets lost): ``retry`` measures it again, up to ``retries``
+            times, then stops safe; ``stop`` stops safe at once.
+        retries: how many times a bad point is measured again (``on_bad_point: retry``).
     """
 
     speeds: tuple[float, ...] | None = None
@@ -91,6 +97,8 @@ class SweepConfig:
     record_s: float = 20.0
     repeat_turning_point: bool = False
     actions: tuple[ActionSpec, ...] = ()
+    on_bad_point: Literal["retry", "stop"] = "retry"
+    retries: int = 1
 
     def __post_init__(self) -> None:
         if (self.speeds is None) == (self.range is None):
@@ -101,6 +109,8 @@ class SweepConfig:
             raise ValueError("branches must not be empty")
         if self.settle_s < 0 or self.record_s <= 0:
             raise ValueError("need settle_s >= 0 and record_s > 0")
+        if not 0 <= self.retries <= 100:
+            raise ValueError("retries must be within 0..100")
 
     def speed_values(self) -> tuple[float, ...]:
         """The distinct speeds, ascending, m/s."""

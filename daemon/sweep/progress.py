@@ -35,7 +35,7 @@ class PointFacts:
     Attributes:
         point_id, branch, speed_mps: as planned.
         position: 1-based position of the point in the plan.
-        status: ``done`` or ``failed``.
+        status: ``done``, ``failed`` or ``lossy``.
         state: flag state over the recording (``still``, ``flapping``, ``unknown``).
         amplitude_over_l, frequency_hz: tip amplitude A/L and flapping frequency (Hz), NaN if none.
         lost_fraction: see :func:`lost_fraction`.

@@ -121,6 +121,7 @@ def describe_run(
             "planned": len(record.planned_ids),
             "done": sum(p.status == "done" for p in points),
             "failed": sum(p.status == "failed" for p in points),
+            "lossy": sum(p.status == "lossy" for p in points),
         },
         "plan": {"sweep": config.pop("sweep", None), "points": start.get("plan", [])},
         "rig": config,
@@ -155,7 +156,8 @@ def readme_text(run: dict[str, Any]) -> str:
     status = run["status"] + (f" ({run['status_detail']})" if run["status_detail"] else "")
     lines += [
         f"Status     {status}; {counts['done']} of {counts['planned']} points done"
-        + (f", {counts['failed']} failed" if counts["failed"] else ""),
+        + (f", {counts['failed']} failed" if counts["failed"] else "")
+        + (f", {counts['lossy']} lossy" if counts.get("lossy") else ""),
         f"Onset      {_speed(run['onset_mps'])} going up (first flapping point after a still one)",
         f"Decay      {_speed(run['decay_mps'])} coming down (first still point after a flapping one)",
         f"Plan       {_plan_text(run['plan']['sweep'])}",

@@ -7,10 +7,12 @@ Records (one JSON object per line, each with ``type`` and the format version ``v
 - ``resume``: appended when an interrupted run is resumed, with the points already done (and the
   command line);
 - ``point``: one per measured point: id, branch, speed, state, metrics, pointers to the raw and
-  centreline files (relative to the run folder), status ``done`` or ``failed``;
+  centreline files (relative to the run folder), status ``done``, ``failed`` or ``lossy`` (with its
+  ``reason``; only ``done`` counts as finished, the others are measured again on resume);
 - ``stop``: reason (``finished``, ``SIGTERM``, an error), appended on any orderly end.
 
-Every line is written, flushed and fsync'ed before the writer returns, so after a power loss the
+A 1 MiB ``.reserve`` file in the run folder is given up when the disk is full, so the last point
+and stop records still fit. Every line is written, flushed and fsync'ed before the writer returns, so after a power loss the
 file holds every finished record and at most one torn last line, which the reader ignores (and
 :meth:`RunLog.resume` cuts off before appending). NaN metrics are written as ``null``.
 """
@@ -18,6 +20,7 @@ file holds every finished record and at most one torn last line, which the reade
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import logging
 import math
@@ -40,6 +43,9 @@ log = logging.getLogger(__name__)
 RUN_LOG = "run.jsonl"
 LOG_VERSION = 1
 POINTS_DIR = "points"
+RESERVE = ".reserve"
+RESERVE_BYTES = 1 << 20
+"""Disk held in each run folder so the point and stop records still fit when the disk fills up."""
 _BLANK = b" \t\r\n\x00"
 
 
@@ -50,7 +56,8 @@ class PointResult:
     Attributes:
         point_id, index, branch: as planned (:class:`~flagtrack.daemon.sweep.plan.Point`).
         speed_mps: the set-point, m/s.
-        status: ``done`` (counts as finished on resume) or ``failed``.
+        status: ``done`` (counts as finished on resume), ``failed`` (the tunnel went silent, faulted
+            or left its tolerance, or an action failed) or ``lossy`` (the recording lost packets).
         state: flag state over the recording (``still``, ``flapping``, ``unknown``).
         speed_readback_mps: mean tunnel readback during the recording, m/s.
         amplitude_over_l, amplitude_std_over_l: tip amplitude A/L, time mean and std.
@@ -79,13 +86,14 @@ class PointResult:
         lost_fraction: fraction of the point's updates that did not find the flag (``/lost``).
         suspect: ``lost_fraction`` is above the supervisor's ``suspect_lost_fraction``: the point's
             numbers may be those of something else than the flag.
+        reason: why the point is ``failed`` or ``lossy`` (one line), ``None`` for a good point.
     """
 
     point_id: str
     index: int
     branch: str
     speed_mps: float
-    status: Literal["done", "failed"] = "done"
+    status: Literal["done", "failed", "lossy"] = "done"
     state: str = "unknown"
     speed_readback_mps: float = math.nan
     amplitude_over_l: float = math.nan
@@ -120,6 +128,7 @@ class PointResult:
     actions: str | None = None
     lost_fraction: float = math.nan
     suspect: bool = False
+    reason: str | None = None
 
     @classmethod
     def planned(cls, point: Point, **values: Any) -> PointResult:
@@ -286,6 +295,7 @@ class RunLog:
         self.run_dir = run_dir
         self.path = run_dir / RUN_LOG
         self._handle = handle
+        _make_reserve(run_dir / RESERVE)
 
     @classmethod
     def create(
@@ -301,7 +311,7 @@ class RunLog:
         run_dir = Path(run_dir)
         (run_dir / POINTS_DIR).mkdir(parents=True, exist_ok=True)
         try:
-            handle = open(run_dir / RUN_LOG, "x", encoding="utf-8")  # noqa: SIM115 - closed by close()
+            handle = open(run_dir / RUN_LOG, "xb", buffering=0)  # noqa: SIM115 - closed by close()
         except FileExistsError as exc:
             raise FormatError("a run log exists already; resume the run instead", path=str(run_dir / RUN_LOG)) from exc
         _fsync_dir(run_dir)
@@ -326,7 +336,7 @@ class RunLog:
         """
         record = read_run(run_dir)
         run_dir = Path(run_dir)
-        handle = open(run_dir / RUN_LOG, "r+", encoding="utf-8")  # noqa: SIM115 - closed by close()
+        handle = open(run_dir / RUN_LOG, "r+b", buffering=0)  # noqa: SIM115 - closed by close()
         if record.torn_tail:
             handle.truncate(record.valid_bytes)
             os.fsync(handle.fileno())
@@ -345,8 +355,10 @@ class RunLog:
         self._append({"type": "point", **record})
 
     def stop(self, reason: str, *, error: str | None = None, t_unix: float | None = None) -> None:
-        """Append the stop record (``finished``, ``SIGTERM``, ``error``, ...)."""
+        """Append the stop record (``finished``, ``SIGTERM``, ``error``, ...); the reserve is given back
+        (a resume makes a new one)."""
         self._append({"type": "stop", "t_unix": _now(t_unix), "reason": reason, "error": error})
+        (self.run_dir / RESERVE).unlink(missing_ok=True)
 
     def close(self) -> None:
         """Close the file (idempotent)."""
@@ -363,9 +375,40 @@ class RunLog:
 
     def _append(self, record: dict[str, Any]) -> None:
         line = json.dumps({"type": record["type"], "v": LOG_VERSION, **record}, allow_nan=False)
-        self._handle.write(line + "\n")
-        self._handle.flush()
+        data = (line + "\n").encode()
+        start = self._handle.tell()
+        try:
+            _write_all(self._handle, data)
+        except OSError as exc:  # a full disk: give up the reserve, write the record there
+            reserve = self.run_dir / RESERVE
+            if exc.errno not in (errno.ENOSPC, errno.EDQUOT) or not reserve.exists():
+                self._handle.truncate(start)
+                raise
+            log.warning("%s: the disk is full; using the run's reserve for the log", self.path)
+            reserve.unlink()
+            self._handle.truncate(start)
+            self._handle.seek(start)
+            _write_all(self._handle, data)
         os.fsync(self._handle.fileno())
+
+
+def _write_all(handle: Any, data: bytes) -> None:
+    """Write all of ``data`` to an unbuffered binary file (raw writes may be short)."""
+    view = memoryview(data)
+    while view:
+        view = view[handle.write(view) :]
+
+
+def _make_reserve(path: Path) -> None:
+    """Hold :data:`RESERVE_BYTES` of disk for the run's last records (given up when the disk is full)."""
+    if path.exists():
+        return
+    try:
+        with open(path, "wb") as reserve:
+            os.posix_fallocate(reserve.fileno(), 0, RESERVE_BYTES)
+    except OSError as exc:
+        log.warning("%s: no reserve for the run log's last records: %s", path, exc.strerror or exc)
+        path.unlink(missing_ok=True)
 
 
 def _now(t_unix: float | None) -> float:

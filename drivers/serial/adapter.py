@@ -2,7 +2,9 @@
 
 Opens anything pyserial opens: a device path (``/dev/ttyUSB0``), a pseudo-terminal of the
 simulated tunnel (``/dev/pts/5``), or a URL (``loop://``, ``socket://host:port``, ``rfc2217://``).
-Every failure is a :class:`DriverError` naming the port.
+Every failure is a :class:`DriverError` naming the port. A device path is opened exclusively
+(pyserial's ``exclusive``: an advisory ``flock``): a second owner is refused with a line naming the
+holder, so two programs never drive one tunnel.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import logging
 import serial
 
 from flagtrack.daemon.errors import DriverError
+from flagtrack.drivers.serial.holder import port_holders
 
 log = logging.getLogger(__name__)
 
@@ -46,12 +49,16 @@ class SerialAdapter:
         if port_obj is not None:
             self.serial = port_obj
             return
+        exclusive = {} if "://" in port else {"exclusive": True}
         try:
             self.serial = serial.serial_for_url(
                 port, baudrate=baudrate, timeout=timeout_s, write_timeout=timeout_s,
-                parity=parity, stopbits=stopbits, bytesize=bytesize,
+                parity=parity, stopbits=stopbits, bytesize=bytesize, **exclusive,
             )  # fmt: skip
         except (serial.SerialException, OSError, ValueError) as exc:
+            if "exclusively lock" in str(exc):
+                holders = "; ".join(port_holders(port)) or "a process this user cannot see"
+                raise DriverError(f"port in use, held by {holders}; not opened", device=port) from exc
             raise DriverError(f"cannot open serial port: {exc}", device=port) from exc
 
     def _send(self, data: bytes) -> None:

@@ -9,7 +9,9 @@ implements :class:`~flagtrack.drivers.tunnel.base.WindTunnel`:
 - after a set, the readback must reach the target within ``tolerance_mps`` and
   ``settle_timeout_s``, or the step fails;
 - a keep-alive thread talks to the controller whenever the link has been idle for
-  ``keepalive_s`` (which must be below half the controller's ``watchdog_s``);
+  ``keepalive_s`` (which must be below half the controller's ``watchdog_s``); once the owner calls
+  :meth:`SafeTunnel.heartbeat` from its loop, the keep-alive stops when that loop has been silent
+  for ``loop_timeout_s``, so a hung owner lets the controller's own watchdog stop the fan;
 - on start it reads the current speed and ramps from there, never from an assumed zero;
 - any failure of a set (no reply, error reply, readback mismatch, abort) ramps the tunnel to zero
   where it still answers and raises one :class:`DriverError` naming the device.
@@ -47,6 +49,8 @@ class SafetyParams:
         poll_period_s: interval between readbacks while waiting, s.
         keepalive_s: idle time after which a keep-alive exchange is sent, s.
         watchdog_s: the controller's communication watchdog, s (``keepalive_s`` must be below half).
+        loop_timeout_s: an owner that calls :meth:`SafeTunnel.heartbeat` and then stays silent this
+            long is taken as hung: no keep-alive is sent for it any more, s.
     """
 
     min_speed_mps: float = 0.0
@@ -58,11 +62,20 @@ class SafetyParams:
     poll_period_s: float = 0.2
     keepalive_s: float = 1.0
     watchdog_s: float = 5.0
+    loop_timeout_s: float = 10.0
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_speed_mps <= self.max_speed_mps or self.max_speed_mps <= 0:
             raise ValueError("need 0 <= min_speed_mps <= max_speed_mps and max_speed_mps > 0")
-        for name in ("max_ramp_mps2", "ramp_period_s", "tolerance_mps", "settle_timeout_s", "poll_period_s"):
+        names = (
+            "max_ramp_mps2",
+            "ramp_period_s",
+            "tolerance_mps",
+            "settle_timeout_s",
+            "poll_period_s",
+            "loop_timeout_s",
+        )
+        for name in names:
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive")
         if not 0 < self.keepalive_s <= self.watchdog_s / 2:
@@ -101,6 +114,8 @@ class SafeTunnel:
         self._last_exchange_s = time.monotonic()
         self._link_ok = True
         self._keepalive_failures = 0
+        self._heartbeat_s: float | None = None  # the owner's loop, once it reports (None: not watched)
+        self._withheld = False
 
     @property
     def device(self) -> str:
@@ -191,6 +206,17 @@ class SafeTunnel:
             speed, fault = math.nan, _text(exc)
         return TunnelStatus(self.device, self.setpoint_mps, speed, fault, self._link_ok, self._keepalive_failures)
 
+    def heartbeat(self) -> None:
+        """The owner's loop is alive (call it from that loop); from the first call on, the keep-alive
+        is sent only while such calls keep coming (within ``loop_timeout_s``)."""
+        self._heartbeat_s = time.monotonic()
+
+    @property
+    def owner_silent(self) -> bool:
+        """The owner reported a heartbeat once and then none for ``loop_timeout_s``."""
+        beat = self._heartbeat_s
+        return beat is not None and time.monotonic() - beat > self.params.loop_timeout_s
+
     def abort(self) -> None:
         """Make the running (and any later) :meth:`set_speed_mps` stop and raise TunnelAborted.
 
@@ -269,6 +295,7 @@ class SafeTunnel:
             value = target_mps if elapsed >= duration_s else start_mps + direction * rate * elapsed
             self._exchange(lambda v=value: self.link.write_setpoint_mps(v))
             self._setpoint_mps = value
+            self._beat_if_watched()
             if value == target_mps:
                 return
             self._sleep(min(self.params.ramp_period_s, duration_s - elapsed), abortable)
@@ -281,6 +308,7 @@ class SafeTunnel:
             if abortable and self._abort.is_set():
                 raise TunnelAborted("wait for the set-point aborted", device=self.device)
             speed = self.read_speed_mps()
+            self._beat_if_watched()
             if abs(speed - target_mps) <= p.tolerance_mps:
                 return
             if time.monotonic() >= deadline:
@@ -292,6 +320,11 @@ class SafeTunnel:
                     device=self.device,
                 )
             self._sleep(p.poll_period_s, abortable)
+
+    def _beat_if_watched(self) -> None:
+        """A ramp or a wait in progress is the owner's loop at work (when the owner is watched)."""
+        if self._heartbeat_s is not None:
+            self._heartbeat_s = time.monotonic()
 
     def _sleep(self, duration_s: float, abortable: bool) -> None:
         if abortable:
@@ -316,6 +349,18 @@ class SafeTunnel:
         while not self._closing.wait(period_s / 4):
             if time.monotonic() - self._last_exchange_s < period_s:
                 continue
+            if self.owner_silent:
+                if not self._withheld:
+                    log.error(
+                        "%s: the owner's loop has been silent for over %g s; keep-alive withheld, the "
+                        "controller's watchdog (%g s) stops the fan",
+                        self.device,
+                        self.params.loop_timeout_s,
+                        self.params.watchdog_s,
+                    )
+                self._withheld = True
+                continue
+            self._withheld = False
             try:
                 self._exchange(self.link.keep_alive)
             except DriverError as exc:

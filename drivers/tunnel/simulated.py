@@ -7,8 +7,9 @@ limit and a communication-loss watchdog (see :mod:`.sim_model`). Its current spe
 in-process (:attr:`SimulatedTunnel.speed_mps`) so the simulated camera can follow it.
 
 Fault injection for tests (:meth:`SimulatedTunnel.inject`): ``mute`` (the link is cut: nothing is
-processed or answered, so the watchdog trips), ``stall_mps`` (the fan cannot go faster), and
-``garbage`` (commands are executed but replies are corrupted).
+processed or answered, so the watchdog trips), ``stall_mps`` (the fan cannot go faster),
+``garbage`` (commands are executed but replies are corrupted) and ``fault`` (the controller reports
+a fault, e.g. ``OVERCURRENT``, through its fault query, as a drive's fault bit).
 """
 
 from __future__ import annotations
@@ -90,9 +91,18 @@ class SimulatedTunnel:
         with self._lock:
             return self._model.valid_commands
 
-    def inject(self, *, mute: bool | None = None, stall_mps: float | None = None, garbage: bool | None = None) -> None:
+    def inject(
+        self,
+        *,
+        mute: bool | None = None,
+        stall_mps: float | None = None,
+        garbage: bool | None = None,
+        fault: str | None = None,
+    ) -> None:
         """Switch faults on or off (arguments left ``None`` are unchanged; ``clear_faults`` resets)."""
         with self._lock:
+            if fault is not None:
+                self._model.fault = fault
             if mute is not None:
                 self._mute = mute
             if stall_mps is not None:
@@ -103,7 +113,7 @@ class SimulatedTunnel:
     def clear_faults(self) -> None:
         """Remove every injected fault."""
         with self._lock:
-            self._mute, self._garbage, self._model.stall_mps = False, False, None
+            self._mute, self._garbage, self._model.stall_mps, self._model.fault = False, False, None, None
 
     def close(self) -> None:
         """Stop the thread and close both ends of the pty (idempotent)."""

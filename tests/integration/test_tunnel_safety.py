@@ -189,3 +189,37 @@ def test_simulated_driver_from_config_exposes_the_simulator(protocol: str) -> No
 def test_safety_params_reject_a_keepalive_slower_than_half_the_watchdog() -> None:
     with pytest.raises(ValueError, match="at most half"):
         SafetyParams(keepalive_s=3.0, watchdog_s=5.0)
+
+
+def test_a_hung_owner_loop_lets_the_controllers_watchdog_stop_the_fan(sim: SimulatedTunnel) -> None:
+    params = SafetyParams(**{**SAFETY.__dict__, "loop_timeout_s": 0.3})
+    tunnel, _ = make_tunnel(sim, params)
+    with tunnel:
+        tunnel.heartbeat()  # the owner's loop reports ...
+        tunnel.set_speed_mps(5.0)
+        beat_until = time.monotonic() + 2 * SIM.watchdog_s
+        while time.monotonic() < beat_until:  # ... and while it does, the keep-alive holds the speed
+            tunnel.heartbeat()
+            time.sleep(0.05)
+        assert sim.watchdog_trips == 0 and sim.setpoint_mps == 5.0
+        # then the loop hangs: no more heartbeats, the keep-alive stops, the controller's watchdog trips
+        wait_until(lambda: sim.watchdog_trips == 1, params.loop_timeout_s + SIM.watchdog_s + 2, "the watchdog trip")
+        assert tunnel.owner_silent
+        wait_until(lambda: sim.speed_mps < 0.1, 2, "the fan stopped")
+        assert tunnel.status().link_ok  # the link itself was fine all along
+
+
+def test_a_controller_fault_is_read_through_the_protocol_and_spoils_a_point(sim: SimulatedTunnel) -> None:
+    from flagtrack.daemon.services.supervisor.validity import TunnelWatch
+
+    tunnel, _ = make_tunnel(sim)
+    with tunnel:
+        tunnel.set_speed_mps(5.0)
+        watch = TunnelWatch(5.0, SAFETY.tolerance_mps, grace_s=1.0)
+        status = tunnel.status()
+        assert status.fault is None and watch.check(status.speed_mps, status.fault, status.link_ok, 0.0) is None
+        sim.inject(fault="OVERCURRENT")
+        status = tunnel.status()
+        expected = "OVERCURRENT" if sim.params.protocol == "ascii" else "fault code 2"
+        assert expected in (status.fault or "")
+        assert "tunnel fault" in watch.check(status.speed_mps, status.fault, status.link_ok, 0.1)

@@ -66,7 +66,7 @@ def test_the_summary_writes_a_readme_and_a_run_json_that_describe_the_folder(tmp
     assert run["format"] == "flagtrack-sweep-run" and run["format_version"] == 1 and run["written_by"] == __version__
     assert run["command"] == "flagtrack sweep -c rig.yaml" and run["status"] == "finished"
     assert (run["onset_mps"], run["decay_mps"]) == transition_speeds(points) == (5.0, 4.0)
-    assert run["counts"] == {"planned": 5, "done": 5, "failed": 0}
+    assert run["counts"] == {"planned": 5, "done": 5, "failed": 0, "lossy": 0}
     assert (
         [p["point_id"] for p in run["points"]]
         == [p.point_id for p in PLAN]

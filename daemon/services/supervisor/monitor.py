@@ -75,6 +75,7 @@ class BusMonitor:
         self.rate_hz = float("nan")
         self.collection: Collection | None = None
         self.recorder_replies: dict[str, RecorderStatus] = {}
+        self.recorder_error = ""  # the recorder's last unprompted error (a full disk), "" when none
         self.seen: set[str] = set()
 
     @property
@@ -109,11 +110,19 @@ class BusMonitor:
             if self.collection is not None:
                 self.collection.sensor.append(samples)
         while (status := self.recorder.recv(timeout_s=0)) is not None:
-            if status.request_id:
-                self.recorder_replies[status.request_id] = status
-                while len(self.recorder_replies) > MAX_REPLIES:
-                    del self.recorder_replies[next(iter(self.recorder_replies))]
+            self._recorder_status(status)
         self.problems.flush()
+
+    def _recorder_status(self, status: RecorderStatus) -> None:
+        """Keep a reply for whoever asked; note an unprompted error (a full disk)."""
+        if status.state == "error" and not status.request_id:
+            self.recorder_error = status.message or "error"
+        elif status.state == "recording":
+            self.recorder_error = ""
+        if status.request_id:
+            self.recorder_replies[status.request_id] = status
+            while len(self.recorder_replies) > MAX_REPLIES:
+                del self.recorder_replies[next(iter(self.recorder_replies))]
 
     def _unusable(self, kind: str, detail: str) -> None:
         self.unusable += 1

@@ -68,6 +68,15 @@ class SupervisorConfig:
         exit_when_done: end the service (and ``flagtrack up``) when the sweep or loop ends.
         suspect_lost_fraction: a point whose updates are lost more often than this is marked
             ``suspect`` (run log, summary CSV, figure).
+        readback_grace_s: during a point's settle and record, how long the tunnel's readback may stay
+            out of ``tunnel.safety.tolerance_mps`` (or its link silent) before the point fails, s.
+        expected_rate_mev_s: event rate a point is expected to record at, Mev/s (free-space check).
+        bytes_per_event: bytes one event takes in a recording (free-space check).
+        free_space_margin_mb: free space kept beyond a point's expected size, MB.
+        resume_interrupted: on start in sweep mode, decide from the run folders (restart means
+            resume: an interrupted run is resumed, a stopped or finished one held, never a new
+            sweep on its own; :mod:`~flagtrack.daemon.sweep.restart`). ``flagtrack sweep -c``
+            turns it off (a person starts a new run there).
     """
 
     mode: Literal["monitor", "sweep", "feedback"] = "monitor"
@@ -83,6 +92,11 @@ class SupervisorConfig:
     recorder_timeout_s: float = 10.0
     exit_when_done: bool = True
     suspect_lost_fraction: float = 0.05
+    readback_grace_s: float = 1.0
+    expected_rate_mev_s: float = 5.0
+    bytes_per_event: float = 2.0
+    free_space_margin_mb: float = 50.0
+    resume_interrupted: bool = True
 
     def __post_init__(self) -> None:
         if self.mode == "sweep" and self.sweep is None:
@@ -91,3 +105,7 @@ class SupervisorConfig:
             raise ValueError("silence_timeout_s and publish_interval_s must be positive")
         if not 0 <= self.suspect_lost_fraction <= 1:
             raise ValueError(f"suspect_lost_fraction must be in [0, 1], got {self.suspect_lost_fraction}")
+        if min(self.readback_grace_s, self.expected_rate_mev_s, self.bytes_per_event, self.free_space_margin_mb) < 0:
+            raise ValueError(
+                "readback_grace_s, expected_rate_mev_s, bytes_per_event, free_space_margin_mb must be >= 0"
+            )

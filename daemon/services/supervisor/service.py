@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import logging
 import math
+import os
+import shutil
 import threading
 import time
 import uuid
@@ -21,16 +23,25 @@ from typing import Any
 
 import numpy as np
 
-from flagtrack.daemon.errors import DriverError, FlagtrackError
+from flagtrack.daemon.errors import ConfigError, DriverError, FlagtrackError
 from flagtrack.daemon.schema import RecorderCommand, SupervisorState, TunnelState
 from flagtrack.daemon.services.supervisor.analysis import point_metrics
 from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step, measured_amplitude
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor, point_state
 from flagtrack.daemon.services.supervisor.section import SupervisorConfig
+from flagtrack.daemon.services.supervisor.validity import (
+    BadPoint,
+    TunnelWatch,
+    expected_point_bytes,
+    free_space_problem,
+    recording_problem,
+)
 from flagtrack.daemon.sweep.actions import ActionOutcome, PauseAction, parse_action, run_command
-from flagtrack.daemon.sweep.plan import Action, EndPoint, Point, Record, SetSpeed, Wait, plan_points, sweep_plan
+from flagtrack.daemon.sweep.plan import Action, EndPoint, Point, Record, SetSpeed, Step, Wait, plan_points, sweep_plan
 from flagtrack.daemon.sweep.progress import SweepProgress, is_suspect
+from flagtrack.daemon.sweep.restart import start_decision
 from flagtrack.daemon.sweep.runfiles import command_line
+from flagtrack.daemon.sweep.runlock import RunLock
 from flagtrack.daemon.sweep.runlog import POINTS_DIR, PointResult, RunLog, completed_points, point_paths, stored_sweep
 from flagtrack.daemon.sweep.summary import write_summary
 from flagtrack.daemon.transport import Bus
@@ -92,6 +103,12 @@ class SupervisorService:
         self.progress: SweepProgress | None = None
         self._observers: list[Callable[[SupervisorState], None]] = []
         self._observer_failed = False
+        self._current_point: Point | None = None
+        self._run_lock: RunLock | None = None
+        self._earlier_points: list[PointResult] = []  # a resumed run's points before this session
+        self._watch: TunnelWatch | None = None  # set during a point's settle and record
+        self._tunnel_problem: str | None = None
+        self._readbacks: list[float] | None = None  # the tunnel's readbacks while a point records
 
     def add_observer(self, observer: Callable[[SupervisorState], None]) -> None:
         """Call ``observer`` with every state the supervisor publishes, in its thread (a command draws
@@ -114,6 +131,8 @@ class SupervisorService:
         reason, error = "finished", None
         try:
             self.tunnel.start()
+            if self.cfg.mode == "sweep" and self.resume_dir is None and self.cfg.resume_interrupted:
+                self._take_up_runs()
             self._wait_for_services()
             if self.cfg.mode == "sweep":
                 runlog = self._open_run()
@@ -150,7 +169,7 @@ class SupervisorService:
         self.tunnel.abort()
 
     def _safe_state(self, runlog: RunLog | None, reason: str, error: str | None) -> None:
-        self._mode = "safe"
+        self._mode, self._watch, self._point = "safe", None, ""
         try:
             self._recorder(RecorderCommand("stop", request_id=uuid.uuid4().hex), wait=False)
         except FlagtrackError as exc:
@@ -164,13 +183,23 @@ class SupervisorService:
             self._publish(force=True)
             self.tunnel.close()
             if runlog is not None:
-                runlog.stop(reason, error=error)
-                runlog.close()
-                try:
-                    write_summary(runlog.run_dir)
-                except Exception as exc:  # noqa: BLE001 - the run is recorded; the summary is a convenience
-                    log.error("supervisor: summary failed: %s", exc)
+                self._close_run(runlog, reason, error)
+            if self._run_lock is not None:
+                self._run_lock.release()
             log.info("supervisor: tunnel at zero (%s)", reason)
+
+    def _close_run(self, runlog: RunLog, reason: str, error: str | None) -> None:
+        """Write the stop record and the summary; a disk that refuses them is said in one line."""
+        try:
+            runlog.stop(reason, error=error)
+        except OSError as exc:
+            log.error("supervisor: could not write the stop record to %s: %s", runlog.path, exc.strerror or exc)
+        finally:
+            runlog.close()
+        try:
+            write_summary(runlog.run_dir)
+        except Exception as exc:  # noqa: BLE001 - the run is recorded; the summary is a convenience
+            log.error("supervisor: summary failed: %s", exc)
 
     # -- helpers ---------------------------------------------------------------------------
 
@@ -178,6 +207,7 @@ class SupervisorService:
         """Wait ``duration_s`` watching the bus; raise RunStopped on a stop request or a silent service."""
         deadline = time.monotonic() + duration_s
         while True:
+            self._heartbeat()
             self.monitor.pump()
             self._publish()
             if self._stop.is_set():
@@ -186,10 +216,30 @@ class SupervisorService:
                 problem = self.monitor.problem(self.cfg.silence_timeout_s)
                 if problem:
                     raise RunStopped(problem)
+            self._check_point()
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return
             self._stop.wait(min(0.02, remaining))
+
+    def _heartbeat(self) -> None:
+        """Tell the tunnel this loop is alive: its keep-alive stops when the loop hangs."""
+        beat = getattr(self.tunnel, "heartbeat", None)
+        if beat is not None:
+            beat()
+
+    def _check_point(self) -> None:
+        """Raise BadPoint if the point under way is spoilt: the recorder failed (the sweep stops), the
+        tunnel went silent, faulted or left its tolerance (seen in the last published status)."""
+        point = self._current_point
+        if not self._point or point is None:
+            return
+        if self.monitor.recorder_error and self._readbacks is not None:
+            reason = f"recorder: {self.monitor.recorder_error}"
+            raise BadPoint(PointResult.planned(point, status="failed", reason=reason), stop=True)
+        if self._tunnel_problem:
+            reason, self._tunnel_problem = self._tunnel_problem, None
+            raise BadPoint(PointResult.planned(point, status="failed", reason=reason))
 
     def _wait_for_services(self) -> None:
         """Wait for the required services and for the still-flag baseline of the onset detector."""
@@ -222,6 +272,7 @@ class SupervisorService:
         )
         self._state_pub.put(state)
         status = self.tunnel.status()
+        self._watch_tunnel(status)
         self._tunnel_pub.put(
             TunnelState(
                 float(status.speed_mps) if np.isfinite(status.speed_mps) else -1.0,
@@ -238,6 +289,13 @@ class SupervisorService:
                 if not self._observer_failed:
                     log.error("supervisor: a progress observer failed (%s: %s)", type(exc).__name__, exc)
                 self._observer_failed = True
+
+    def _watch_tunnel(self, status: Any) -> None:
+        """Note the readback (while recording) and any problem of the point under way."""
+        if self._readbacks is not None:
+            self._readbacks.append(status.speed_mps)
+        if self._watch is not None and self._tunnel_problem is None:
+            self._tunnel_problem = self._watch.check(status.speed_mps, status.fault, status.link_ok, time.monotonic())
 
     def _progress_fields(self, now_s: float) -> dict[str, Any]:
         """The sweep-progress fields of :class:`SupervisorState` (none outside a sweep)."""
@@ -291,12 +349,30 @@ class SupervisorService:
 
     # -- sweep -----------------------------------------------------------------------------
 
+    def _take_up_runs(self) -> None:
+        """Restart means resume: take up an interrupted run, or hold (RunStopped, tunnel to zero)."""
+        decision = start_decision(Path(self.cfg.runs_dir).expanduser(), self.cfg.run_name)
+        if decision.action == "hold":
+            raise RunStopped(decision.why)
+        if decision.action == "resume":
+            log.warning("supervisor: %s", decision.why)
+            self.resume_dir = decision.run_dir
+
+    def _lock_run(self, run_dir: Path) -> None:
+        """Own the run folder (one supervisor per run), or stop naming its holder."""
+        try:
+            self._run_lock = RunLock.acquire(run_dir, command_line())
+        except ConfigError as exc:
+            raise RunStopped(str(exc)) from None
+
     def _open_run(self) -> RunLog:
         if self.resume_dir is not None:
+            self._lock_run(self.resume_dir)
             runlog, record = RunLog.resume(self.resume_dir, command=command_line())
             self.run_dir = runlog.run_dir
             self._sweep = stored_sweep(record)
             self._done = completed_points(self.run_dir)
+            self._earlier_points = list(record.points)
             log.info("supervisor: resuming %s (%d points done)", self.run_dir, len(self._done))
             return runlog
         name = self.cfg.run_name or datetime.now().strftime("run-%Y%m%d-%H%M%S")
@@ -304,31 +380,68 @@ class SupervisorService:
         assert self.cfg.sweep is not None
         self._sweep, self._done = self.cfg.sweep, set()
         config = {**self.rig_snapshot, "sweep": _mapping(self.cfg.sweep)}
+        self._lock_run(self.run_dir)
         return RunLog.create(
             self.run_dir, run_id=name, config=config, plan=plan_points(self.cfg.sweep), command=command_line()
         )
 
     def _run_sweep(self, runlog: RunLog) -> None:
-        point: Point | None = None
-        result: PointResult | None = None
-        outcomes: list[ActionOutcome] = []
         planned_point_s = self._sweep.settle_s + self._sweep.record_s
         self.progress = SweepProgress(plan_points(self._sweep), self._done, planned_point_s, time.monotonic())
+        steps: list[Step] = []  # the steps of the point under way, from its Point to its EndPoint
         for step in sweep_plan(self._sweep, self._done):
-            if isinstance(step, Point):
-                point, result, outcomes = step, None, []
-                self._point, self._branch = step.point_id, step.branch.value
-                self.progress.start_point(step, time.monotonic())
-                log.info("supervisor: point %s", step.point_id)
+            if isinstance(step, Point) or steps:
+                steps.append(step)
+                if isinstance(step, EndPoint):
+                    self._measure(steps, runlog)
+                    steps = []
             elif isinstance(step, SetSpeed):
                 self._set_speed(step.speed_mps)
             elif isinstance(step, Wait):
                 self._idle(step.duration_s)
+        self._mode = "done"
+
+    def _measure(self, steps: list[Step], runlog: RunLog) -> None:
+        """Measure one point (its steps from Point to EndPoint); a bad point is recorded, then measured
+        again or the sweep stops safe, as the plan's ``on_bad_point`` and ``retries`` say."""
+        point = steps[0]
+        assert isinstance(point, Point)
+        retries = self._sweep.retries if self._sweep.on_bad_point == "retry" else 0
+        for attempt in range(retries + 1):
+            self._point, self._branch, self._current_point = point.point_id, point.branch.value, point
+            self._tunnel_problem = None
+            assert self.progress is not None
+            self.progress.start_point(point, time.monotonic())
+            log.info("supervisor: point %s%s", point.point_id, f" (attempt {attempt + 1})" if attempt else "")
+            self._check_free_space(point)
+            try:
+                result = self._point_steps(point, steps[1:], runlog)
+            except BadPoint as bad:
+                self._finish_point(runlog, self._set_aside(bad.result))
+                if bad.stop or attempt == retries:
+                    raise RunStopped(str(bad)) from None
+                log.warning("supervisor: %s; measuring it again", bad)
+                continue
+            finally:
+                self._watch = None
+            self._finish_point(runlog, result)
+            return
+
+    def _point_steps(self, point: Point, steps: list[Step], runlog: RunLog) -> PointResult:
+        """Run a point's steps; return its record (raise BadPoint when it was not measured as planned)."""
+        result: PointResult | None = None
+        outcomes: list[ActionOutcome] = []
+        for step in steps:
+            if isinstance(step, SetSpeed):
+                self._watch = None
+                self._set_speed(step.speed_mps)
+                self._watch = self._tunnel_watch(step.speed_mps)
+            elif isinstance(step, Wait):
+                self._idle(step.duration_s)
             elif isinstance(step, Record):
-                assert point is not None
                 result = self._record_point(point, step)
+                self._watch = None  # the analysis and the actions after the recording are not spoilt by the tunnel
             elif isinstance(step, Action):
-                assert point is not None
                 outcome = self._run_action(step, point, len(outcomes))
                 outcomes.append(outcome)
                 if outcome.required and not outcome.ok:  # the point is failed (a resumed run measures it again)
@@ -338,18 +451,72 @@ class SupervisorService:
                         error=f"required action: {outcome.summary()}",
                         actions=_summary(outcomes),
                     )
-                    runlog.point(failed)
-                    self.points_done.append(failed)
-                    self._point_finished(failed)
+                    self._finish_point(runlog, failed)
                     raise RunStopped(f"point {point.point_id}: required action {outcome.summary()}")
-            elif isinstance(step, EndPoint) and result is not None:
-                if outcomes:
-                    result = replace(result, actions=_summary(outcomes))
-                runlog.point(result)
-                self.points_done.append(result)
-                self._point = ""
-                self._point_finished(result)
-        self._mode = "done"
+        assert result is not None
+        if outcomes:
+            result = replace(result, actions=_summary(outcomes))
+        if result.status != "done":
+            raise BadPoint(result)
+        return result
+
+    def _finish_point(self, runlog: RunLog, result: PointResult) -> None:
+        runlog.point(result)
+        self.points_done.append(result)
+        self._point = ""
+        self._point_finished(result)
+
+    def _tunnel_watch(self, speed_mps: float) -> TunnelWatch:
+        params = getattr(self.tunnel, "params", None)
+        tolerance = params.tolerance_mps if params is not None else 0.2
+        return TunnelWatch(speed_mps, tolerance, self.cfg.readback_grace_s)
+
+    def _check_free_space(self, point: Point) -> None:
+        """Stop safe rather than start a point the disk cannot hold (expected size from the config and
+        from the rate this run's points, before a resume too, filled the disk at)."""
+        assert self.run_dir is not None
+        measured = [self._bytes_per_s(p) for p in (*self._earlier_points, *self.points_done)]
+        cfg = self.cfg
+        need = expected_point_bytes(
+            self._sweep.record_s, cfg.expected_rate_mev_s, cfg.bytes_per_event, max(measured, default=0.0)
+        )
+        free = shutil.disk_usage(self.run_dir).free
+        problem = free_space_problem(free, need, cfg.free_space_margin_mb * 1e6, str(self.run_dir))
+        if problem is not None:
+            raise RunStopped(f"point {point.point_id} not started: {problem}")
+
+    def _bytes_per_s(self, p: PointResult) -> float:
+        """Bytes per second a recorded point wrote (its .raw and centreline files), 0 when unknown."""
+        duration_s = p.t_stop_unix - p.t_start_unix
+        if not duration_s > 0 or self.run_dir is None:
+            return 0.0
+        files = [self.run_dir / f for f in (p.raw_file, p.centreline_file) if f]
+        return sum(f.stat().st_size for f in files if f.exists()) / duration_s
+
+    def _set_aside(self, result: PointResult) -> PointResult:
+        """Rename a bad attempt's files (``<id>.bad<N>.raw`` ...) so that measuring the point again
+        loses nothing; return its record pointing at them."""
+        assert self.run_dir is not None
+        points = self.run_dir / POINTS_DIR
+        n = 1
+        while any(points.glob(f"{result.point_id}.bad{n}.*")) or any(points.glob(f"{result.point_id}.bad{n}_*")):
+            n += 1
+        moved: dict[str, str | None] = {}
+        for old in sorted(points.glob(f"{result.point_id}[._]*")):
+            if ".bad" in old.name or ".action" in old.name:
+                continue
+            new = old.with_name(f"{result.point_id}.bad{n}{old.name[len(result.point_id) :]}")
+            try:
+                os.replace(old, new)
+            except OSError as exc:
+                log.error("supervisor: could not set %s aside: %s", old, exc)
+                continue
+            moved[str(old.relative_to(self.run_dir))] = str(new.relative_to(self.run_dir))
+        return replace(
+            result,
+            raw_file=moved.get(result.raw_file or "", result.raw_file),
+            centreline_file=moved.get(result.centreline_file or "", result.centreline_file),
+        )
 
     def _point_finished(self, result: PointResult) -> None:
         """Count the point and publish its facts at once (each finished point is in a state message)."""
@@ -384,16 +551,32 @@ class SupervisorService:
 
     def _record_point(self, point: Point, step: Record) -> PointResult:
         base = self.run_dir / "points" / point.point_id  # type: ignore[operator]
+        raw, lines = (self.run_dir / path for path in point_paths(point.point_id))  # type: ignore[operator]
         t_start = time.time()
-        self._recorder(
+        started = self._recorder(
             RecorderCommand("start", path=str(base.resolve()), centrelines=True, request_id=uuid.uuid4().hex)
         )
         self.monitor.start_collecting()
-        readbacks = []
-        end = time.monotonic() + step.duration_s
-        while time.monotonic() < end:
-            self._idle(min(0.5, max(0.0, end - time.monotonic())))
-            readbacks.append(self.tunnel.status().speed_mps)
+        self._readbacks = []
+        try:
+            self._idle(step.duration_s)
+        except BadPoint as bad:  # the recording so far is kept (and named in the point's record)
+            self.monitor.stop_collecting()
+            if not bad.stop:
+                self._recorder(RecorderCommand("stop", request_id=uuid.uuid4().hex))
+            raise BadPoint(
+                replace(
+                    bad.result,
+                    raw_file=str(raw.relative_to(self.run_dir)) if raw.exists() else None,  # type: ignore[arg-type]
+                    raw_bytes=raw.stat().st_size if raw.exists() else 0,
+                    centreline_file=str(lines.relative_to(self.run_dir)) if lines.exists() else None,  # type: ignore[arg-type]
+                    t_start_unix=t_start,
+                    t_stop_unix=time.time(),
+                ),
+                bad.stop,
+            ) from None
+        finally:
+            readbacks, self._readbacks = self._readbacks, None
         collection = self.monitor.stop_collecting()
         stopped = self._recorder(RecorderCommand("stop", request_id=uuid.uuid4().hex))
         on_hz, off_hz = self.monitor.thresholds_hz()
@@ -408,11 +591,13 @@ class SupervisorService:
                 delta_rms_std_over_l=metrics.delta_rms_std_over_l,
                 lost_fraction=metrics.lost_fraction,
             )
-        raw, lines = (self.run_dir / path for path in point_paths(point.point_id))  # type: ignore[operator]
         readback = [v for v in readbacks if np.isfinite(v)]
         sensor_fields = self._check_sensor(point, base, collection, raw, state)
+        lost = recording_problem(started, stopped)
         return PointResult.planned(
             point,
+            status="lossy" if lost else "done",
+            reason=lost,
             state=state,
             speed_readback_mps=float(np.mean(readback)) if readback else math.nan,
             amplitude_over_l=metrics.amplitude_over_l,

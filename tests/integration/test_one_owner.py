@@ -1,0 +1,79 @@
+"""One owner per tunnel and per run (issue 20): real processes, a real pseudo-terminal, real locks.
+
+A second program on a held tunnel port (`flagtrack tunnel set`, a supervisor) is refused with one
+line naming the holder and sends nothing; a second supervisor on a run folder in use is refused
+naming the holder; a killed holder frees both at once.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.sweep.runlock import LOCK_FILE, RunLock
+from flagtrack.drivers.tunnel.sim_model import SimParams
+from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
+from tests.integration.test_tunnel_cli import FLAGTRACK, rig_config, start_set
+
+
+@pytest.fixture
+def sim() -> Iterator[SimulatedTunnel]:
+    with SimulatedTunnel(SimParams(tau_s=0.05, ramp_mps2=100.0, watchdog_s=1.0)) as tunnel:
+        yield tunnel
+
+
+def test_a_second_tunnel_set_on_a_held_port_is_refused_naming_the_holder(sim: SimulatedTunnel, tmp_path: Path) -> None:
+    config = rig_config(tmp_path, sim.port)
+    holder = start_set(config, "3")
+    try:
+        commands_before = sim.valid_commands
+        second = subprocess.run(
+            [*FLAGTRACK, "tunnel", "set", "6", "-c", str(config)], capture_output=True, text=True, timeout=30
+        )
+        assert second.returncode != 0
+        lines = second.stderr.strip().splitlines()
+        assert len(lines) == 1 and "Traceback" not in second.stderr, second.stderr
+        assert f"{sim.port}: port in use, held by pid {holder.pid} (" in lines[0]
+        assert "tunnel set 3" in lines[0]
+        assert sim.setpoint_mps == 3.0  # the second one sent nothing
+        assert sim.valid_commands >= commands_before  # (the holder's keep-alives went on)
+    finally:
+        holder.send_signal(signal.SIGTERM)
+        holder.communicate(timeout=10)
+    assert sim.setpoint_mps == 0.0
+    freed = subprocess.run([*FLAGTRACK, "tunnel", "get", "-c", str(config)], capture_output=True, text=True, timeout=30)
+    assert freed.returncode == 0, freed.stderr  # the port is free again
+
+
+HOLD = """
+import sys
+from flagtrack.daemon.sweep.runlock import RunLock
+lock = RunLock.acquire(sys.argv[1], "flagtrack supervisor -c rig.yaml")
+print("locked", flush=True)
+sys.stdin.read()
+"""
+
+
+def test_a_run_folder_in_use_is_refused_naming_the_holder_and_freed_by_its_death(tmp_path: Path) -> None:
+    run_dir = tmp_path / "runs" / "run"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLD, str(run_dir)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "locked\n"
+        with pytest.raises(ConfigError) as refused:
+            RunLock.acquire(run_dir, "flagtrack sweep --resume runs/run")
+        text = str(refused.value)
+        assert f"the run is in use by pid {holder.pid} on host " in text
+        assert "(flagtrack supervisor -c rig.yaml) since " in text and "not started" in text
+    finally:
+        holder.kill()  # SIGKILL: no clean-up, the kernel drops the lock with the process
+        holder.communicate(timeout=10)
+    with RunLock.acquire(run_dir, "flagtrack sweep --resume runs/run"):
+        assert "flagtrack sweep --resume runs/run" in (run_dir / LOCK_FILE).read_text()
