@@ -17,6 +17,7 @@ from typing import Any
 
 from flagtrack.daemon import commands
 from flagtrack.daemon.commands._registry import add_subcommands, discover
+from flagtrack.daemon.core import jit_hook
 from flagtrack.daemon.errors import FlagtrackError
 from flagtrack.daemon.process import tune_process
 
@@ -86,10 +87,18 @@ def _print_warnings_as_lines(command: str) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``flagtrack`` command; return its exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    if argv == ["--version"]:  # without building every command's parser (~1 s)
+        from flagtrack.daemon import __version__
+
+        print(f"flagtrack {__version__}")
+        raise SystemExit(0)  # as argparse's version action does
     args = build_parser(_named_command(argv)).parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     tune_process()
+    from flagtrack.daemon.aot.cache import load as load_compiled_kernels
+
+    jit_hook.loader = load_compiled_kernels  # the kernels built ahead of time, if any (no numba import)
     previous = warnings.showwarning
     _print_warnings_as_lines(args.command)
     try:
