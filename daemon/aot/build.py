@@ -11,6 +11,7 @@ other argument types still goes to numba.
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import sys
 import tempfile
@@ -192,12 +193,19 @@ def _numba_version() -> str:
 
 
 def _kernel_sources() -> list[str]:
-    """Every .py file of the folders holding kernels (a kernel inlines its callees and their constants)."""
+    """The source files a build depends on: every module defining a kernel, and the flagtrack modules
+    those import (a kernel inlines its callees and the constants it reads)."""
     root = cache.package_root()
-    folders = set()
-    for kernel in jit.all_kernels():
-        module = sys.modules.get(kernel.py_func.__module__)
+    names = {kernel.py_func.__module__ for kernel in jit.all_kernels()} | {jit.__name__}
+    for name in list(names):
+        module = sys.modules.get(name)
+        source = Path(module.__file__).read_text(encoding="utf-8") if module and module.__file__ else ""
+        names |= set(re.findall(r"^\s*(?:from|import)\s+(flagtrack(?:\.\w+)+)", source, flags=re.MULTILINE))
+    files = set()
+    for name in names:
+        module = sys.modules.get(name)
         if module is not None and getattr(module, "__file__", None):
-            folders.add(Path(module.__file__).resolve().parent)  # type: ignore[arg-type]
-    folders.add(Path(jit.__file__).resolve().parent)
-    return sorted(str(p.relative_to(root)) for folder in folders for p in folder.glob("*.py"))
+            path = Path(module.__file__).resolve()  # type: ignore[arg-type]
+            if path.is_relative_to(root):
+                files.add(str(path.relative_to(root)))
+    return sorted(files)
