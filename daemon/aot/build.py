@@ -2,6 +2,7 @@
 
 The workload runs what the commands and services run before their first event and on it: the
 EVT 2.0/3.0 readers and packet codecs (bytes as read from a file and as received), the packetizer,
+the native word scan,
 the readers of .dat/.npy files, and ``reconstruct`` with both tracker methods, with and without the
 noise filter. Every signature numba compiled for it is exported (numba's own flags per kernel:
 ``nogil``, ``fastmath``, ``error_model``) into one extension module for this CPU. A call with
@@ -47,6 +48,7 @@ def run_workload(folder: Path) -> None:
     from flagtrack.daemon.tracking.section import Method, TrackingConfig
     from flagtrack.daemon.tracking.setup import tracking_setup
     from flagtrack.drivers.formats import write_events
+    from flagtrack.drivers.formats.native import NativeCutter
     from flagtrack.drivers.formats.packets import Packetizer, decode_packet
     from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
 
@@ -54,7 +56,9 @@ def run_workload(folder: Path) -> None:
     events = np.concatenate(chunks)
     for encoding in ("evt3", "evt2"):
         packetizer = Packetizer(encoding, 128, 128)
-        for packet in packetizer.push(events, t_until_us=int(events["t"][-1]) + 5000) + packetizer.flush():
+        packets = packetizer.push(events, t_until_us=int(events["t"][-1]) + 5000) + packetizer.flush()
+        cutter = NativeCutter(encoding)
+        for packet in packets + cutter.push(b"".join(p.data for p in packets)) + cutter.flush():
             decode_packet(encoding, packet.data, packet.t_offset_us)
     files = [folder / "w3.raw", folder / "w2.raw", folder / "w.npy", folder / "w.dat"]
     for path, encoding in zip(files, ("evt3", "evt2", None, None)):

@@ -168,7 +168,7 @@ class MetavisionCamera:
             data = _as_bytes(raw) if raw is not None else b""
             if data:
                 self._stall.fed()
-                return self._stream.decode(data)
+                return self._stream.take(data)
             if time.monotonic() >= deadline:
                 self._stall.check()
                 return None

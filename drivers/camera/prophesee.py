@@ -201,7 +201,7 @@ class PropheseeCamera:
             self._note_drops(status)
             if packet:
                 self._stall.fed()
-                return self._stream.decode(packet)
+                return self._stream.take(packet)
             if time.monotonic() >= deadline:
                 self._stall.check()
                 return None
