@@ -49,6 +49,23 @@ class TrackerPipeline:
         chunk = self.tracker.prepare(events)
         self._put((chunk, complete_through_us, tag))
 
+    def emit_to(self, batches: list[CentrelineBatch]) -> None:
+        """From now on, append the updates to ``batches`` (call between drains)."""
+        self._emit = lambda batch, _tag: batches.append(batch)
+
+    def abandon(self) -> None:
+        """Stop the worker after what is queued, without raising its error (the tracker is dropped)."""
+        if not self._closed:
+            self._closed = True
+            self._put(_STOP)
+            self._worker.join()
+        self._error = None
+
+    def drain(self) -> None:
+        """Wait until every chunk fed so far has been advanced and emitted; raise the worker's error."""
+        self._queue.join()
+        self._check()
+
     def finish(self, tag: Any = None) -> None:
         """End of stream: the worker emits the last updates (``Tracker.finish``) and stops."""
         self._put(("finish", None, tag))
@@ -91,12 +108,12 @@ class TrackerPipeline:
         tracker = self.tracker
         while True:
             item = self._queue.get()
-            if item is _STOP:
-                return
-            if self._error is not None:
-                continue  # drain: the caller sees the error at its next call
-            chunk, complete_through_us, tag = item
             try:
+                if item is _STOP:
+                    return
+                if self._error is not None:
+                    continue  # drain: the caller sees the error at its next call
+                chunk, complete_through_us, tag = item
                 if isinstance(chunk, PreparedChunk):
                     batch = tracker.advance(chunk, complete_through_us)
                 else:
@@ -104,3 +121,5 @@ class TrackerPipeline:
                 self._emit(batch, tag)
             except BaseException as exc:  # noqa: BLE001 - handed to the caller's thread
                 self._error = exc
+            finally:
+                self._queue.task_done()
