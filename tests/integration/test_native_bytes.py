@@ -47,6 +47,21 @@ def test_every_real_raw_recording_is_recorded_byte_for_byte(shared_real, tmp_pat
     assert recorder.current is None or recorder.current.events == len(expected.events)
 
 
+@pytest.mark.shared_data
+@pytest.mark.parametrize("name", ["expelliarmus_dat_test_NCARS.dat", "tonic_sample_ncars.dat"])
+# the AEDAT4 recordings are not here: their times are Unix-epoch us, and the recorder refuses a packet
+# time offset of more than a year of camera time (packets.MAX_OFFSET_US), re-encoded or not
+def test_real_recordings_without_a_native_encoding_are_re_encoded_and_recorded_unchanged(
+    shared_real, tmp_path, name
+) -> None:
+    source = shared_real / name
+    config = RecorderConfig(directory=tmp_path, path="rec")
+    recorder = run_rig(source, config, speed=0.0, replay={"width": 346, "height": 260})  # .dat: no size in header
+    got, expected = read_events(tmp_path / "rec.raw", strict=True), read_events(source)
+    assert recorder.finished == [tmp_path / "rec.raw"]
+    np.testing.assert_array_equal(got.events, expected.events)
+
+
 def test_packets_say_native_and_a_non_raw_source_is_re_encoded(tmp_path, shared_real_or_synthetic) -> None:
     """Native packets carry their preamble size; a .npy replay (no native encoding) is re-encoded."""
     for source, native in shared_real_or_synthetic:
