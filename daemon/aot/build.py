@@ -24,6 +24,7 @@ from typing import Any
 
 from flagtrack.daemon.aot import cache
 from flagtrack.daemon.core import jit
+from flagtrack.daemon.errors import FlagtrackError
 
 
 @dataclass(frozen=True)
@@ -167,6 +168,12 @@ def build(progress: Any = None, workload: Any = run_workload) -> BuildResult:
     compile_started = time.perf_counter()
     try:
         cc.compile()
+    except Exception as exc:  # no C compiler, a numba that pycc cannot handle, ...
+        shutil.rmtree(staging, ignore_errors=True)
+        raise FlagtrackError(
+            f"cannot compile the kernels ahead of time ({type(exc).__name__}: {exc}); "
+            "numba compiles them at first use, as without a build"
+        ) from exc
     finally:
         pycc_compiler.compile_extra = original
     compile_s = time.perf_counter() - compile_started

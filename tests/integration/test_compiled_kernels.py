@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -56,6 +57,7 @@ def _run(env: dict[str, str]) -> dict[str, str]:
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(not (shutil.which("cc") or shutil.which("gcc")), reason="numba.pycc needs a C compiler to link")
 def test_a_build_loads_without_numba_gives_the_same_bytes_and_is_ignored_when_stale(tmp_path, monkeypatch) -> None:
     monkeypatch.setenv(cache.ENV_CACHE, str(tmp_path))
     result = build(workload=packets_only)
@@ -82,3 +84,19 @@ def test_no_build_means_numba(tmp_path, monkeypatch) -> None:
     monkeypatch.setenv(cache.ENV_CACHE, str(tmp_path))
     assert cache.load() is None
     assert not np.any([p.name == cache.MANIFEST for p in tmp_path.rglob("*")])
+
+
+@pytest.mark.filterwarnings("ignore::numba.core.errors.NumbaPendingDeprecationWarning")  # numba.pycc's own
+def test_a_build_that_cannot_compile_is_one_clear_error_and_leaves_nothing(tmp_path, monkeypatch) -> None:
+    from numba.pycc import CC
+
+    from flagtrack.daemon.errors import FlagtrackError
+
+    def no_compiler(self) -> None:
+        raise OSError("no C compiler found")
+
+    monkeypatch.setenv(cache.ENV_CACHE, str(tmp_path))
+    monkeypatch.setattr(CC, "compile", no_compiler)
+    with pytest.raises(FlagtrackError, match="cannot compile the kernels ahead of time .*no C compiler found"):
+        build(workload=lambda folder: None)
+    assert list(tmp_path.rglob("*.json")) == [] and cache.load() is None
