@@ -17,6 +17,7 @@ from typing import Any
 
 from flagtrack.daemon import commands
 from flagtrack.daemon.commands._registry import add_subcommands, discover
+from flagtrack.daemon.core import jit_hook
 from flagtrack.daemon.errors import FlagtrackError
 from flagtrack.daemon.process import tune_process
 
@@ -83,17 +84,45 @@ def _print_warnings_as_lines(command: str) -> None:
     warnings.showwarning = show
 
 
+def _exit_at_once(status: int) -> None:
+    """End the process now: exit handlers run and output is flushed, but the interpreter does not
+    tear its modules and arrays down one by one (~0.15 s after a reconstruction; docs/tracking.md)."""
+    import atexit
+    import os
+
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        stream.flush()
+    os._exit(status)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``flagtrack`` command; return its exit status."""
+    """Run the ``flagtrack`` command; return its exit status.
+
+    Run as the process's own command (``argv`` None), a command module with ``EXIT_AT_ONCE = True``
+    ends the process as soon as it has succeeded (:func:`_exit_at_once`).
+    """
+    exit_now = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
+    if argv == ["--version"]:  # without building every command's parser (~1 s)
+        from flagtrack.daemon import __version__
+
+        print(f"flagtrack {__version__}")
+        raise SystemExit(0)  # as argparse's version action does
     args = build_parser(_named_command(argv)).parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     tune_process()
+    from flagtrack.daemon.aot.cache import load as load_compiled_kernels
+
+    jit_hook.loader = load_compiled_kernels  # the kernels built ahead of time, if any (no numba import)
     previous = warnings.showwarning
     _print_warnings_as_lines(args.command)
     try:
-        return int(args.run(args) or 0)
+        status = int(args.run(args) or 0)
+        if exit_now and getattr(sys.modules.get(args.run.__module__), "EXIT_AT_ONCE", False):
+            _exit_at_once(status)
+        return status
     except FlagtrackError as exc:
         print(f"flagtrack {args.command}: error: {exc}", file=sys.stderr)
         return 2

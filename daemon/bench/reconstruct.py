@@ -1,9 +1,11 @@
 """``flagtrack bench reconstruct``: events per second of the whole ``flagtrack reconstruct`` command.
 
 Makes (once, cached) an EVT 3.0 recording of a flapping line (``drivers/sim/quickline``,
-``WavyFlag`` L = 200 px at 20 Hz, about 6 Mev/s of camera data), then, pinned to one core:
+``WavyFlag`` L = 200 px at 20 Hz, about 6 Mev/s of camera data), then, pinned to one core (the
+command tracks on two threads: ``--all-cores`` lets them use two):
 
-- runs the command once to warm up (numba cache, .pyc files);
+- runs the command once to warm up (numba cache, .pyc files; the kernels built by ``flagtrack kernels
+  build`` are used when there is a build: see the "kernels" line);
 - times the real command end to end in a subprocess (interpreter start, imports, loading the
   compiled kernels, decoding, tracking, HDF5 writing), best of ``--repeat``, with its peak RSS;
 - times the same command on a 0.1 s file: the fixed start-up cost;
@@ -142,6 +144,13 @@ def _core(path: Path, method: str, max_events: int, repeat: int) -> tuple[float,
     return total / best, total
 
 
+def _kernels_state() -> str:
+    """Whether the command loads kernels compiled ahead of time (``flagtrack kernels build``) or numba's."""
+    from flagtrack.daemon.aot.cache import build_dir, read_manifest
+
+    return "compiled ahead of time" if read_manifest(build_dir()) is not None else "numba"
+
+
 def run(args: argparse.Namespace) -> int:
     """Make (or reuse) the recording, time the command and the core, print the figures."""
     cache = args.cache or Path(tempfile.gettempdir()) / "flagtrack-bench"
@@ -159,6 +168,7 @@ def run(args: argparse.Namespace) -> int:
         wall, rss, events = min(runs)
         core_rate, core_events = _core(path, args.method, args.core_events, args.repeat)
     result = {
+        "kernels": _kernels_state(),
         "file": str(path),
         "format": args.format,
         "file_bytes": path.stat().st_size,
@@ -180,6 +190,7 @@ def run(args: argparse.Namespace) -> int:
             f"recording      {events / 1e6:.1f} M events, {result['file_bytes'] / 1e6:.0f} MB ({args.format}), "
             f"method {args.method}{', one core' if pin else ''}"
         )
+        print(f"kernels        {result['kernels']}")
         print(f"command        {wall:.2f} s  {result['command_mev_s']:.1f} Mev/s end to end, peak RSS {rss:.0f} MB")
         print(f"start-up       {startup:.2f} s (same command on 0.1 s of data)")
         print(f"steady         {result['steady_mev_s']:.1f} Mev/s (command minus start-up)")

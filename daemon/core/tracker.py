@@ -111,6 +111,27 @@ class _Buffer:
             self.n = keep
 
 
+@dataclass(frozen=True)
+class PreparedChunk:
+    """A chunk denoised and mapped by :meth:`Tracker.prepare`, for :meth:`Tracker.advance`.
+
+    Attributes:
+        t, x, y: (n_kept,) the kept events (µs; tracking-plane coordinates).
+        n_in: events of the chunk before denoising.
+        first_t_us: the chunk's first event time (None when empty).
+        t_max_us: latest event time of the stream so far.
+        raw_t: the chunk's times when they are not in order (the tracker sorts them in), else None.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    n_in: int
+    first_t_us: int | None
+    t_max_us: int
+    raw_t: np.ndarray | None
+
+
 class Tracker:
     """Incremental centreline tracker (the paper's chain, optionally denoised).
 
@@ -143,6 +164,7 @@ class Tracker:
         self._buffer = _Buffer()
         self._clock: UpdateClock | None = None
         self._t_max_us = np.iinfo(np.int64).min
+        self._prepared_t_max_us = self._t_max_us  # the same, for the chunks prepare() has seen
         self._max_step_back_us = 0  # largest step back in time seen in the stream (sensor jitter)
         # a window ending within this of the last event starts at or before it (see feed)
         self._shortest_window_us = math.floor(min(seg.tau_s for seg in params.schedule.segments) * 1e6)
@@ -177,6 +199,61 @@ class Tracker:
             complete_before_us = max(complete_before_us, min(trusted_us, self._t_max_us + self._shortest_window_us))
         return self._run(complete_before_us, None)
 
+    def prepare(self, events: np.ndarray) -> PreparedChunk:
+        """First half of :meth:`feed`: denoise and map a chunk into arrays of its own.
+
+        Touches only the noise filter, the mapping and the order check, none of which
+        :meth:`advance` uses, so one thread may prepare the next chunk while another advances the
+        chain on the last: ``advance(prepare(e), h)`` returns exactly what ``feed(e, h)`` does.
+        Chunks must be prepared and advanced in the same order.
+        """
+        n_in = len(events)
+        t = np.empty(n_in, dtype=np.int64)
+        x = np.empty(n_in, dtype=np.float32)
+        y = np.empty(n_in, dtype=np.float32)
+        end, ordered, t_max = self._filter.filter_into(events, t, x, y, 0, self._prepared_t_max_us)
+        if self._mapping is not None and end > 0:
+            x[:end], y[:end] = self._mapping.map(x[:end], y[:end])
+        self._prepared_t_max_us = t_max
+        return PreparedChunk(
+            t=t[:end],
+            x=x[:end],
+            y=y[:end],
+            n_in=n_in,
+            first_t_us=int(events["t"][0]) if n_in else None,
+            t_max_us=t_max,
+            raw_t=None if ordered else np.array(events["t"]),
+        )
+
+    def advance(self, chunk: PreparedChunk, complete_through_us: int | None = None) -> CentrelineBatch:
+        """Second half of :meth:`feed`: add a prepared chunk and return the updates now complete."""
+        if self._finished:
+            raise RuntimeError("feed() after finish()")
+        if chunk.n_in:
+            stats = self.stats
+            if self._clock is None:
+                assert chunk.first_t_us is not None
+                self._clock = UpdateClock(self.params.schedule, chunk.first_t_us)
+                stats.first_t_us = chunk.first_t_us
+                self._buffer.last_dropped_t = chunk.first_t_us
+            buf, n_kept = self._buffer, len(chunk.t)
+            buf.reserve(n_kept)
+            buf.t[buf.n : buf.n + n_kept] = chunk.t
+            buf.x[buf.n : buf.n + n_kept] = chunk.x
+            buf.y[buf.n : buf.n + n_kept] = chunk.y
+            buf.n += n_kept
+            if chunk.raw_t is not None:
+                self._sort_buffer(chunk.raw_t)
+            stats.events_in += chunk.n_in
+            stats.events_kept += n_kept
+            self._t_max_us = chunk.t_max_us
+            stats.last_t_us = chunk.t_max_us
+        complete_before_us = self._t_max_us
+        if complete_through_us is not None:
+            trusted_us = int(complete_through_us) + 1 - self._max_step_back_us
+            complete_before_us = max(complete_before_us, min(trusted_us, self._t_max_us + self._shortest_window_us))
+        return self._run(complete_before_us, None)
+
     def finish(self) -> CentrelineBatch:
         """End of stream: return the remaining updates whose windows started before the last event."""
         self._finished = True
@@ -204,7 +281,7 @@ class Tracker:
             self._sort_buffer(events["t"])
         stats.events_in += n_in
         stats.events_kept += end - start
-        self._t_max_us = t_max
+        self._t_max_us = self._prepared_t_max_us = t_max
         stats.last_t_us = t_max
 
     def _sort_buffer(self, t: np.ndarray) -> None:

@@ -99,6 +99,8 @@ class EventPacket:
     ``end_of_stream`` marks the last packet of a stream (end of a replayed file). ``stream_id``
     names the stream (drawn when the camera service starts; 0 from older peers): packets of
     another id are a restarted camera, a lower ``seq`` with the same id a duplicate or late packet.
+    ``native``: ``data`` is the camera's own words (cut, not re-encoded), after ``preamble_bytes`` of
+    state words that make the packet decode alone (a recorder leaves them out; older peers: 0, False).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.EVENT_PACKET
@@ -115,6 +117,8 @@ class EventPacket:
     n_triggers: int = 0
     end_of_stream: bool = False
     stream_id: int = 0
+    preamble_bytes: int = 0
+    native: bool = False
     data: bytes = b""
 
 

@@ -1,7 +1,10 @@
 """The camera service: runs one camera adapter and publishes its stream on the bus.
 
 Publishes self-contained native-encoding event packets (about ``packet_us`` of camera time each,
-numbered), event-rate statistics every ``rate_interval_s`` of camera time, and the camera status
+numbered): an adapter that hands over the device's bytes (``CameraData.raw``) has them cut on word
+boundaries, untouched (:class:`~flagtrack.drivers.formats.native.NativeCutter`); decoded events (the
+simulated camera, .dat/.npy/.aedat4 replays, iniVation) are encoded by the packetizer. It also
+publishes event-rate statistics every ``rate_interval_s`` of camera time, and the camera status
 (with settings read back); declares its liveliness as ``camera/<id>``.
 """
 
@@ -17,6 +20,7 @@ from flagtrack.daemon.core.events import make_events
 from flagtrack.daemon.schema import CameraStatus, EventPacket, EventRate
 from flagtrack.daemon.transport import Bus, Publisher
 from flagtrack.drivers.camera.base import Camera, CameraInfo, EndOfStream
+from flagtrack.drivers.formats.native import NATIVE_ENCODINGS, NativeCutter
 from flagtrack.drivers.formats.packets import Packet, Packetizer, PacketParams
 
 log = logging.getLogger(__name__)
@@ -42,7 +46,8 @@ class CameraStreamConfig:
 
 
 class RateCounter:
-    """Events, ON events and bytes per interval of camera time."""
+    """Events, ON events and bytes per interval of camera time (counts from the packets: for native
+    bytes, from the cutter's word scan)."""
 
     def __init__(self, interval_us: int) -> None:
         self.interval_us = interval_us
@@ -51,6 +56,8 @@ class RateCounter:
 
     def add(self, packet: Packet) -> list[tuple[int, int, int, int]]:
         """Count a packet; return ``(t_end_us, events, on, bytes)`` of every interval it closes."""
+        if self._end_us is None and packet.n_events == 0:
+            return []  # the first interval starts with the first event (not a stream's leading time words)
         if self._end_us is None or packet.t_first_us >= self._end_us + self.interval_us:
             # first packet, or the stream jumped (data dropped): no rate for the gap, start afresh
             self._end_us = (packet.t_first_us // self.interval_us + 1) * self.interval_us
@@ -113,16 +120,29 @@ class CameraService:
         Packetizer(info.encoding, 1, 1).push(
             make_events([0, 1], [0, 0], [0, 0], [1, 0]), t_until_us=5000
         )  # load the encoder
+        if info.encoding in NATIVE_ENCODINGS:
+            NativeCutter(info.encoding).push(bytes(8))  # and the word scan
         rates = RateCounter(int(self.cfg.rate_interval_s * 1e6))
+        cutter: NativeCutter | None = None  # made at the first native bytes
         while not stop.is_set():
             try:
                 data = self.camera.read(self.cfg.read_timeout_s)
             except EndOfStream:
-                last = packetizer.flush() or [Packet(b"", packetizer.horizon_us, packetizer.horizon_us, 0, 0, 0, 0)]
-                self._publish(last, 0, info, events_pub, rate_pub, rates, end_of_stream=True)
+                last = (cutter.flush() if cutter is not None else []) + packetizer.flush()
+                horizon = max(packetizer.horizon_us, cutter.horizon_us if cutter is not None else -1)
+                last = last or [Packet(b"", horizon, horizon, 0, 0, 0, 0)]
+                self._publish(last, 0, info, events_pub, rate_pub, rates, end_of_stream=True, native=cutter is not None)
                 self.reached_eof = True
                 return
-            if data is not None:
+            if data is None:
+                continue
+            if data.raw is not None:  # the device's own words: cut, not decoded
+                if cutter is None:
+                    params = PacketParams(self.cfg.packet_us, self.cfg.max_packet_events)
+                    cutter = NativeCutter(info.encoding, params, info.t_offset_us)
+                packets = cutter.push(data.raw)
+                self._publish(packets, data.arrival_ns, info, events_pub, rate_pub, rates, native=True)
+            else:
                 packets = packetizer.push(data.events, data.triggers, data.t_until_us)
                 self._publish(packets, data.arrival_ns, info, events_pub, rate_pub, rates)
 
@@ -135,6 +155,7 @@ class CameraService:
         rate_pub: Publisher,
         rates: RateCounter,
         end_of_stream: bool = False,
+        native: bool = False,
     ) -> None:
         for i, packet in enumerate(packets):
             events_pub.put(
@@ -152,6 +173,8 @@ class CameraService:
                     n_triggers=packet.n_triggers,
                     end_of_stream=end_of_stream and i == len(packets) - 1,
                     stream_id=self.stream_id,
+                    preamble_bytes=packet.preamble_bytes,
+                    native=native,
                     data=packet.data,
                 )
             )

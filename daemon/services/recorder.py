@@ -239,8 +239,13 @@ class RecordingPart:
         self.sequence.follow_horizon(packet.t_last_us)
         if arrival is Arrival.GAP:
             self.gaps.append([expected, packet.seq])
-        self.raw.write(packet.data)
-        self.bytes += len(packet.data)
+        data = packet.data
+        if packet.preamble_bytes and self.packets and arrival is not Arrival.GAP:
+            # the camera's own words as it sent them: the state words that made this packet decodable
+            # alone are left out (kept at the file's start and after a gap, where they are needed)
+            data = memoryview(data)[packet.preamble_bytes :]
+        self.raw.write(data)
+        self.bytes += len(data)
         self.packets += 1
         self.events += packet.n_events
         self.first_t_us = packet.t_first_us if self.first_t_us is None else self.first_t_us

@@ -34,11 +34,17 @@ from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, TrackerStatus
 from flagtrack.daemon.services.lost_count import LostCount
 from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
+from flagtrack.daemon.tracking.pipeline import TrackerPipeline
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.formats.packets import decode_packet
 
 log = logging.getLogger(__name__)
 _NO_NS = np.zeros(0, dtype=np.int64)
+PIPELINE_MIN_PACKETS = 8
+"""Runs of at least this many packets (queued while the tracker worked) are tracked on two threads;
+shorter ones, the usual case at a moderate rate, in this one (no hand-over between threads)."""
+PIPELINE_GROUP_PACKETS = 4
+"""Packets decoded and prepared together on the way to the chain's worker."""
 
 
 @dataclass(frozen=True)
@@ -129,6 +135,7 @@ class TrackerService:
         self._pending_ns: list[np.ndarray] = []
         self._pending_since = 0.0
         self._seq_out = 0
+        self._pipeline: TrackerPipeline | None = None  # the chain's worker thread, made on first use
         self.packets_sub = bus.subscribe(
             bus.keys.camera_events(cfg.camera_id),
             EventPacket,
@@ -177,6 +184,8 @@ class TrackerService:
                     self._count_drops()
                     self.problems.flush()
         finally:
+            if self._pipeline is not None:
+                self._pipeline.abandon()
             self._publish_if_due(force=True)
             status_pub.put(self._status("stopped", window, time.monotonic(), lag_s))
             self._count_drops()
@@ -253,6 +262,9 @@ class TrackerService:
         """Decode consecutive packets as one stream (one by one if that fails) and track them."""
         if not run:
             return
+        if len(run) >= PIPELINE_MIN_PACKETS:  # packets queued up (a busy camera): both cores at work
+            self._track_run_on_two_threads(run, end_of_stream)
+            return
         try:
             chunks = self._decode(run)
         except Exception as exc:  # noqa: BLE001 - a packet must not stop the service: counted, logged
@@ -290,17 +302,56 @@ class TrackerService:
                     self.problems.add("undecodable packets", exc)
             return chunks
 
-    def _track(self, chunks: list, run: list[EventPacket], end_of_stream: bool) -> None:
+    def _track_run_on_two_threads(self, run: list[EventPacket], end_of_stream: bool) -> None:
+        """Track a long run as :meth:`_track_run` does, with the work split: this thread decodes,
+        denoises and maps groups of ``PIPELINE_GROUP_PACKETS`` packets while a worker updates the
+        chain on the group before (:class:`.TrackerPipeline`: the same updates as ``feed``)."""
+        pipeline = self._pipeline_of(self.tracker)
+        batches: list[CentrelineBatch] = []
+        pipeline.emit_to(batches)
+        groups = [run[i : i + PIPELINE_GROUP_PACKETS] for i in range(0, len(run), PIPELINE_GROUP_PACKETS)]
+        try:
+            for g, group in enumerate(groups):
+                try:
+                    chunks = self._decode(group)
+                except Exception as exc:  # noqa: BLE001 - as in _track_run: counted, logged
+                    self._failed(group, exc)
+                    continue
+                self.events += sum(len(c) for c in chunks)
+                for i, events in enumerate(chunks):
+                    last = g == len(groups) - 1 and i == len(chunks) - 1
+                    pipeline.feed(events, run[-1].t_last_us if last else None)
+            pipeline.drain()
+        except Exception as exc:  # noqa: BLE001 - the core choked on this data: a fresh tracker goes on
+            self._failed(run, exc)
+            self.tracker = self.tracker_factory()
+            batches = []
+        self._track(batches, run, end_of_stream, advanced=True)
+
+    def _pipeline_of(self, tracker: Any) -> TrackerPipeline:
+        """The worker of ``tracker`` (a new tracker, after a restart or a failure, gets a new one)."""
+        if self._pipeline is None or self._pipeline.tracker is not tracker:
+            if self._pipeline is not None:
+                self._pipeline.abandon()
+            self._pipeline = TrackerPipeline(tracker, lambda batch, _tag: None)
+        return self._pipeline
+
+    def _track(self, chunks: list, run: list[EventPacket], end_of_stream: bool, advanced: bool = False) -> None:
         """Feed the decoded chunks (the last with the run's horizon: the camera says every event up
-        to it has come, so the windows ending there are complete now) and queue the updates."""
+        to it has come, so the windows ending there are complete now) and queue the updates;
+        ``advanced``: ``chunks`` are the updates already (tracked on two threads)."""
         tracker = self.tracker
         batch: CentrelineBatch | None = None
         source_ns = _NO_NS
         try:
-            batches = [
-                tracker.feed(events, run[-1].t_last_us if i == len(chunks) - 1 else None)
-                for i, events in enumerate(chunks)
-            ]
+            batches = (
+                chunks
+                if advanced
+                else [
+                    tracker.feed(events, run[-1].t_last_us if i == len(chunks) - 1 else None)
+                    for i, events in enumerate(chunks)
+                ]
+            )
             if end_of_stream:
                 batches.append(tracker.finish())
             if batches:

@@ -18,6 +18,8 @@ class CameraInfo:
         encoding: native stream encoding (``evt3`` or ``evt2``).
         serial: device serial number or source file.
         settings: settings as read back from the device (biases, ROI, rate limiter, trigger, ...).
+        t_offset_us: time the native bytes' times start from (a replayed flagtrack file's
+            ``% t_offset_us``, whole time loops; 0 for a device).
     """
 
     adapter: str
@@ -26,24 +28,28 @@ class CameraInfo:
     encoding: str
     serial: str = ""
     settings: dict[str, Any] = field(default_factory=dict)
+    t_offset_us: int = 0
 
 
 @dataclass(frozen=True)
 class CameraData:
-    """A piece of the camera's stream, decoded (adapters decode to packetise and count).
+    """A piece of the camera's stream: the device's own bytes (``raw``) or decoded events.
 
     Attributes:
-        events: EVENT_DTYPE array, camera time order.
+        events: EVENT_DTYPE array, camera time order (empty when ``raw`` is given).
         triggers: TRIGGER_DTYPE array.
         arrival_ns: wall-clock time (ns) the data reached the adapter.
         t_until_us: the stream is complete before this camera time (every event with an earlier time
             has been delivered), or None if the camera cannot say.
+        raw: the device's bytes in its native encoding (``CameraInfo.encoding``, evt3 or evt2), as
+            received: the service cuts them into packets without decoding them.
     """
 
     events: np.ndarray
     triggers: np.ndarray
     arrival_ns: int
     t_until_us: int | None = None
+    raw: bytes | None = None
 
 
 class EndOfStream(Exception):

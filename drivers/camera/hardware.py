@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from flagtrack.daemon.core.events import empty_events, empty_triggers
 from flagtrack.daemon.errors import ConfigError, DriverError
 from flagtrack.drivers.camera.base import CameraData
 from flagtrack.drivers.formats import make_decoder
@@ -30,6 +31,7 @@ KEY = "camera.hardware"
 """Dotted prefix of the hardware settings in a rig config (errors name ``camera.hardware.<key>``)."""
 
 PUBLISHED_ENCODING = {"evt3": "evt3", "evt2": "evt2", "evt21": "evt2"}
+_NO_EVENTS, _NO_TRIGGERS = empty_events(), empty_triggers()
 """Encoding of our packets for a device encoding: the packetizer writes EVT 2.0 or EVT 3.0 only."""
 
 
@@ -107,9 +109,8 @@ def sdk_version(distribution: str, module: ModuleType) -> str:
 
 
 class RawStream:
-    """Decodes a device's raw EVT byte stream, cut anywhere, into :class:`CameraData`.
-
-    Corrupt words are skipped and counted (``faults``) instead of stopping the camera.
+    """A device's raw EVT byte stream, cut anywhere, as :class:`CameraData`: the bytes themselves
+    (EVT 3.0/2.0) or, for EVT 2.1, decoded (corrupt words skipped and counted in ``faults``).
 
     Args:
         encoding: the device's encoding (``evt3``, ``evt2`` or ``evt21``).
@@ -133,10 +134,13 @@ class RawStream:
         """Corrupt words skipped so far."""
         return self.decoder.faults
 
-    def decode(self, data: bytes | bytearray | memoryview) -> CameraData:
-        """Decode the next bytes (any length) into events and triggers."""
+    def take(self, data: bytes | bytearray | memoryview) -> CameraData:
+        """The next bytes (any length): handed over as they are in EVT 3.0/2.0 (the camera service cuts
+        them into packets), decoded into events and triggers in EVT 2.1 (published as EVT 2.0)."""
         arrival_ns = time.time_ns()
         self.bytes += len(data)
+        if self.published == self.encoding:
+            return CameraData(_NO_EVENTS, _NO_TRIGGERS, arrival_ns, raw=bytes(data))
         events, triggers = self.decoder.decode(data)
         return CameraData(events, triggers, arrival_ns)
 

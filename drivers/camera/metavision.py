@@ -3,7 +3,8 @@
 OpenEB is not on PyPI: it is built from source or installed with Prophesee's Metavision SDK, and
 brings the camera plugins (EVK4, EVK3, SilkyEvCam through CenturyArks' plugin, ...). The camera
 is opened with ``DeviceDiscovery.open``; the raw buffers of its events stream (EVT 3.0, 2.0 or
-2.1, as ``get_current_data_encoding_format`` says) are decoded by our decoders. Biases, ROI,
+2.1, as ``get_current_data_encoding_format`` says) are handed to the camera service as they are
+(EVT 3.0/2.0: it cuts them into packets) or decoded by our decoders (EVT 2.1). Biases, ROI,
 event rate controller (ERC) and trigger input come from ``camera.hardware`` and are read back
 from the device where the bindings can (``get_all_biases``, ``get_cd_event_rate``, ``is_enabled``).
 Written for OpenEB 4.x/5.x; facilities or methods an older binding lacks are skipped in read-back.
@@ -168,7 +169,7 @@ class MetavisionCamera:
             data = _as_bytes(raw) if raw is not None else b""
             if data:
                 self._stall.fed()
-                return self._stream.decode(data)
+                return self._stream.take(data)
             if time.monotonic() >= deadline:
                 self._stall.check()
                 return None

@@ -1,8 +1,8 @@
 """Prophesee-sensor cameras (EVK4, EVK3 HD, CenturyArks SilkyEvCam VGA, ...) through ``neuromorphic-drivers``.
 
 neuromorphic-drivers (PyPI, ``pip install 'flagtrack[prophesee]'``) talks USB directly (no
-OpenEB needed). The camera is opened in raw mode: it yields the sensor's EVT 3.0 bytes, which we
-decode ourselves. Biases, ROI (row/column masks), the rate limiter and the external trigger
+OpenEB needed). The camera is opened in raw mode: it yields the sensor's EVT 3.0 bytes, which are
+handed to the camera service as they are (it cuts them into packets: docs/formats.md). Biases, ROI (row/column masks), the rate limiter and the external trigger
 input come from ``camera.hardware`` of the rig config and are applied with
 ``update_configuration``; the library cannot read registers back, so the settings reported in
 :class:`CameraInfo` are the ones applied, after clamping each bias to the bounds the device
@@ -201,7 +201,7 @@ class PropheseeCamera:
             self._note_drops(status)
             if packet:
                 self._stall.fed()
-                return self._stream.decode(packet)
+                return self._stream.take(packet)
             if time.monotonic() >= deadline:
                 self._stall.check()
                 return None

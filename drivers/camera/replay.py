@@ -7,6 +7,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -14,7 +15,10 @@ from flagtrack.daemon.core.events import empty_events, empty_triggers
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.camera.base import CameraData, CameraInfo, EndOfStream
 from flagtrack.drivers.formats import open_events
-from flagtrack.drivers.formats.packets import slot_table
+from flagtrack.drivers.formats.codec import LOOP_US
+from flagtrack.drivers.formats.native import NativeCutter
+from flagtrack.drivers.formats.packets import PacketParams, slot_table
+from flagtrack.drivers.formats.raw_file import RawReader
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +36,8 @@ class ReplayConfig:
         slice_us: camera time handed over per read (pacing granularity).
         encoding: stream encoding to publish (default: the file's own EVT encoding, else evt3).
         width, height: sensor size when the file does not say.
+        native: hand a RAW file's bytes over as they are, as the device would (EVT 3.0/2.0 replayed
+            once in its own encoding); False: decode them into events (the camera service re-encodes).
     """
 
     path: Path
@@ -41,6 +47,7 @@ class ReplayConfig:
     encoding: str | None = None
     width: int | None = None
     height: int | None = None
+    native: bool = True
 
     def __post_init__(self) -> None:
         if self.speed < 0:
@@ -54,11 +61,19 @@ class ReplayConfig:
 
 
 class ReplayCamera:
-    """A :class:`~flagtrack.drivers.camera.base.Camera` reading a file."""
+    """A :class:`~flagtrack.drivers.camera.base.Camera` reading a file.
+
+    A RAW file in EVT 3.0 or 2.0, replayed once in its own encoding, is handed over as the device
+    would: its bytes as they are (``CameraData.raw``; paced by a word scan of their times). Other
+    files, loops and other encodings are decoded and handed over as events.
+    """
 
     def __init__(self, cfg: ReplayConfig) -> None:
         self.cfg = cfg
         self._slices: Iterator[tuple[np.ndarray, np.ndarray, int]] | None = None
+        self.native = False
+        self.t_offset_us = 0  # a native file's % t_offset_us (its times start there)
+        self._body_offset = 0
         self._pending: tuple[np.ndarray, np.ndarray, int] | None = None
         self._wall0 = 0.0
         self._t0_us: int | None = None
@@ -74,7 +89,12 @@ class ReplayCamera:
                 "the file does not give the sensor size: set camera.replay.width and height", device=str(path)
             )
         encoding = self.cfg.encoding or (info.encoding if info.encoding in ("evt2", "evt3") else "evt3")
-        self._slices = self._loop_slices(path)
+        self.native = self.cfg.native and info.format == "raw" and info.encoding == encoding and not self.cfg.loop
+        if self.native:
+            with RawReader(path) as raw:
+                self.t_offset_us, self._body_offset = raw.layout.t_offset_us, raw.body_offset
+            self.native = self.t_offset_us % LOOP_US[encoding] == 0  # packets' offsets are whole loops
+        self._slices = self._native_slices(path, encoding) if self.native else self._loop_slices(path)
         self._wall0 = time.monotonic()
         return CameraInfo(
             "replay",
@@ -82,7 +102,13 @@ class ReplayCamera:
             int(height),
             encoding,
             serial=str(path),
-            settings={"speed": self.cfg.speed, "loop": self.cfg.loop, "source_format": info.format},
+            t_offset_us=self.t_offset_us if self.native else 0,
+            settings={
+                "speed": self.cfg.speed,
+                "loop": self.cfg.loop,
+                "source_format": info.format,
+                "native_bytes": self.native,
+            },
         )
 
     def read(self, timeout_s: float) -> CameraData | None:
@@ -93,7 +119,7 @@ class ReplayCamera:
             if self._pending is None:
                 raise EndOfStream(str(self.cfg.path))
         events, triggers, t_until = self._pending
-        if self.cfg.speed > 0:
+        if self.cfg.speed > 0 and t_until >= 0:
             if self._t0_us is None:
                 self._t0_us = t_until - self.cfg.slice_us
                 self._wall0 = time.monotonic()
@@ -105,10 +131,32 @@ class ReplayCamera:
             if wait > 0:
                 time.sleep(wait)
         self._pending = None
+        if self.native:  # events holds the file's bytes
+            until = t_until if t_until >= 0 else None
+            return CameraData(empty_events(), empty_triggers(), time.time_ns(), t_until_us=until, raw=events)
         return CameraData(events, triggers, time.time_ns(), t_until_us=t_until)
 
     def close(self) -> None:
         self._slices = None
+
+    def _native_slices(self, path: Path, encoding: str) -> Iterator[tuple[Any, np.ndarray, int]]:
+        """(bytes, no triggers, t_until_us) of the file's body as read (as fast as possible) or per
+        ``slice_us`` of camera time (paced; cut by a word scan, nothing decoded)."""
+        body_offset = self._body_offset
+        params = PacketParams(self.cfg.slice_us, 1 << 40)
+        cutter = NativeCutter(encoding, params, self.t_offset_us) if self.cfg.speed > 0 else None
+        no_triggers = empty_triggers()
+        with path.open("rb") as f:
+            f.seek(body_offset)
+            while block := f.read(_READ_CHUNK_BYTES):
+                if cutter is None:
+                    yield block, no_triggers, -1
+                    continue
+                for piece in cutter.push(block):
+                    yield piece.data[piece.preamble_bytes :], no_triggers, piece.t_last_us + 1
+            if cutter is not None:
+                for piece in cutter.flush():
+                    yield piece.data[piece.preamble_bytes :], no_triggers, piece.t_last_us + 1
 
     def _loop_slices(self, path: Path) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
         shift = 0

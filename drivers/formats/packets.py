@@ -50,6 +50,7 @@ class Packet:
     n_on: int
     n_triggers: int
     t_offset_us: int  # the loop start subtracted by this packet's encoder
+    preamble_bytes: int = 0  # state words before the camera's own (native packets, drivers/formats/native.py)
 
 
 class Packetizer:

@@ -47,8 +47,13 @@ def wait_subscribed(bus: Bus, *keys: str, timeout_s: float = 10.0) -> None:
 def read_until(
     camera: Camera, done: Callable[[], bool], timeout_s: float = 20.0, read_timeout_s: float = 0.01
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Read until ``done()`` and a read returns None; return (events, triggers, number of non-empty reads)."""
+    """Read until ``done()`` and a read returns None; return (events, triggers, number of non-empty reads).
+
+    An adapter that hands over the device's own bytes (``CameraData.raw``: EVT 3.0/2.0) has them
+    decoded here, in one stream, as the tracker decodes its packets.
+    """
     events, triggers, reads = [empty_events()], [empty_triggers()], 0
+    decoder = None
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         data = camera.read(read_timeout_s)
@@ -57,6 +62,15 @@ def read_until(
                 break
             continue
         reads += 1
+        if data.raw is not None:
+            if decoder is None:
+                from flagtrack.drivers.formats import make_decoder
+
+                decoder = make_decoder(camera._stream.published, strict=True)  # type: ignore[attr-defined]
+            decoded_events, decoded_triggers = decoder.decode(data.raw)
+            events.append(decoded_events)
+            triggers.append(decoded_triggers)
+            continue
         events.append(data.events)
         triggers.append(data.triggers)
     else:

@@ -93,7 +93,7 @@ def test_replay_paces_at_real_time(tmp_path: Path) -> None:
     events = np.concatenate(list(line_events(WavyFlag(), 0, 300_000, 640, 480)))
     path = tmp_path / "paced.raw"
     write_events(path, events, width=640, height=480, encoding="evt3")
-    camera = ReplayCamera(ReplayConfig(path, speed=2.0))
+    camera = ReplayCamera(ReplayConfig(path, speed=2.0, native=False))  # decoded slices
     camera.open()
     start = time.monotonic()
     n = 0

@@ -43,7 +43,7 @@ def data_bytes(path: Path) -> int:
     return len(data) - end
 
 
-def run_rig(source: Path, rec_cfg: RecorderConfig, speed: float, during=None) -> RecorderService:
+def run_rig(source: Path, rec_cfg: RecorderConfig, speed: float, during=None, replay=None) -> RecorderService:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with (
         Bus(BusConfig(namespace="flagtrack/rec", listen=(endpoint,))) as rec_bus,
@@ -54,7 +54,8 @@ def run_rig(source: Path, rec_cfg: RecorderConfig, speed: float, during=None) ->
         thread = threading.Thread(target=recorder.run, args=(stop,))
         thread.start()
         wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"), cam_bus.keys.recorder_command())
-        camera = CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(ReplayConfig(source, speed=speed)))
+        replay_cfg = ReplayConfig(source, speed=speed, **(replay or {}))
+        camera = CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(replay_cfg))
         cam_thread = threading.Thread(target=camera.run, args=(threading.Event(),))
         cam_thread.start()
         if during is not None:

@@ -14,7 +14,7 @@ import pytest
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.tracker import Tracker
-from flagtrack.daemon.schema import CentrelineMessage, TrackerStatus
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, TrackerStatus
 from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
 from flagtrack.daemon.services.tracker import TrackerService, TrackerServiceConfig
 from flagtrack.daemon.tracking.section import TrackingConfig
@@ -438,3 +438,59 @@ def test_a_packet_whose_time_offset_is_loops_off_is_dropped_not_tracked(tmp_path
     got = CentrelineBatch.concatenate([m.batch() for m in messages])
     want = offline(path, CONFIG)
     assert abs(len(got) - len(want)) <= 4 and got.t_s.max() < 0.061
+
+
+def test_a_run_of_queued_packets_on_two_threads_gives_the_updates_of_one(tmp_path: Path, monkeypatch) -> None:
+    """Under load (packets queued up) the service decodes and prepares on its thread while a worker
+    updates the chain; the updates are exactly those of tracking the run on one thread."""
+    from flagtrack.daemon.services import tracker as tracker_service
+    from flagtrack.drivers.formats import parse_raw_header
+    from flagtrack.drivers.formats.native import NativeCutter
+
+    events = np.concatenate(list(line_events(FLAG, 0, 60_000, 640, 480, QuickLineParams(), seed=2)))
+    path = tmp_path / "run.raw"
+    write_events(path, events, width=640, height=480, encoding="evt3")
+    data = path.read_bytes()
+    cutter = NativeCutter("evt3")
+    cut = cutter.push(data[parse_raw_header(data)[1] :]) + cutter.flush()
+    packets = [
+        EventPacket(
+            "cam0",
+            i,
+            p.t_first_us,
+            p.t_last_us,
+            p.n_events,
+            640,
+            480,
+            "evt3",
+            i,
+            p.t_offset_us,
+            end_of_stream=i == len(cut) - 1,
+            stream_id=1,
+            preamble_bytes=p.preamble_bytes,
+            native=True,
+            data=p.data,
+        )  # fmt: skip
+        for i, p in enumerate(cut)
+    ]
+    params = CONFIG.tracker_params()
+
+    def tracked(min_packets: int) -> CentrelineBatch:
+        monkeypatch.setattr(tracker_service, "PIPELINE_MIN_PACKETS", min_packets)
+        with Bus(BusConfig(namespace="flagtrack/two")) as bus:
+            config = TrackerServiceConfig(batch_updates=1 << 30)
+            service = TrackerService(bus, config, lambda: Tracker(params, sensor_size=(640, 480)))
+            service._lines_pub = bus.publisher(bus.keys.centrelines())
+            added: list[CentrelineBatch] = []
+            queue_updates = service._add
+            monkeypatch.setattr(service, "_add", lambda batch, ns: [added.append(batch), queue_updates(batch, ns)])
+            for start in range(0, len(packets), 32):  # as the service takes them: up to max_coalesce at once
+                service.handle(packets[start : start + 32])
+            assert service.events == len(events) and service.undecodable_packets == 0
+            return CentrelineBatch.concatenate(added)
+
+    two_threads, one_thread = tracked(8), tracked(1 << 30)
+    assert len(two_threads) == len(one_thread) > 100
+    for name in ("t_s", "x", "y", "joints_x", "joints_y", "delta_rms", "n_events"):
+        np.testing.assert_array_equal(getattr(two_threads, name), getattr(one_thread, name), err_msg=name)
+    np.testing.assert_allclose(two_threads.x, offline(path, CONFIG).x, atol=1e-9)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -58,3 +59,11 @@ def test_command_start_up_leaves_yaml_and_package_metadata_unimported() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_kernels_status_names_the_cache_folder_and_says_when_there_is_no_build(tmp_path, monkeypatch, capsys) -> None:
+    monkeypatch.setenv("FLAGTRACK_KERNEL_CACHE", str(tmp_path))
+    assert cli.main(["kernels", "status", "--json"]) == 0
+    status = json.loads(capsys.readouterr().out)
+    assert status["usable"] is False and status["exports"] == 0
+    assert status["folder"].startswith(str(tmp_path))

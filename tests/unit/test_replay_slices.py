@@ -14,7 +14,7 @@ from flagtrack.drivers.formats import read_events, write_events
 
 
 def slices(path: Path, slice_us: int) -> list[tuple[np.ndarray, np.ndarray, int]]:
-    camera = ReplayCamera(ReplayConfig(path, speed=1e9, slice_us=slice_us))  # paced, but no waiting
+    camera = ReplayCamera(ReplayConfig(path, speed=1e9, slice_us=slice_us, native=False))  # paced, no waiting
     camera.open()
     out = []
     while True:

@@ -55,3 +55,13 @@ def test_a_missing_required_field_is_still_an_error() -> None:
     broken = _rewrite(encode(status), edit=lambda meta: meta.pop("packets"))
     with pytest.raises(SchemaError, match="packets"):
         decode(broken, TrackerStatus)
+
+
+def test_native_packets_carry_their_preamble_and_older_packets_decode_as_re_encoded() -> None:
+    packet = EventPacket(
+        "cam0", 3, 10, 999, 5, 640, 480, "evt3", 123, preamble_bytes=4, native=True, data=b"\x00\x80" * 4
+    )
+    assert decode(encode(packet), EventPacket) == packet
+    older = _rewrite(encode(packet), edit=lambda meta: [meta.pop("preamble_bytes"), meta.pop("native")])
+    got = decode(older, EventPacket)  # a peer of before native packets: every byte is the packet's own
+    assert (got.preamble_bytes, got.native, got.data) == (0, False, packet.data)
