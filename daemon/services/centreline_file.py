@@ -9,6 +9,7 @@ from typing import Any
 
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage
+from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.formats.centreline import CentrelineShapeError, CentrelineSink
 
@@ -49,6 +50,7 @@ class CentrelineFileService:
         sink = CentrelineSink(self.path, self.attrs, flush_interval_s=self.write_interval_s)
         try:
             while not stop.is_set():
+                beat(self.name, f"{self.updates} updates written, {self.rejected} rejected")
                 msg = self.subscription.recv(timeout_s=0.05)
                 if msg is not None:
                     try:

@@ -50,6 +50,7 @@ from flagtrack.daemon import __version__
 from flagtrack.daemon.errors import FormatError, SchemaError
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, RecorderCommand, RecorderStatus, decode
+from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.formats import raw_header
@@ -382,6 +383,7 @@ class RecorderService:
             self.start(self.cfg.path, self.cfg.centrelines)
         try:
             while not stop.is_set():
+                beat(self.name, self._beat_status())
                 command = commands.recv(timeout_s=0)
                 if command is not None:
                     self.handle(command)
@@ -414,6 +416,10 @@ class RecorderService:
         finally:
             self.stop_recording()
             self.problems.flush(force=True)
+
+    def _beat_status(self) -> str:
+        where = self.current.raw_path.name if self.current is not None else "idle"
+        return f"{where}, {self.lost_packets} packets lost"
 
     def handle(self, command: RecorderCommand, origin: str = "") -> None:
         """Carry out a start / stop / rotate command and publish the resulting status (an error

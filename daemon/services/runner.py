@@ -19,6 +19,8 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from flagtrack.daemon.services import sd_notify
+
 log = logging.getLogger(__name__)
 
 
@@ -177,13 +179,20 @@ def run_services(
     """Run services until a signal, a failure, or a finishing service; then shut down.
 
     ``on_service_end``: see :class:`ServiceGroup` (``up`` passes the bus's ``undeclare_alive``).
+    Under systemd (``$NOTIFY_SOCKET``), READY/WATCHDOG/STATUS follow the services' own
+    :func:`sd_notify.beat` calls (:mod:`.sd_notify`).
     """
     group = ServiceGroup(services, stop_when_any_finishes, on_service_end)
     signals = handle_signals and threading.current_thread() is threading.main_thread()
-    with capture_signals(group, on_force) if signals else contextlib.nullcontext():
+    with (
+        capture_signals(group, on_force) if signals else contextlib.nullcontext(),
+        sd_notify.watching([s.name for s in services]) as watchdog,
+    ):
         group.start()
         try:
             group.wait()
         finally:
+            if watchdog is not None:
+                watchdog.stopping()
             report = group.shutdown(shutdown_timeout_s)
     return report

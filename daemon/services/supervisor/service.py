@@ -23,6 +23,7 @@ import numpy as np
 
 from flagtrack.daemon.errors import DriverError, FlagtrackError
 from flagtrack.daemon.schema import RecorderCommand, SupervisorState, TunnelState
+from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.services.supervisor.analysis import point_metrics
 from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor, point_state
@@ -178,6 +179,7 @@ class SupervisorService:
         """Wait ``duration_s`` watching the bus; raise RunStopped on a stop request or a silent service."""
         deadline = time.monotonic() + duration_s
         while True:
+            beat(self.name, f"{self._mode}, flag {self.monitor.state.value}")
             self.monitor.pump()
             self._publish()
             if self._stop.is_set():
