@@ -332,7 +332,9 @@ def fuzz(minutes: float, examples_per_round: int = 200, deadline_s: float = 10.0
         "cases": sum(t.cases for t in all_targets),
         "targets": {t.name: {"cases": t.cases, "failures": t.failures} for t in all_targets},
         "failures": sum(len(t.failures) for t in all_targets),
-        "max_rss_growth_after_first_round_mb": round((resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss0) / 1024, 1),
+        "max_rss_growth_after_first_round_mb": round(
+            (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss0) / 1024, 1
+        ),
     }
 
 
