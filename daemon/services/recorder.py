@@ -46,6 +46,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
+import numpy as np
+
 from flagtrack.daemon import __version__
 from flagtrack.daemon.errors import FormatError, SchemaError
 from flagtrack.daemon.problems import ProblemLog
@@ -153,6 +155,8 @@ class RecordingPart:
     events: int = 0
     sequence: PacketSequence = field(default_factory=PacketSequence)
     gaps: list[list[int]] = field(default_factory=list)
+    gap_spans: list[dict[str, int]] = field(default_factory=list)  # each gap's times (sidecar "gaps")
+    last_sent_ns: int = 0
     malformed: int = 0
     late: int = 0  # duplicates and late packets of the stream, dropped
     dropped: int = 0
@@ -232,6 +236,10 @@ class RecordingPart:
         self.sequence.follow_horizon(packet.t_last_us)
         if arrival is Arrival.GAP:
             self.gaps.append([expected, packet.seq])
+            self.gap_spans.append(gap_span(expected, packet, self.last_t_us, self.last_sent_ns))
+            if self.centrelines is not None:  # the centreline file says where its updates have a hole
+                self.centrelines.set_attrs({"gaps_t_s": gap_times_s(self.gap_spans)})
+        self.last_sent_ns = packet.sent_ns
         self.raw.write(packet.data)
         self.bytes += len(packet.data)
         self.packets += 1
@@ -284,6 +292,7 @@ class RecordingPart:
             "t_first_us": self.first_t_us,
             "t_last_us": self.last_t_us,
             "sequence_gaps": self.gaps,
+            "gaps": self.gap_spans,
             "missing_packets": sum(b - a for a, b in self.gaps),
             "malformed_packets": self.malformed,
             "late_packets": self.late,
@@ -327,6 +336,26 @@ class RecordingPart:
         )
         self.continued_in = part.raw_path.name
         return part
+
+
+def gap_span(expected: int, packet: EventPacket, last_t_us: int | None, last_sent_ns: int) -> dict[str, int]:
+    """A sequence gap before ``packet`` (``expected`` the first missing number): the packets and the
+    camera time (``t_from_us`` the horizon of the last packet written, ``t_to_us`` the first time of
+    this one) and wall time (``sent_*_ns``, when the camera received them) it spans."""
+    return {
+        "from_seq": expected,
+        "to_seq": packet.seq,
+        "missing_packets": packet.seq - expected,
+        "t_from_us": last_t_us if last_t_us is not None else packet.t_first_us,
+        "t_to_us": packet.t_first_us,
+        "sent_from_ns": last_sent_ns,
+        "sent_to_ns": packet.sent_ns,
+    }
+
+
+def gap_times_s(spans: list[dict[str, int]]) -> np.ndarray:
+    """(n, 2) start and end of each gap on the recording's clock (s), as a centreline file's ``t``."""
+    return np.array([[g["t_from_us"] * 1e-6, g["t_to_us"] * 1e-6] for g in spans], dtype=np.float64).reshape(-1, 2)
 
 
 class RecorderService:
