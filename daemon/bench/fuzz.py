@@ -310,31 +310,58 @@ def run_target(target: Target, examples: int, deadline_s: float, seed: int) -> N
         target.failures.append(f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"[:300])
 
 
-def fuzz(minutes: float, examples_per_round: int = 200, deadline_s: float = 10.0, seed: int = 0) -> dict:
-    """Fuzz every target in rounds until ``minutes`` have passed; the cases and failures of each."""
+def _round_in_child(folder: str, index: int, examples: int, deadline_s: float, seed: int) -> tuple[int, list[str], int]:
+    """One round of target ``index`` in a worker process: (cases, failures, the worker's max RSS in KiB)."""
     import resource
 
+    target = targets(Path(folder))[index]
+    run_target(target, examples, deadline_s, seed)
+    return target.cases, target.failures, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+
+
+def fuzz(minutes: float, examples_per_round: int = 200, deadline_s: float = 10.0, seed: int = 0) -> dict:
+    """Fuzz every target in rounds until ``minutes`` have passed; the cases and failures of each.
+
+    Each round of a target runs in a worker process, so a parser that aborts the process (a Rust
+    panic that cannot unwind) is a finding, not the end of the run.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
     started = time.monotonic()
-    rss0 = 0  # after the first round (imports, compiled kernels, the first files), in KiB
+    rss: dict[int, list[int]] = {}  # max RSS of the worker after each round, KiB, by target
     with tempfile.TemporaryDirectory(prefix="flagtrack-fuzz-") as tmp:
         all_targets = targets(Path(tmp))
+        context = multiprocessing.get_context("fork")
+        pool = ProcessPoolExecutor(1, mp_context=context)
         rounds = 0
         while rounds == 0 or time.monotonic() - started < minutes * 60:
-            for target in all_targets:  # a target that failed is not run again (its finding stands)
+            for i, target in enumerate(all_targets):  # a target that failed is not run again (its finding stands)
                 in_time = time.monotonic() - started < minutes * 60
-                if rounds == 0 or (in_time and not target.failures):
-                    run_target(target, examples_per_round, deadline_s, seed + rounds)
+                if not (rounds == 0 or (in_time and not target.failures)):
+                    continue
+                try:
+                    cases, failures, max_rss = pool.submit(
+                        _round_in_child, tmp, i, examples_per_round, deadline_s, seed + rounds
+                    ).result()
+                except BrokenProcessPool:
+                    target.failures.append("the process aborted (a crash no exception handler can catch)")
+                    pool = ProcessPoolExecutor(1, mp_context=context)
+                    continue
+                target.cases += cases
+                target.failures += failures
+                rss.setdefault(i, []).append(max_rss)
             rounds += 1
-            rss0 = rss0 or resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        pool.shutdown()
+    worker_mb = max((max(r) for r in rss.values() if r), default=0) / 1024
     return {
         "minutes": round((time.monotonic() - started) / 60, 2),
         "rounds": rounds,
         "cases": sum(t.cases for t in all_targets),
         "targets": {t.name: {"cases": t.cases, "failures": t.failures} for t in all_targets},
         "failures": sum(len(t.failures) for t in all_targets),
-        "max_rss_growth_after_first_round_mb": round(
-            (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss0) / 1024, 1
-        ),
+        "worker_max_rss_mb": round(worker_mb, 1),
     }
 
 
@@ -359,7 +386,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"{name:>20}: {figures['cases']:>7} cases, {found}", file=sys.stderr)
     print(
         f"{result['cases']} cases in {result['minutes']} min ({result['rounds']} rounds), {result['failures']} failure(s), "
-        f"max RSS grew {result['max_rss_growth_after_first_round_mb']} MB after the first round",
+        f"the worker's largest RSS {result['worker_max_rss_mb']} MB",
         file=sys.stderr,
     )
     if args.json:

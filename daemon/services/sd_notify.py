@@ -39,7 +39,7 @@ def notify_address(env: Mapping[str, str] = os.environ) -> str | bytes | None:
 def watchdog_interval_s(env: Mapping[str, str] = os.environ) -> float | None:
     """Half of ``$WATCHDOG_USEC`` (systemd's advice), if it is meant for this process; else None."""
     usec, pid = env.get("WATCHDOG_USEC", ""), env.get("WATCHDOG_PID", "")
-    if not usec.isdigit() or int(usec) == 0 or (pid and pid != str(os.getpid())):
+    if not (usec.isascii() and usec.isdigit()) or int(usec) == 0 or (pid and pid != str(os.getpid())):
         return None
     return int(usec) / 2e6
 

@@ -90,3 +90,12 @@ def test_an_unbalanced_npy_header_is_a_format_error(tmp_path: Path) -> None:
     path.write_bytes(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header)
     with pytest.raises(FlagtrackError, match="garbage .npy header"):
         read_whole(path)
+
+
+def test_a_dat_size_in_other_digits_is_ignored(tmp_path: Path) -> None:
+    """What `bench fuzz` found: '% Width 6²0' passed str.isdigit and int() raised ValueError (a traceback)."""
+    path = tmp_path / "odd.dat"
+    path.write_bytes("% Width 6²0\n% Height 480\n".encode("latin-1") + bytes([12, 8]) + bytes(16))
+    with open_events(path) as reader:
+        assert reader.info.width is None and reader.info.height is None
+        assert sum(len(c.events) for c in reader) == 2

@@ -86,6 +86,7 @@ def test_notify_address(env: dict[str, str], address: object) -> None:
         ({"WATCHDOG_USEC": "20000000"}, 10.0),
         ({"WATCHDOG_USEC": "0"}, None),
         ({"WATCHDOG_USEC": "abc"}, None),
+        ({"WATCHDOG_USEC": "2²"}, None),
         ({"WATCHDOG_USEC": "20000000", "WATCHDOG_PID": "1"}, None),  # meant for another process
         ({"WATCHDOG_USEC": "20000000", "WATCHDOG_PID": str(os.getpid())}, 10.0),
     ],
