@@ -97,6 +97,7 @@ class ServiceGroup:
             try:
                 service.run(self.stop)
             finally:
+                sd_notify.retire(service.name)  # an ended service no longer holds back the watchdog
                 self._ended(service)
         except BaseException as exc:
             log.error("service %s failed: %s", service.name, exc, exc_info=log.isEnabledFor(logging.DEBUG))

@@ -126,6 +126,14 @@ class Watchdog:
             self.ready, self._last_s, self.pings = True, now, self.pings + (self.interval_s is not None)
             self._fresh.clear()
 
+    def retire(self, name: str) -> None:
+        """Service ``name`` has ended (its work done): the others' beats alone keep the pings going."""
+        with self._lock:
+            if name in self.names:
+                self.names.remove(name)
+                self._fresh.discard(name)
+                self._status.pop(name, None)
+
     def stopping(self) -> None:
         """Say the process is stopping (``STOPPING=1``); no more pings after this."""
         with self._lock:
@@ -142,6 +150,13 @@ def beat(name: str, status: str = "") -> None:
     watchdog = _current
     if watchdog is not None:
         watchdog.beat(name, status)
+
+
+def retire(name: str) -> None:
+    """Service ``name`` of this process has ended; a no-op outside a runner."""
+    watchdog = _current
+    if watchdog is not None:
+        watchdog.retire(name)
 
 
 @contextlib.contextmanager

@@ -46,11 +46,15 @@ def test_ready_waits_for_every_service_and_pings_need_every_loop() -> None:
     dog.beat("tracker")
     assert len(sent) == 2 and dog.pings == 2
     dog.beat("someone-else")  # not a service of this group: ignored
+    clock.t = 4.0
+    dog.retire("camera/cam0")  # a replay that reached its end: the tracker alone keeps the pings going
+    dog.beat("tracker")
+    assert sent[-1] == "WATCHDOG=1\nSTATUS=tracker: 5 updates" and dog.pings == 3
     dog.stopping()
     clock.t = 10.0
     dog.beat("camera/cam0")
     dog.beat("tracker")
-    assert sent[-1] == "STOPPING=1" and len(sent) == 3
+    assert sent[-1] == "STOPPING=1" and len(sent) == 4
 
 
 def test_without_watchdog_usec_only_ready_and_status_are_sent() -> None:
