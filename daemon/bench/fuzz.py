@@ -123,7 +123,7 @@ def check_rig_text(folder: Path, text: str) -> None:
     from flagtrack.daemon.rig.config import load_rig
 
     path = folder / "rig.yaml"
-    path.write_text(text, encoding="utf-8", errors="surrogateescape")
+    path.write_bytes(text.encode("utf-8", errors="surrogatepass"))  # a lone surrogate: bytes that are not UTF-8
     try:
         load_rig(path, services=())
     except ConfigError as exc:

@@ -99,3 +99,13 @@ def test_a_dat_size_in_other_digits_is_ignored(tmp_path: Path) -> None:
     with open_events(path) as reader:
         assert reader.info.width is None and reader.info.height is None
         assert sum(len(c.events) for c in reader) == 2
+
+
+def test_an_npy_field_that_is_a_sub_array_is_a_format_error(tmp_path: Path) -> None:
+    """What `bench fuzz` found: a damaged descr gave field t the shape (0,), and the copy into the
+    event array raised numpy's ValueError (a traceback)."""
+    header = b"{'descr': [('t', '<i8', (0,)), ('x', '<u2'), ('y', '<u2'), ('p', 'u1')], 'fortran_order': False, 'shape': (3,), }\n"
+    path = tmp_path / "sub.npy"
+    path.write_bytes(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header + bytes(15))
+    with pytest.raises(FlagtrackError, match="field 't'"):
+        read_whole(path)
