@@ -7,7 +7,7 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
 
-from flagtrack.daemon.bench.fuzz import check_rig_text, rig_texts
+from flagtrack.daemon.bench.fuzz_targets import check_rig_text, rig_texts
 
 
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

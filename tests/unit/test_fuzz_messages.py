@@ -8,7 +8,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from flagtrack.daemon.bench.fuzz import MEMORY_LIMIT_BYTES, check_message, check_packet, damaged, sample_messages
+from flagtrack.daemon.bench.fuzz_targets import (
+    MEMORY_LIMIT_BYTES,
+    check_message,
+    check_packet,
+    damaged,
+    sample_messages,
+)
 
 SAMPLES = sample_messages()
 edits = st.lists(st.tuples(st.floats(0, 1, exclude_max=True), st.integers(0, 255)), min_size=1, max_size=4)

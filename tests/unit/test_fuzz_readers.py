@@ -16,7 +16,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from flagtrack.daemon.bench.fuzz import check_file, damaged
+from flagtrack.daemon.bench.fuzz_targets import check_file, damaged
 from flagtrack.daemon.errors import FlagtrackError
 from flagtrack.drivers.formats import open_events, write_events
 from flagtrack.drivers.sim.quickline import WavyFlag, line_events

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from flagtrack.daemon.bench.fuzz import check_rtu_frame, check_sensor_line, check_tunnel_reply
+from flagtrack.daemon.bench.fuzz_targets import check_rtu_frame, check_sensor_line, check_tunnel_reply
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.serial import modbus_rtu as rtu
 from flagtrack.drivers.tunnel.modbus import ModbusMap, ModbusTunnel
