@@ -101,6 +101,14 @@ def _configs(folder: Path, recording: Path, speed: float, tau_s: float, port: in
     return paths
 
 
+def per_minute_max(samples: list[tuple[float, float]]) -> list[float]:
+    """The largest RSS (MB) of each minute of ``samples`` ((seconds, MB)): a plateau or a climb."""
+    out: dict[int, float] = {}
+    for t, value in samples:
+        out[int(t // 60)] = max(out.get(int(t // 60), 0.0), value)
+    return [round(out[m], 1) for m in sorted(out)]
+
+
 class Sampler:
     """RSS of the named processes every :data:`RSS_EVERY_S`, from ``start`` (monotonic s)."""
 
@@ -184,6 +192,7 @@ def soak(minutes: float, rate_mev_s: float, tau_s: float, recording: Path, folde
         "rss_growth_mb": max(growth.values()),
         "rss_growth_mb_by_process": growth,
         "rss_mb_last": {name: round(s[-1][1], 1) for name, s in sampler.samples.items() if s},
+        "rss_mb_per_minute": {name: per_minute_max(s) for name, s in sampler.samples.items()},
         "latency_p50_ms": round(float(np.percentile(np.concatenate(latency), 50)), 2) if latency else None,
         "latency_p99_ms": round(float(np.percentile(np.concatenate(latency), 99)), 2) if latency else None,
         "latency_p50_ms_per_minute": [round(float(np.percentile(m, 50)), 2) for m in latency],
