@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -20,7 +21,7 @@ import h5py
 import numpy as np
 import pytest
 
-from flagtrack.drivers.formats import read_events
+from flagtrack.drivers.formats import open_events
 from tests.fakes.helpers import wait_until
 
 PORT = 7447
@@ -145,8 +146,14 @@ recorder: {{directory: {tmp_path / "rec"}, path: run, centrelines: true, flush_i
             except subprocess.TimeoutExpired:
                 proc.kill()
     doc = sidecar(tmp_path)
-    events = read_events(tmp_path / "rec" / "run.raw", strict=True).events
-    assert len(events) == doc["events"] >= at_router_restart > before_cut  # nothing before the cut is lost
+    with warnings.catch_warnings(record=True) as caught, open_events(tmp_path / "rec" / "run.raw") as reader:
+        warnings.simplefilter("always")
+        events = reader.read().events
+    # A packet in flight at the cut can arrive garbled (seen in about one run of two: the tracker counts it
+    # undecodable, the recorder writes it as it came); the reader skips its bad stretch and says so.
+    assert len(caught) == len(reader.skipped) and len(reader.skipped) <= 2, [str(w.message) for w in caught]
+    assert doc["events"] - reader.events_lost_at_most <= len(events) <= doc["events"]
+    assert doc["events"] >= at_router_restart > before_cut and len(events) > before_cut  # nothing before is lost
     assert doc["missing_packets"] == sum(g["missing_packets"] for g in doc["gaps"])
     assert len(doc["gaps"]) >= 1, "packets sent while the link was down are lost: a gap"
     for gap in doc["gaps"]:
