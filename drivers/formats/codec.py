@@ -274,6 +274,7 @@ class Decoder:
                 f"stream ends inside a {self._word}-byte {NAMES[self.encoding]} word "
                 f"({n} trailing bytes; truncated file?)",
                 self._fed - n,
+                outcome="kept the events before it" if self.resync else "skipped",  # a reader's words, as before
             )
 
     def _kernel_runner(self, buf: memoryview, n_words: int):  # noqa: ANN202
@@ -304,14 +305,14 @@ class Decoder:
         self._report(what, offset, quiet=self.resync)  # resync: said once per skipped range, when it closes
         return what
 
-    def _report(self, message: str, offset: int, quiet: bool = False) -> None:
+    def _report(self, message: str, offset: int, quiet: bool = False, outcome: str = "skipped") -> None:
         self.faults += 1
         if self.strict:
             raise FormatError(message, path=self.source, offset=offset)
         if quiet:
             return
         where = f"{self.source}, byte {offset}" if self.source else f"byte {offset}"
-        warnings.warn(f"{where}: {message}; skipped", FormatWarning, stacklevel=3)
+        warnings.warn(f"{where}: {message}; {outcome}", FormatWarning, stacklevel=3)
 
 
 _ENCODE_ERRORS = {
