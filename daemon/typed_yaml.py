@@ -28,9 +28,11 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
 
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(f"cannot read config: {exc.strerror}", path=str(path)) from exc
+    except UnicodeDecodeError as exc:  # found by `flagtrack bench fuzz`: a traceback before
+        raise ConfigError(f"not UTF-8 text (byte {exc.start}: {exc.reason})", path=str(path)) from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:

@@ -118,8 +118,10 @@ def reconstruct_campaign(
     checksum: bool = False,
     bar: bool = False,
     prefix: str = "flagtrack batch",
+    strict: bool = False,
 ) -> BatchResult:
-    """Reconstruct every job's recording into its centreline file, as ``flagtrack reconstruct`` does.
+    """Reconstruct every job's recording into its centreline file, as ``flagtrack reconstruct`` does
+    (``strict``: a damaged recording fails instead of losing its corrupt stretches).
 
     With ``out_dir`` locked (one batch at a time), the temporary files a killed batch left are removed,
     the tasks run on the executor ``executor_factory(len(jobs))`` gives, and ``batch.csv`` /
@@ -149,6 +151,7 @@ def reconstruct_campaign(
                     params,
                     force,
                     checksum,
+                    strict,
                 )
             rows: dict[Path, Row] = {}
             for job, result in loop.results():

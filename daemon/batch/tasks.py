@@ -90,7 +90,13 @@ def _in_dask_worker() -> bool:
 
 
 def reconstruct_task(
-    input_file: str, output: str, setup: TrackingSetup, params: str, force: bool = False, checksum: bool = False
+    input_file: str,
+    output: str,
+    setup: TrackingSetup,
+    params: str,
+    force: bool = False,
+    checksum: bool = False,
+    strict: bool = False,
 ) -> TaskResult:
     """Reconstruct ``input_file`` into ``output`` as ``flagtrack reconstruct`` does (written atomically,
     stamped), unless ``output`` is up to date (see :mod:`~flagtrack.daemon.batch.stamp`).
@@ -102,6 +108,7 @@ def reconstruct_task(
         params: :func:`~flagtrack.daemon.batch.stamp.params_digest` of ``setup.attrs``.
         force: redo it even if up to date.
         checksum: compare the input's content digest even when its size and time match.
+        strict: a damaged recording fails (by default its corrupt stretches are skipped, with a warning).
 
     Returns:
         The row (``done``, ``skipped`` or ``failed`` with the reason naming the file); a failure is never
@@ -128,7 +135,7 @@ def reconstruct_task(
         stamped = dataclasses.replace(setup, attrs={**setup.attrs, **stamp_attrs(stat, digest, params)})
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("default")
-            reconstruct_file(Path(input_file), Path(output), stamped, atomic=True)
+            reconstruct_file(Path(input_file), Path(output), stamped, atomic=True, strict=strict)
         if InputStat.of(input_file) != stat:
             Path(output).unlink(missing_ok=True)
             raise FlagtrackError(f"{resolved}: changed while it was being read (nothing written): run the batch again")

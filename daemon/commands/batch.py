@@ -54,6 +54,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     rec.add_argument("-o", "--out-dir", type=Path, required=True, help="output folder (created)")
     rec.add_argument("-c", "--config", type=Path, help="YAML config with a `tracker:` section")
     add_tracking_arguments(rec)
+    rec.add_argument(
+        "--strict", action="store_true", help="a damaged recording fails (default: its corrupt stretches are skipped)"
+    )
     _common(rec)
     val = actions.add_parser(
         "validate",
@@ -144,7 +147,7 @@ def _reconstruct(args: argparse.Namespace) -> int:
     inputs = expand_inputs(args.inputs, exclude={args.out_dir / CSV_NAME})
     jobs = jobs_for(inputs, output_paths(args.out_dir, inputs))
     result = reconstruct_campaign(
-        jobs, args.out_dir, setup, factory, force=args.force, checksum=args.checksum, bar=_bar(args)
+        jobs, args.out_dir, setup, factory, force=args.force, checksum=args.checksum, bar=_bar(args), strict=args.strict
     )
     return _finish(args, result, "inputs")
 

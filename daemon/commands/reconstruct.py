@@ -34,6 +34,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", type=Path, required=True, help="output HDF5 file")
     parser.add_argument("-c", "--config", type=Path, help="YAML config with a `tracker:` section")
     add_tracking_arguments(parser)
+    parser.add_argument(
+        "--strict",
+        action="store_true",
+        help="refuse a damaged recording (default: skip a corrupt stretch to the next valid time base, "
+        "keep the rest and say what was skipped)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -47,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     setup = tracking_setup(apply_tracking_arguments(config, args), path=str(args.config) if args.config else None)
     started = time.perf_counter()
     with _ProgressBar(args.file, not args.no_progress and sys.stderr.isatty()) as bar:
-        summary = reconstruct_file(args.file, args.output, setup, progress=bar)
+        summary = reconstruct_file(args.file, args.output, setup, progress=bar, strict=args.strict)
     elapsed = time.perf_counter() - started
     rate = summary.events_in / elapsed / 1e6 if elapsed > 0 else 0.0
     print(
@@ -55,6 +61,13 @@ def run(args: argparse.Namespace) -> int:
         f"({summary.events_kept} after denoising) in {elapsed:.2f} s ({rate:.1f} Mev/s) -> {args.output}",
         file=sys.stderr,
     )
+    if summary.skipped_bytes:
+        ranges = ", ".join(f"{a}-{b}" for a, b in summary.skipped_bytes)
+        print(
+            f"{args.file}: damaged: skipped bytes {ranges} (at most {summary.events_lost_at_most} events lost; "
+            "--strict refuses such a file)",
+            file=sys.stderr,
+        )
     return 0
 
 

@@ -67,8 +67,11 @@ class RouterService:
         self.bus = bus
 
     def run(self, stop: threading.Event) -> None:
+        from flagtrack.daemon.services.sd_notify import beat
+
         try:
-            stop.wait()
+            while not stop.wait(0.5):  # the router's work runs in Zenoh's threads; this loop only serves
+                beat(self.name, "serving")
         finally:
             self.bus.close()
 

@@ -18,6 +18,7 @@ from typing import Any
 
 from flagtrack.daemon.core.events import make_events
 from flagtrack.daemon.schema import CameraStatus, EventPacket, EventRate
+from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.transport import Bus, Publisher
 from flagtrack.drivers.camera.base import Camera, CameraInfo, EndOfStream
 from flagtrack.drivers.formats.native import NATIVE_ENCODINGS, NativeCutter
@@ -125,6 +126,7 @@ class CameraService:
         rates = RateCounter(int(self.cfg.rate_interval_s * 1e6))
         cutter: NativeCutter | None = None  # made at the first native bytes
         while not stop.is_set():
+            beat(self.name, f"{self.packets} packets, {self.events} events sent")
             try:
                 data = self.camera.read(self.cfg.read_timeout_s)
             except EndOfStream:

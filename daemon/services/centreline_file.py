@@ -7,8 +7,11 @@ import threading
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage
+from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.formats.centreline import CentrelineShapeError, CentrelineSink
 
@@ -20,7 +23,9 @@ class CentrelineFileService:
 
     A message whose samples or joints differ from the file's (the first message sets them) cannot
     go in the file: it is counted (``rejected``) and logged as a rate-limited summary, and the
-    service goes on.
+    service goes on. Messages missing from the tracker's sequence (a link cut, a router restart) are
+    recorded as gaps: the file's attribute ``gaps_t_s`` ((n, 2) s, the last update before and the
+    first after each).
 
     Args:
         bus: the bus.
@@ -40,6 +45,8 @@ class CentrelineFileService:
         self.write_interval_s = 0.5  # appends are batched: one HDF5 append per interval
         self.updates = 0
         self.rejected = 0
+        self.gaps: list[list[float]] = []
+        self._last: tuple[int, float | None] | None = None  # (seq, t_s of its last update) of the last message
         self.problems = ProblemLog(log, "centrelines")
         self.subscription = bus.subscribe(
             bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000, max_bytes=512 << 20
@@ -49,8 +56,10 @@ class CentrelineFileService:
         sink = CentrelineSink(self.path, self.attrs, flush_interval_s=self.write_interval_s)
         try:
             while not stop.is_set():
+                beat(self.name, f"{self.updates} updates written, {self.rejected} rejected")
                 msg = self.subscription.recv(timeout_s=0.05)
                 if msg is not None:
+                    self._note_gap(msg, sink)
                     try:
                         sink.add(msg.batch(), units=msg.units, source=msg.source)
                         self.updates += len(msg.t_s)
@@ -69,6 +78,18 @@ class CentrelineFileService:
                 self.problems.flush()
         finally:
             sink.close()
+            if self.gaps:
+                log.warning("centrelines: %d gap(s) in the tracker's messages: %s s", len(self.gaps), self.gaps)
             if sink.opened:
                 log.info("centrelines: %d updates written to %s", self.updates, self.path)
             self.problems.flush(force=True)
+
+    def _note_gap(self, msg: CentrelineMessage, sink: CentrelineSink) -> None:
+        """Record a gap when messages of the tracker's sequence are missing before ``msg``."""
+        last = self._last
+        t = [float(x) for x in msg.t_s[[0, -1]]] if len(msg.t_s) else None
+        if last is not None and msg.seq > last[0] + 1:
+            self.gaps.append([last[1] if last[1] is not None else float("nan"), t[0] if t else float("nan")])
+            self.problems.add("gaps in the tracker's messages", f"messages {last[0] + 1}-{msg.seq - 1} missing")
+            sink.set_attrs({"gaps_t_s": np.array(self.gaps, dtype=np.float64)})
+        self._last = (msg.seq, t[1] if t else (last[1] if last else None))

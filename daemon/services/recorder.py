@@ -48,10 +48,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
+import numpy as np
+
 from flagtrack.daemon import __version__
 from flagtrack.daemon.errors import FormatError, SchemaError
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, RecorderCommand, RecorderStatus, decode
+from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.formats import raw_header
@@ -157,6 +160,8 @@ class RecordingPart:
     events: int = 0
     sequence: PacketSequence = field(default_factory=PacketSequence)
     gaps: list[list[int]] = field(default_factory=list)
+    gap_spans: list[dict[str, int]] = field(default_factory=list)  # each gap's times (sidecar "gaps")
+    last_sent_ns: int = 0
     malformed: int = 0
     late: int = 0  # duplicates and late packets of the stream, dropped
     dropped: int = 0
@@ -239,6 +244,10 @@ class RecordingPart:
         self.sequence.follow_horizon(packet.t_last_us)
         if arrival is Arrival.GAP:
             self.gaps.append([expected, packet.seq])
+            self.gap_spans.append(gap_span(expected, packet, self.last_t_us, self.last_sent_ns))
+            if self.centrelines is not None:  # the centreline file says where its updates have a hole
+                self.centrelines.set_attrs({"gaps_t_s": gap_times_s(self.gap_spans)})
+        self.last_sent_ns = packet.sent_ns
         data = packet.data
         if packet.preamble_bytes and self.packets and arrival is not Arrival.GAP:
             # the camera's own words as it sent them: the state words that made this packet decodable
@@ -297,6 +306,7 @@ class RecordingPart:
             "t_first_us": self.first_t_us,
             "t_last_us": self.last_t_us,
             "sequence_gaps": self.gaps,
+            "gaps": self.gap_spans,
             "missing_packets": sum(b - a for a, b in self.gaps),
             "malformed_packets": self.malformed,
             "late_packets": self.late,
@@ -363,6 +373,26 @@ class RecordingPart:
         return part
 
 
+def gap_span(expected: int, packet: EventPacket, last_t_us: int | None, last_sent_ns: int) -> dict[str, int]:
+    """A sequence gap before ``packet`` (``expected`` the first missing number): the packets and the
+    camera time (``t_from_us`` the horizon of the last packet written, ``t_to_us`` the first time of
+    this one) and wall time (``sent_*_ns``, when the camera received them) it spans."""
+    return {
+        "from_seq": expected,
+        "to_seq": packet.seq,
+        "missing_packets": packet.seq - expected,
+        "t_from_us": last_t_us if last_t_us is not None else packet.t_first_us,
+        "t_to_us": packet.t_first_us,
+        "sent_from_ns": last_sent_ns,
+        "sent_to_ns": packet.sent_ns,
+    }
+
+
+def gap_times_s(spans: list[dict[str, int]]) -> np.ndarray:
+    """(n, 2) start and end of each gap on the recording's clock (s), as a centreline file's ``t``."""
+    return np.array([[g["t_from_us"] * 1e-6, g["t_to_us"] * 1e-6] for g in spans], dtype=np.float64).reshape(-1, 2)
+
+
 class RecorderService:
     """Records one camera's packets on command (or from launch)."""
 
@@ -418,6 +448,7 @@ class RecorderService:
             self.start(self.cfg.path, self.cfg.centrelines)
         try:
             while not stop.is_set():
+                beat(self.name, self._beat_status())
                 command = commands.recv(timeout_s=0)
                 if command is not None:
                     self.handle(command)
@@ -454,6 +485,10 @@ class RecorderService:
         finally:
             self.stop_recording()
             self.problems.flush(force=True)
+
+    def _beat_status(self) -> str:
+        where = self.current.raw_path.name if self.current is not None else "idle"
+        return f"{where}, {self.lost_packets} packets lost"
 
     def handle(self, command: RecorderCommand, origin: str = "") -> None:
         """Carry out a start / stop / rotate command and publish the resulting status (an error

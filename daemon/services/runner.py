@@ -19,6 +19,8 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from flagtrack.daemon.services import sd_notify
+
 log = logging.getLogger(__name__)
 
 
@@ -95,6 +97,7 @@ class ServiceGroup:
             try:
                 service.run(self.stop)
             finally:
+                sd_notify.retire(service.name)  # an ended service no longer holds back the watchdog
                 self._ended(service)
         except BaseException as exc:
             log.error("service %s failed: %s", service.name, exc, exc_info=log.isEnabledFor(logging.DEBUG))
@@ -177,13 +180,20 @@ def run_services(
     """Run services until a signal, a failure, or a finishing service; then shut down.
 
     ``on_service_end``: see :class:`ServiceGroup` (``up`` passes the bus's ``undeclare_alive``).
+    Under systemd (``$NOTIFY_SOCKET``), READY/WATCHDOG/STATUS follow the services' own
+    :func:`sd_notify.beat` calls (:mod:`.sd_notify`).
     """
     group = ServiceGroup(services, stop_when_any_finishes, on_service_end)
     signals = handle_signals and threading.current_thread() is threading.main_thread()
-    with capture_signals(group, on_force) if signals else contextlib.nullcontext():
+    with (
+        capture_signals(group, on_force) if signals else contextlib.nullcontext(),
+        sd_notify.watching([s.name for s in services]) as watchdog,
+    ):
         group.start()
         try:
             group.wait()
         finally:
+            if watchdog is not None:
+                watchdog.stopping()
             report = group.shutdown(shutdown_timeout_s)
     return report

@@ -17,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from flagtrack.daemon.schema import SensorSamples
+from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.sensor.base import PointSensor, SensorReading
 from flagtrack.drivers.sensor.setup import SensorConfig
@@ -59,6 +60,7 @@ class SensorService:
         last_publish = time.monotonic()
         try:
             while not stop.is_set():
+                beat(self.name, f"{self.samples} samples, {self.missing} missing, {self.failures} failures")
                 now = time.monotonic()
                 if sensor is None:
                     if now >= retry_at:

@@ -33,6 +33,7 @@ from flagtrack.daemon.errors import FormatError
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, TrackerStatus
 from flagtrack.daemon.services.lost_count import LostCount
+from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
 from flagtrack.daemon.tracking.pipeline import TrackerPipeline
 from flagtrack.daemon.transport import Bus
@@ -162,6 +163,7 @@ class TrackerService:
         idle_wait_s = max(self.cfg.max_batch_delay_s, min(self.cfg.status_interval_s, 0.1))
         try:
             while not stop.is_set():
+                beat(self.name, f"{self.events} events, {self.updates} updates, {self.missing_packets} packets missing")
                 packet = packets.recv(timeout_s=self.cfg.max_batch_delay_s if self._pending else idle_wait_s)
                 if packet is not None:
                     batch = [packet]

@@ -7,6 +7,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from flagtrack.daemon.tracking.pipeline import TrackerPipeline
 from flagtrack.daemon.tracking.setup import TrackingSetup
 from flagtrack.drivers.formats import open_events
@@ -28,6 +30,8 @@ class ReconstructSummary:
     events_kept: int
     first_t_us: int | None
     last_t_us: int | None
+    skipped_bytes: tuple[tuple[int, int], ...] = ()
+    events_lost_at_most: int = 0
 
     def as_dict(self) -> dict[str, int | None]:
         """The summary as plain values (``--json`` outputs, batch rows)."""
@@ -47,6 +51,7 @@ def reconstruct_file(
     *,
     progress: Callable[[int], None] | None = None,
     atomic: bool = False,
+    strict: bool = False,
 ) -> ReconstructSummary:
     """Stream the recording ``path`` through a fresh tracker of ``setup`` into ``output``.
 
@@ -60,11 +65,14 @@ def reconstruct_file(
         progress: called with the bytes of ``path`` read so far.
         atomic: write ``output`` under a temporary name in its folder and rename it at the end, so
             ``output`` is a whole file or absent (``flagtrack batch``); a failure removes the temporary file.
+        strict: refuse a damaged recording; by default a corrupt stretch is skipped (see
+            :mod:`~flagtrack.drivers.formats.reader`) and the file's attributes ``input_skipped_bytes``
+            ((n, 2) byte ranges) and ``input_events_lost_at_most`` say what was lost.
 
     Raises:
         FormatError: the recording cannot be read.
     """
-    with open_events(path, chunk_bytes=CHUNK_BYTES) as reader:
+    with open_events(path, chunk_bytes=CHUNK_BYTES, strict=strict) as reader:
         info = reader.info
         tracker = setup.new_tracker((info.width or 0, info.height or 0))
         attrs = {**setup.attrs, "input_file": str(Path(path).resolve()), "input_format": info.format}
@@ -80,7 +88,23 @@ def reconstruct_file(
                     progress(Path(path).stat().st_size)
                 pipeline.finish()
             stats = tracker.stats
-            sink.set_attrs({"events_in": stats.events_in, "events_kept": stats.events_kept})
+            skipped = tuple((r.start, r.end) for r in reader.skipped)
+            sink.set_attrs(
+                {
+                    "events_in": stats.events_in,
+                    "events_kept": stats.events_kept,
+                    "input_skipped_bytes": np.array(skipped, dtype=np.int64).reshape(-1, 2),
+                    "input_events_lost_at_most": reader.events_lost_at_most,
+                }
+            )
     if stats.events_out_of_order:
         log.warning("%d events were out of time order", stats.events_out_of_order)
-    return ReconstructSummary(stats.updates, stats.events_in, stats.events_kept, stats.first_t_us, stats.last_t_us)
+    return ReconstructSummary(
+        stats.updates,
+        stats.events_in,
+        stats.events_kept,
+        stats.first_t_us,
+        stats.last_t_us,
+        skipped,
+        reader.events_lost_at_most,
+    )

@@ -60,7 +60,8 @@ class AedatReader(EventReader):
 
         try:
             return aedat.Decoder(str(self.path))
-        except Exception as exc:  # noqa: BLE001 - the library raises RuntimeError/OSError without offsets
+        except BaseException as exc:  # noqa: BLE001 - RuntimeError/OSError without offsets, or a Rust panic
+            _reraise_interrupts(exc)
             raise FormatError(
                 f"cannot read the AEDAT 4.0 header: {exc}", path=str(self.path), offset=len(MAGIC)
             ) from None
@@ -97,7 +98,8 @@ class AedatReader(EventReader):
                 packet = next(decoder)
             except StopIteration:
                 break
-            except Exception as exc:  # noqa: BLE001 - the library's own errors carry no offset
+            except BaseException as exc:  # noqa: BLE001 - the library's own errors carry no offset
+                _reraise_interrupts(exc)
                 if batch or triggers:  # keep what was decoded before the fault
                     yield _chunk(batch, triggers, batch_offset or self.first_packet)
                 offset = next(offsets)  # raises with the offset if the file is cut inside this packet
@@ -115,6 +117,17 @@ class AedatReader(EventReader):
                 batch, triggers, batch_offset, batch_events = [], [], None, 0
         if batch or triggers:
             yield _chunk(batch, triggers, batch_offset or self.first_packet)
+
+
+def _reraise_interrupts(exc: BaseException) -> None:
+    """Let Ctrl-C and exits through; anything else the library raises becomes the caller's FormatError.
+
+    The library is Rust: a damaged file can make it panic, which pyo3 raises as ``PanicException``, a
+    ``BaseException`` (found by tests/unit/test_fuzz_readers.py: a header whose flatbuffer offsets
+    point beyond the file).
+    """
+    if isinstance(exc, KeyboardInterrupt | SystemExit | GeneratorExit):
+        raise exc
 
 
 def _events(raw: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterator
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -30,12 +31,44 @@ WORD_BYTES = {"evt2": 4, "evt21": 8, "evt3": 2}
 EVENTS_PER_WORD = {"evt2": 1, "evt21": 32, "evt3": 12}
 LOOP_US = {"evt2": 1 << 34, "evt21": 1 << 34, "evt3": 1 << 24}
 NAMES = {"evt2": "EVT 2.0", "evt21": "EVT 2.1", "evt3": "EVT 3.0"}
+RESERVED_TYPES = {
+    "evt2": [2, 3, 4, 5, 6, 7, 9, 11, 12, 13],
+    "evt21": [2, 3, 4, 5, 6, 7, 9, 11, 12, 13],
+    "evt3": [9, 11, 12, 13],
+}
 SENSOR_LIMIT = 2048
 """Coordinates carry 11 bits in every EVT format."""
 
 
 class FormatWarning(UserWarning):
     """A fault in an event stream that was skipped or cut short instead of raised (non-strict)."""
+
+
+TIME_HIGH_BITS = {"evt2": (6, 28), "evt21": (6, 28), "evt3": (12, 12)}
+"""(shift, bits) of a TIME_HIGH word's value: its unit is ``2**shift`` µs, it wraps after ``2**bits`` units."""
+RESYNC_WINDOW_US = 1 << 20
+"""A TIME_HIGH at most this far (about 1 s) after the last good one resynchronises at once; a farther
+one only when the next two TIME_HIGH words follow it within this window (the stream is clean again)."""
+
+
+def unwrap_units(prev_units: int, raw: int, bits: int) -> int:
+    """The absolute TIME_HIGH units of value ``raw`` after ``prev_units``, by OpenEB's threshold rule
+    (a drop to within :data:`~._timebase.LOOP_THRESHOLD_UNITS` of a whole loop is a wrap)."""
+    period = 1 << bits
+    loop, prev_raw = divmod(prev_units, period)
+    if prev_raw > raw and prev_raw - raw >= period - 1 - tb.LOOP_THRESHOLD_UNITS:
+        loop += 1
+    return loop * period + raw
+
+
+@dataclass(frozen=True)
+class SkippedRange:
+    """Bytes ``[start, end)`` of a file skipped after a fault, holding at most ``events_at_most`` events."""
+
+    start: int
+    end: int
+    events_at_most: int
+    reason: str
 
 
 def check_encoding(encoding: str | None, source: str | None = None) -> str:
@@ -71,6 +104,9 @@ class Decoder:
         strict: on a fault (reserved word, event outside the sensor), raise :class:`FormatError`
             (True; the rest of that call's data is dropped, the state stays usable for the next
             call) or warn with :class:`FormatWarning`, skip the word and go on (False).
+        resync: (not strict) after a fault, skip to the next TIME_HIGH word whose time base follows
+            the last good one (see :data:`RESYNC_WINDOW_US`) and go on from there, recording what
+            was skipped in :attr:`skipped`, instead of skipping the faulty word alone.
         source: name of the stream (file path) for messages.
         base_offset: byte offset of the stream's first byte in its file (header length), so
             errors and chunk offsets are file offsets.
@@ -90,6 +126,7 @@ class Decoder:
         base_offset: int = 0,
         endianness: str = "little",
         max_events: int = 1 << 20,
+        resync: bool = False,
     ) -> None:
         self.encoding = check_encoding(encoding, source)
         if endianness not in ("little", "legacy"):
@@ -102,6 +139,9 @@ class Decoder:
         self.endianness = endianness
         self.max_events = max(int(max_events), 64)
         self.faults = 0
+        self.resync = resync and not strict
+        self.skipped: list[SkippedRange] = []
+        self._resync_from: tuple[int, str] | None = None  # (file offset, reason) while skipping
         self._word = WORD_BYTES[encoding]
         self._state = np.zeros(16, dtype=np.int64)
         self._state[7] = 1  # EVT 3.0 starts in CD mode
@@ -147,7 +187,7 @@ class Decoder:
         if n_words == 0:
             return
         run = self._kernel_runner(buf, n_words)
-        i = 0
+        i = 0 if self._resync_from is None else self._resync_point(buf, 0, n_words, start_offset)
         while i < n_words:
             capacity = min(self.max_events, (n_words - i) * EVENTS_PER_WORD[self.encoding] + 64)
             events = np.empty(capacity + 1, dtype=EVENT_DTYPE)
@@ -157,12 +197,76 @@ class Decoder:
                 piece = events[:n] if keep_view else events[:n].copy()
                 yield piece, self._triggers[:nt].copy(), start_offset + i * self._word
             if status in (tb.BAD_WORD, tb.OUT_OF_SENSOR):
-                self._fault(status, buf, i_next, start_offset + i_next * self._word)
+                offset = start_offset + i_next * self._word
+                reason = self._fault(status, buf, i_next, offset)
                 i_next += 1
+                if self.resync:
+                    self._resync_from = (offset, reason)
+                    i_next = self._resync_point(buf, i_next, n_words, start_offset)
             i = i_next
 
+    @property
+    def events_lost_at_most(self) -> int:
+        """Upper bound on the events in the stretches skipped so far (:attr:`skipped`)."""
+        return sum(r.events_at_most for r in self.skipped)
+
+    def _resync_point(self, buf: memoryview, i: int, n_words: int, start_offset: int) -> int:
+        """While resynchronising: the index (>= ``i``) of the TIME_HIGH word to go on from, or
+        ``n_words`` if none in this buffer; a found one closes the skipped range."""
+        high = self._high_words(buf, n_words)
+        shift, bits = TIME_HIGH_BITS[self.encoding]
+        top = 12 if self.encoding == "evt3" else 28  # the type: the top 4 bits of the (high) word
+        types = high[i:] >> top
+        marks = np.flatnonzero(types == 8) + i
+        bad = np.flatnonzero(np.isin(types, RESERVED_TYPES[self.encoding])) + i
+        period, window = 1 << bits, max(RESYNC_WINDOW_US >> shift, 1)
+        last = int(self._state[1]) >> shift  # absolute units (loops included)
+        values = (high[marks] & (period - 1)).astype(np.int64)
+        absolute, prev = [], last
+        for v in values:  # the decoder's own unwrapping over the TIME_HIGH words skipped
+            prev = unwrap_units(prev, int(v), bits)
+            absolute.append(prev)
+        for k, j in enumerate(marks):
+            nxt = marks[k + 1 : k + 3]
+            clean = len(nxt) == 2 and not np.any((bad > j) & (bad < nxt[-1]))
+            chain = absolute[k : k + 3]
+            follows = clean and all(0 <= b - a <= window for a, b in zip(chain, chain[1:]))
+            if self._state[0] == 0 or 0 <= absolute[k] - last <= window or follows:
+                if self._state[0]:  # the time base goes on from the word resynchronised on
+                    self._state[1] = absolute[k] << shift
+                    self._state[2] = absolute[k] >> bits
+                self._end_skip(start_offset + int(j) * self._word)
+                return int(j)
+        return n_words
+
+    def _high_words(self, buf: memoryview, n_words: int) -> np.ndarray:
+        if self.encoding == "evt21":
+            halves = np.frombuffer(buf, dtype="<u4", count=2 * n_words)
+            return halves[1::2] if self.endianness == "little" else halves[0::2]
+        return np.frombuffer(buf, dtype="<u2" if self.encoding == "evt3" else "<u4", count=n_words)
+
+    def _end_skip(self, end: int) -> None:
+        """Close the range being skipped at file offset ``end``; decoding goes on from there."""
+        if self._resync_from is None:
+            return
+        start, reason = self._resync_from
+        self._resync_from = None
+        self._state[7] = 0  # EVT 3.0: no event until the next EVT_ADDR_Y gives y again
+        n_events = (end - start) // self._word * EVENTS_PER_WORD[self.encoding]
+        self.skipped.append(SkippedRange(start, end, n_events, reason))
+        where = f"{self.source}, " if self.source else ""
+        warnings.warn(
+            f"{where}bytes {start}-{end}: {reason}; skipped to the next valid time base "
+            f"(at most {n_events} events lost)",
+            FormatWarning,
+            stacklevel=4,
+        )
+
     def finish(self) -> None:
-        """End of stream: a pending partial word means the stream was cut inside a word."""
+        """End of stream: a pending partial word means the stream was cut inside a word; a range still
+        being skipped ends at the end of the stream."""
+        if self._resync_from is not None:
+            self._end_skip(self._fed - len(self._tail))
         if self._tail:
             n = len(self._tail)
             self._tail = b""
@@ -170,6 +274,7 @@ class Decoder:
                 f"stream ends inside a {self._word}-byte {NAMES[self.encoding]} word "
                 f"({n} trailing bytes; truncated file?)",
                 self._fed - n,
+                outcome="kept the events before it" if self.resync else "skipped",  # a reader's words, as before
             )
 
     def _kernel_runner(self, buf: memoryview, n_words: int):  # noqa: ANN202
@@ -184,7 +289,7 @@ class Decoder:
         kernel = decode_evt3 if self.encoding == "evt3" else decode_evt2
         return lambda i, tt, xyp: kernel(words, i, state, tt, xyp, tr, width, height, off)
 
-    def _fault(self, status: int, buf: memoryview, index: int, offset: int) -> None:
+    def _fault(self, status: int, buf: memoryview, index: int, offset: int) -> str:
         word = bytes(buf[index * self._word : (index + 1) * self._word])
         value = int.from_bytes(word, "little")
         if self.encoding == "evt21" and self.endianness == "legacy":
@@ -197,14 +302,17 @@ class Decoder:
                 f"corrupt {NAMES[self.encoding]} word 0x{value:0{2 * self._word}x}: event outside the "
                 f"{self.width}x{self.height} sensor"
             )
-        self._report(what, offset)
+        self._report(what, offset, quiet=self.resync)  # resync: said once per skipped range, when it closes
+        return what
 
-    def _report(self, message: str, offset: int) -> None:
+    def _report(self, message: str, offset: int, quiet: bool = False, outcome: str = "skipped") -> None:
         self.faults += 1
         if self.strict:
             raise FormatError(message, path=self.source, offset=offset)
+        if quiet:
+            return
         where = f"{self.source}, byte {offset}" if self.source else f"byte {offset}"
-        warnings.warn(f"{where}: {message}; skipped", FormatWarning, stacklevel=3)
+        warnings.warn(f"{where}: {message}; {outcome}", FormatWarning, stacklevel=3)
 
 
 _ENCODE_ERRORS = {

@@ -67,7 +67,8 @@ class DatReader(EventReader):
             )
         self.body_offset = pos
         width, height = fields.get("Width"), fields.get("Height")
-        size = (int(width), int(height)) if width and height and width.isdigit() and height.isdigit() else (None, None)
+        numbers = all(v and v.isascii() and v.isdigit() for v in (width, height))  # not "6²0": str.isdigit takes it
+        size = (int(width), int(height)) if numbers and width and height else (None, None)
         self.info = RecordingInfo(self.path, "dat", None, size[0], size[1], fields)
 
     def _chunks(self) -> Iterator[EventChunk]:

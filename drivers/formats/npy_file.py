@@ -45,6 +45,10 @@ def _field_names(dtype: np.dtype, path: Path) -> tuple[str, str, str, str]:
     polarity = "p" if "p" in names else "on" if "on" in names else None
     if not {"t", "x", "y"} <= set(names) or polarity is None:
         raise FormatError(f".npy dtype {dtype} has no fields t, x, y and p", path=str(path), offset=0)
+    for name in ("t", "x", "y", polarity):  # one number each (not a sub-array, found by `bench fuzz`)
+        field = dtype[name]
+        if field.shape != () or field.kind not in "biuf":
+            raise FormatError(f".npy field {name!r} is {field}, not one number per event", path=str(path), offset=0)
     return "t", "x", "y", polarity
 
 

@@ -33,14 +33,16 @@ class RawReader(EventReader):
         self.info = RecordingInfo(self.path, "raw", self.layout.encoding, self.layout.width, self.layout.height, fields)
 
     def decoder(self) -> Decoder:
-        """A fresh strict decoder positioned at the body (file offsets in its errors)."""
+        """A fresh decoder positioned at the body (file offsets in its errors): strict, or (by default)
+        resynchronising after a corrupt stretch (what it skipped: :attr:`skipped`)."""
         lay = self.layout
         return Decoder(
             lay.encoding,
             width=lay.width,
             height=lay.height,
             t_offset_us=lay.t_offset_us,
-            strict=True,
+            strict=self.strict,
+            resync=not self.strict,
             source=str(self.path),
             base_offset=self.body_offset,
             endianness=lay.endianness,
@@ -49,6 +51,7 @@ class RawReader(EventReader):
 
     def _chunks(self) -> Iterator[EventChunk]:
         decoder = self.decoder()
+        self.skipped = decoder.skipped  # filled as the decoder goes
         buffer = bytearray(self.chunk_bytes)
         with self.path.open("rb") as f:
             f.seek(self.body_offset)

@@ -3,8 +3,9 @@
 A reader is opened on one file, states what it knows from the header (:class:`RecordingInfo`),
 and yields :class:`EventChunk` s in file order with bounded memory. Faults (truncated file,
 corrupt word, garbage) raise :class:`FormatError` naming file and byte offset when ``strict``;
-otherwise the reader keeps every event decoded before the fault, warns with
-:class:`~flagtrack.drivers.formats.codec.FormatWarning`, and stops there.
+otherwise a RAW reader skips a corrupt stretch to the next valid time base and goes on (listing
+what it skipped in :attr:`EventReader.skipped`), and the others keep every event decoded before the
+fault; either warns with :class:`~flagtrack.drivers.formats.codec.FormatWarning`.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 
 from flagtrack.daemon.core.events import empty_events, empty_triggers
 from flagtrack.daemon.errors import FormatError
-from flagtrack.drivers.formats.codec import FormatWarning
+from flagtrack.drivers.formats.codec import FormatWarning, SkippedRange
 
 DEFAULT_CHUNK_BYTES = 8 << 20
 
@@ -84,6 +85,12 @@ class EventReader:
         if not self.path.is_file():
             raise FormatError("no such file", path=str(self.path))
         self.size_bytes = self.path.stat().st_size
+        self.skipped: list[SkippedRange] = []  # byte ranges skipped after faults (non-strict), in file order
+
+    @property
+    def events_lost_at_most(self) -> int:
+        """Upper bound on the events in the :attr:`skipped` byte ranges."""
+        return sum(r.events_at_most for r in self.skipped)
 
     def __enter__(self) -> EventReader:
         return self

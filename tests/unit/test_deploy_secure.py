@@ -60,12 +60,23 @@ def test_the_units_are_hardened() -> None:
     assert set(unit["RestrictAddressFamilies"][0].split()) == {"AF_UNIX", "AF_INET", "AF_INET6", "AF_NETLINK"}
     assert {c.split(":")[0] for c in unit["LoadCredential"]} == {"ca", "cert", "key"}
     assert "DeviceAllow" not in unit  # only the instances that need a device get one
-    allowed = {path.parent.name: unit_settings(path)["DeviceAllow"] for path in UNITS.glob("*.service.d/*.conf")}
+    allowed = {path.parent.name: unit_settings(path)["DeviceAllow"] for path in UNITS.glob("*.service.d/devices.conf")}
     assert allowed == {
         "flagtrack@camera.service.d": ["char-usb_device rw"],
         "flagtrack@supervisor.service.d": ["/dev/flagtrack-tunnel rw"],
         "flagtrack@sensor.service.d": ["/dev/flagtrack-sensor rw"],
     }
+    assert not any("DeviceAllow" in unit_settings(path) for path in UNITS.glob("*.service.d/[!d]*.conf"))
+
+
+def test_the_units_tell_systemd_they_are_alive() -> None:
+    """Type=notify with a watchdog (READY/WATCHDOG from the services' loops, daemon/services/sd_notify.py);
+    the supervisor's allows for one blocking tunnel step (ramp + settle timeout)."""
+    unit = unit_settings(UNITS / "flagtrack@.service")
+    assert unit["Type"] == ["notify"] and unit["NotifyAccess"] == ["main"]
+    assert unit["WatchdogSec"] == ["30"] and unit["Restart"] == ["on-failure"]
+    supervisor = unit_settings(UNITS / "flagtrack@supervisor.service.d" / "watchdog.conf")
+    assert supervisor["WatchdogSec"] == ["120"]
 
 
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze is not installed here")

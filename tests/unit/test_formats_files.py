@@ -101,10 +101,20 @@ def test_corrupt_word_in_raw(tmp_path: Path) -> None:
     with pytest.raises(FormatError, match="reserved type 0x9") as err:
         read_events(path, strict=True)
     assert err.value.offset == body + 2 * index
-    with pytest.warns(FormatWarning, match=f"byte {body + 2 * index}"):
-        rec = read_events(path)
-    assert 0 < len(rec.events) < len(events)
-    np.testing.assert_array_equal(rec.events, events[: len(rec.events)])
+    with pytest.warns(FormatWarning, match=f"bytes {body + 2 * index}-"), open_events(path) as reader:
+        rec = reader.read()  # by default: skipped to the next valid time base, the rest kept
+    assert [r.start for r in reader.skipped] == [body + 2 * index]
+    assert 0 < len(events) - len(rec.events) <= reader.events_lost_at_most
+    assert_prefix_and_suffix(rec.events, events)
+
+
+def assert_prefix_and_suffix(kept: np.ndarray, events: np.ndarray) -> None:
+    """``kept`` is ``events`` with one stretch left out: a prefix of it, then a suffix."""
+    differs = np.flatnonzero(kept != events[: len(kept)])
+    k = int(differs[0]) if len(differs) else len(kept)
+    assert 0 < k < len(kept), "events on both sides of the damage are kept"
+    np.testing.assert_array_equal(kept[:k], events[:k])
+    np.testing.assert_array_equal(kept[k:], events[len(events) - (len(kept) - k) :])
 
 
 @pytest.mark.parametrize(

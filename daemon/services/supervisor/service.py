@@ -25,6 +25,7 @@ import numpy as np
 
 from flagtrack.daemon.errors import ConfigError, DriverError, FlagtrackError
 from flagtrack.daemon.schema import RecorderCommand, SupervisorState, TunnelState
+from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.services.supervisor.analysis import point_metrics
 from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step, measured_amplitude
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor, point_state
@@ -208,6 +209,7 @@ class SupervisorService:
         deadline = time.monotonic() + duration_s
         while True:
             self._heartbeat()
+            beat(self.name, f"{self._mode}, flag {self.monitor.state.value}")
             self.monitor.pump()
             self._publish()
             if self._stop.is_set():

@@ -9,6 +9,7 @@ from typing import Any
 
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, SupervisorState, TunnelState
+from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.transport import Bus
 
 from .config import ViewerConfig
@@ -60,6 +61,7 @@ class ViewerService:
         )
         try:
             while not stop.is_set():
+                beat(self.name, f"{self.updates} updates, {self.frames} frames")
                 final = False
                 for name, handler in handlers:
                     while (msg := subs[name].recv(timeout_s=0)) is not None:
