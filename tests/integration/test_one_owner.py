@@ -43,6 +43,11 @@ def test_a_second_tunnel_set_on_a_held_port_is_refused_naming_the_holder(sim: Si
         assert "tunnel set 3" in lines[0]
         assert sim.setpoint_mps == 3.0  # the second one sent nothing
         assert sim.valid_commands >= commands_before  # (the holder's keep-alives went on)
+        stop = subprocess.run(
+            [*FLAGTRACK, "tunnel", "stop", "-c", str(config)], capture_output=True, text=True, timeout=30
+        )
+        assert stop.returncode != 0 and len(stop.stderr.strip().splitlines()) == 1, stop.stderr
+        assert f"held by pid {holder.pid}" in stop.stderr and "stop its owner (SIGTERM" in stop.stderr
     finally:
         holder.send_signal(signal.SIGTERM)
         holder.communicate(timeout=10)
