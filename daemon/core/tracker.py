@@ -193,11 +193,7 @@ class Tracker:
         if self._finished:
             raise RuntimeError("feed() after finish()")
         self._ingest(events)
-        complete_before_us = self._t_max_us
-        if complete_through_us is not None:
-            trusted_us = int(complete_through_us) + 1 - self._max_step_back_us
-            complete_before_us = max(complete_before_us, min(trusted_us, self._t_max_us + self._shortest_window_us))
-        return self._run(complete_before_us, None)
+        return self._run(self._complete_before_us(complete_through_us), None)
 
     def prepare(self, events: np.ndarray) -> PreparedChunk:
         """First half of :meth:`feed`: denoise and map a chunk into arrays of its own.
@@ -248,11 +244,16 @@ class Tracker:
             stats.events_kept += n_kept
             self._t_max_us = chunk.t_max_us
             stats.last_t_us = chunk.t_max_us
+        return self._run(self._complete_before_us(complete_through_us), None)
+
+    def _complete_before_us(self, complete_through_us: int | None) -> int:
+        """Windows ending before this are complete: the latest event, or later when the source
+        vouches for its horizon (``complete_through_us``), at most one shortest window on."""
         complete_before_us = self._t_max_us
         if complete_through_us is not None:
             trusted_us = int(complete_through_us) + 1 - self._max_step_back_us
             complete_before_us = max(complete_before_us, min(trusted_us, self._t_max_us + self._shortest_window_us))
-        return self._run(complete_before_us, None)
+        return complete_before_us
 
     def finish(self) -> CentrelineBatch:
         """End of stream: return the remaining updates whose windows started before the last event."""
