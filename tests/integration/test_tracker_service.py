@@ -440,10 +440,8 @@ def test_a_packet_whose_time_offset_is_loops_off_is_dropped_not_tracked(tmp_path
     assert abs(len(got) - len(want)) <= 4 and got.t_s.max() < 0.061
 
 
-def test_a_run_of_queued_packets_on_two_threads_gives_the_updates_of_one(tmp_path: Path, monkeypatch) -> None:
-    """Under load (packets queued up) the service decodes and prepares on its thread while a worker
-    updates the chain; the updates are exactly those of tracking the run on one thread."""
-    from flagtrack.daemon.services import tracker as tracker_service
+def native_packets(tmp_path: Path) -> tuple[Path, np.ndarray, list[EventPacket]]:
+    """A 60 ms recording of the flag, its events, and its bytes cut into native packets, as a camera sends them."""
     from flagtrack.drivers.formats import parse_raw_header
     from flagtrack.drivers.formats.native import NativeCutter
 
@@ -473,6 +471,15 @@ def test_a_run_of_queued_packets_on_two_threads_gives_the_updates_of_one(tmp_pat
         )  # fmt: skip
         for i, p in enumerate(cut)
     ]
+    return path, events, packets
+
+
+def test_a_run_of_queued_packets_on_two_threads_gives_the_updates_of_one(tmp_path: Path, monkeypatch) -> None:
+    """Under load (packets queued up) the service decodes and prepares on its thread while a worker
+    updates the chain; the updates are exactly those of tracking the run on one thread."""
+    from flagtrack.daemon.services import tracker as tracker_service
+
+    path, events, packets = native_packets(tmp_path)
     params = CONFIG.tracker_params()
 
     def tracked(min_packets: int) -> CentrelineBatch:
@@ -494,3 +501,43 @@ def test_a_run_of_queued_packets_on_two_threads_gives_the_updates_of_one(tmp_pat
     for name in ("t_s", "x", "y", "joints_x", "joints_y", "delta_rms", "n_events"):
         np.testing.assert_array_equal(getattr(two_threads, name), getattr(one_thread, name), err_msg=name)
     np.testing.assert_allclose(two_threads.x, offline(path, CONFIG).x, atol=1e-9)
+
+
+class _FailingTracker(Tracker):
+    """A core tracker whose chain update fails on the chunk holding ``fail_at_us`` (data it cannot take)."""
+
+    fail_at_us = 30_000
+
+    def feed(self, events: np.ndarray, complete_through_us: int | None = None) -> CentrelineBatch:
+        if len(events) and events["t"][0] <= self.fail_at_us <= events["t"][-1]:
+            raise ValueError("the chain cannot take this chunk")
+        return super().feed(events, complete_through_us)
+
+
+@pytest.mark.parametrize("min_packets", [1 << 30, 8], ids=["one thread", "two threads"])
+def test_a_chunk_the_core_cannot_track_is_counted_and_a_fresh_tracker_goes_on(
+    tmp_path: Path, monkeypatch, min_packets: int
+) -> None:
+    """Whichever thread updates the chain, a failure drops the packets it held (counted, logged as a
+    summary) and the packets after them are tracked by a fresh core tracker."""
+    from flagtrack.daemon.services import tracker as tracker_service
+
+    monkeypatch.setattr(tracker_service, "PIPELINE_MIN_PACKETS", min_packets)
+    _, _, packets = native_packets(tmp_path)
+    params = CONFIG.tracker_params()
+    with Bus(BusConfig(namespace="flagtrack/fail")) as bus:
+        service = TrackerService(
+            bus, TrackerServiceConfig(batch_updates=1 << 30), lambda: _FailingTracker(params, sensor_size=(640, 480))
+        )
+        service._lines_pub = bus.publisher(bus.keys.centrelines())
+        added: list[CentrelineBatch] = []
+        queue_updates = service._add
+        monkeypatch.setattr(service, "_add", lambda batch, ns: [added.append(batch), queue_updates(batch, ns)])
+        for start in range(0, len(packets), 16):
+            service.handle(packets[start : start + 16])
+        failed = service.undecodable_packets
+        assert 1 <= failed <= 16  # the packets tracked with the failing chunk, no more
+        assert service.problems.totals.get("packets that failed to track") == failed
+        t_s = CentrelineBatch.concatenate(added).t_s
+        assert t_s.max() > 0.05  # tracking went on after the failure (at 30 ms) to the end (60 ms)
+        assert not np.any((t_s > 0.0305) & (t_s < 0.0315))  # the failed chunk's updates are dropped
