@@ -124,29 +124,43 @@ class CameraService:
         if info.encoding in NATIVE_ENCODINGS:
             NativeCutter(info.encoding).push(bytes(8))  # and the word scan
         rates = RateCounter(int(self.cfg.rate_interval_s * 1e6))
-        cutter: NativeCutter | None = None  # made at the first native bytes
+        cutter: NativeCutter | None = None  # made at the first native bytes the adapter did not cut
+        precut_horizon = -1  # of the packets the adapter cut
         while not stop.is_set():
             beat(self.name, f"{self.packets} packets, {self.events} events sent")
             try:
                 data = self.camera.read(self.cfg.read_timeout_s)
             except EndOfStream:
                 last = (cutter.flush() if cutter is not None else []) + packetizer.flush()
-                horizon = max(packetizer.horizon_us, cutter.horizon_us if cutter is not None else -1)
+                horizon = max(packetizer.horizon_us, cutter.horizon_us if cutter is not None else -1, precut_horizon)
                 last = last or [Packet(b"", horizon, horizon, 0, 0, 0, 0)]
                 self._publish(last, 0, info, events_pub, rate_pub, rates, end_of_stream=True, native=cutter is not None)
                 self.reached_eof = True
                 return
             if data is None:
                 continue
-            if data.raw is not None:  # the device's own words: cut, not decoded
+            if data.packets is not None and cutter is None and self._fits(data.packets):  # cut by the adapter
+                precut_horizon = max(precut_horizon, *(p.t_last_us for p in data.packets))
+                self._publish(data.packets, data.arrival_ns, info, events_pub, rate_pub, rates, native=True)
+            elif data.raw is not None:  # the device's own words: cut, not decoded
+                raw = data.raw
                 if cutter is None:
                     params = PacketParams(self.cfg.packet_us, self.cfg.max_packet_events)
                     cutter = NativeCutter(info.encoding, params, info.t_offset_us)
-                packets = cutter.push(data.raw)
+                    if data.packets:  # after packets the adapter cut: their state words go first
+                        raw = data.packets[0].data[: data.packets[0].preamble_bytes] + raw
+                packets = cutter.push(raw)
                 self._publish(packets, data.arrival_ns, info, events_pub, rate_pub, rates, native=True)
             else:
                 packets = packetizer.push(data.events, data.triggers, data.t_until_us)
                 self._publish(packets, data.arrival_ns, info, events_pub, rate_pub, rates)
+
+    def _fits(self, packets: list[Packet]) -> bool:
+        """Whether packets an adapter cut are within this service's packet size (time and events)."""
+        return all(
+            p.n_events <= self.cfg.max_packet_events and p.t_last_us - p.t_first_us < self.cfg.packet_us
+            for p in packets
+        )
 
     def _publish(
         self,

@@ -7,6 +7,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from flagtrack.drivers.formats.packets import Packet
+
 
 @dataclass(frozen=True)
 class CameraInfo:
@@ -43,6 +45,10 @@ class CameraData:
             has been delivered), or None if the camera cannot say.
         raw: the device's bytes in its native encoding (``CameraInfo.encoding``, evt3 or evt2), as
             received: the service cuts them into packets without decoding them.
+        packets: ``raw`` already cut into self-contained packets, when the adapter had to scan the
+            bytes anyway (a paced replay, which cuts them per ``slice_us`` of camera time to pace
+            itself): the service publishes them as they are if they are no longer than its own
+            packets, rather than scanning the bytes a second time.
     """
 
     events: np.ndarray
@@ -50,6 +56,7 @@ class CameraData:
     arrival_ns: int
     t_until_us: int | None = None
     raw: bytes | None = None
+    packets: list[Packet] | None = None
 
 
 class EndOfStream(Exception):

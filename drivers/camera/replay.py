@@ -17,7 +17,7 @@ from flagtrack.drivers.camera.base import CameraData, CameraInfo, EndOfStream
 from flagtrack.drivers.formats import open_events
 from flagtrack.drivers.formats.codec import LOOP_US
 from flagtrack.drivers.formats.native import NativeCutter
-from flagtrack.drivers.formats.packets import PacketParams, slot_table
+from flagtrack.drivers.formats.packets import Packet, PacketParams, slot_table
 from flagtrack.drivers.formats.raw_file import RawReader
 
 log = logging.getLogger(__name__)
@@ -131,7 +131,10 @@ class ReplayCamera:
             if wait > 0:
                 time.sleep(wait)
         self._pending = None
-        if self.native:  # events holds the file's bytes
+        if self.native:  # events holds the file's bytes, or the packet a paced replay cut
+            if isinstance(events, Packet):
+                raw = events.data[events.preamble_bytes :]
+                return CameraData(empty_events(), empty_triggers(), time.time_ns(), t_until, raw=raw, packets=[events])
             until = t_until if t_until >= 0 else None
             return CameraData(empty_events(), empty_triggers(), time.time_ns(), t_until_us=until, raw=events)
         return CameraData(events, triggers, time.time_ns(), t_until_us=t_until)
@@ -140,8 +143,9 @@ class ReplayCamera:
         self._slices = None
 
     def _native_slices(self, path: Path, encoding: str) -> Iterator[tuple[Any, np.ndarray, int]]:
-        """(bytes, no triggers, t_until_us) of the file's body as read (as fast as possible) or per
-        ``slice_us`` of camera time (paced; cut by a word scan, nothing decoded)."""
+        """(bytes, no triggers, -1) of the file's body as read (as fast as possible), or (packet, no
+        triggers, t_until_us) per ``slice_us`` of camera time (paced; cut by a word scan, nothing
+        decoded: the packets go to the service as cut)."""
         body_offset = self._body_offset
         params = PacketParams(self.cfg.slice_us, 1 << 40)
         cutter = NativeCutter(encoding, params, self.t_offset_us) if self.cfg.speed > 0 else None
@@ -153,10 +157,10 @@ class ReplayCamera:
                     yield block, no_triggers, -1
                     continue
                 for piece in cutter.push(block):
-                    yield piece.data[piece.preamble_bytes :], no_triggers, piece.t_last_us + 1
+                    yield piece, no_triggers, piece.t_last_us + 1
             if cutter is not None:
                 for piece in cutter.flush():
-                    yield piece.data[piece.preamble_bytes :], no_triggers, piece.t_last_us + 1
+                    yield piece, no_triggers, piece.t_last_us + 1
 
     def _loop_slices(self, path: Path) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
         shift = 0

@@ -85,7 +85,7 @@ def shared_real_or_synthetic(tmp_path) -> list[tuple[Path, bool]]:
     return [(raw, True), (npy, False)]
 
 
-def _publish_all(source: Path) -> list[EventPacket]:
+def _publish_all(source: Path, speed: float = 0.0, slice_us: int = 1000) -> list[EventPacket]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with (
         Bus(BusConfig(namespace="flagtrack/native", listen=(endpoint,))) as sub_bus,
@@ -95,7 +95,7 @@ def _publish_all(source: Path) -> list[EventPacket]:
         from tests.fakes.helpers import wait_subscribed
 
         wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"))
-        config = ReplayConfig(source, speed=0.0, width=640, height=480)
+        config = ReplayConfig(source, speed=speed, width=640, height=480, slice_us=slice_us)
         camera = CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(config))
         camera.run(threading.Event())
         packets: list[EventPacket] = []
@@ -107,3 +107,36 @@ def _publish_all(source: Path) -> list[EventPacket]:
 
         wait_until(all_came, timeout_s=20, what="the end of the stream")
     return packets
+
+
+@pytest.mark.parametrize("slice_us", [1000, 4000], ids=["slices of a packet", "longer slices"])
+def test_a_paced_replay_hands_over_its_packets_and_the_bytes_are_scanned_once(
+    tmp_path, monkeypatch, slice_us: int
+) -> None:
+    """A paced replay cuts the file per slice to pace itself; slices no longer than a packet go out as
+    cut (no second scan in the service, no wait for the next slice to close one); longer ones are
+    cut again. Either way the packets decode alone and carry the file's words."""
+    from flagtrack.daemon.services import camera as camera_service
+
+    scans: list[int] = []
+    cutter_class = camera_service.NativeCutter
+
+    class CountingCutter(cutter_class):  # type: ignore[misc,valid-type]
+        def push(self, data: bytes | bytearray | memoryview) -> list:
+            scans.append(len(data))
+            return super().push(data)
+
+    monkeypatch.setattr(camera_service, "NativeCutter", CountingCutter)
+    source = tmp_path / "s.raw"
+    from flagtrack.drivers.formats import write_events
+    from flagtrack.drivers.sim.quickline import WavyFlag, line_events
+
+    events = np.concatenate(list(line_events(WavyFlag(), 0, 30_000, 640, 480)))
+    write_events(source, events, width=640, height=480, encoding="evt3")
+    packets = _publish_all(source, speed=20.0, slice_us=slice_us)
+    scanned = sum(n for n in scans if n > 8)  # (8 bytes: the service's warm-up)
+    assert scanned == (0 if slice_us == 1000 else len(body(source)))
+    assert all(p.t_last_us - p.t_first_us < 1000 for p in packets)  # the service's packet size either way
+    decoded = np.concatenate([decode_packet(p.encoding, p.data, p.t_offset_us)[0] for p in packets])
+    np.testing.assert_array_equal(decoded, events)
+    assert b"".join(p.data[p.preamble_bytes :] for p in packets) == body(source)
