@@ -18,7 +18,6 @@ a fresh core tracker takes over.
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import logging
 import threading
@@ -43,11 +42,10 @@ from flagtrack.drivers.formats.packets import decode_packet
 log = logging.getLogger(__name__)
 _NO_NS = np.zeros(0, dtype=np.int64)
 PIPELINE_MIN_PACKETS = 8
-"""Runs of at least this many packets are tracked on two threads, and so is any run while more
-packets wait or the chain's worker is busy; a lone packet at a moderate rate is tracked in this
-thread (no hand-over between threads on the latency path)."""
-PIPELINE_GROUP_BYTES = 64 << 10
-"""Packets are decoded and prepared together, up to about this many bytes, on the way to the worker."""
+"""Runs of at least this many packets (queued while the tracker worked) are tracked on two threads;
+shorter ones, the usual case at a moderate rate, in this one (no hand-over between threads)."""
+PIPELINE_GROUP_PACKETS = 4
+"""Packets decoded and prepared together on the way to the chain's worker."""
 
 
 @dataclass(frozen=True)
@@ -139,8 +137,6 @@ class TrackerService:
         self._pending_since = 0.0
         self._seq_out = 0
         self._pipeline: TrackerPipeline | None = None  # the chain's worker thread, made on first use
-        self._advanced: collections.deque[tuple[CentrelineBatch, Any]] = collections.deque()  # its updates
-        self._in_flight = 0  # packets handed to the worker whose updates were not all collected
         self.packets_sub = bus.subscribe(
             bus.keys.camera_events(cfg.camera_id),
             EventPacket,
@@ -181,7 +177,6 @@ class TrackerService:
                     if batch[-1].end_of_stream and self.cfg.exit_at_end_of_stream:
                         break
                 # nothing more queued: publish now (latency); under load, batches fill up instead
-                self._collect(wait=len(packets.channel) == 0)
                 self._publish_if_due(force=len(packets.channel) == 0)
                 now = time.monotonic()
                 if now - last_status >= self.cfg.status_interval_s:
@@ -191,7 +186,6 @@ class TrackerService:
                     self._count_drops()
                     self.problems.flush()
         finally:
-            self._collect(wait=True)
             if self._pipeline is not None:
                 self._pipeline.abandon()
             self._publish_if_due(force=True)
@@ -254,7 +248,6 @@ class TrackerService:
         """Another stream began (the camera restarted). The updates of the old stream are
         published, and a fresh core tracker takes the new one (the old one's unfinished windows,
         cut short by the restart, are dropped)."""
-        self._collect(wait=True)
         self._publish_if_due(force=True)
         self.restarts += 1
         self.problems.add(
@@ -271,8 +264,7 @@ class TrackerService:
         """Decode consecutive packets as one stream (one by one if that fails) and track them."""
         if not run:
             return
-        busy = self._pipeline is not None and self._pipeline.busy
-        if busy or len(run) >= PIPELINE_MIN_PACKETS or len(self.packets_sub.channel):  # both cores at work
+        if len(run) >= PIPELINE_MIN_PACKETS:  # packets queued up (a busy camera): both cores at work
             self._track_run_on_two_threads(run, end_of_stream)
             return
         try:
@@ -313,18 +305,13 @@ class TrackerService:
             return chunks
 
     def _track_run_on_two_threads(self, run: list[EventPacket], end_of_stream: bool) -> None:
-        """Track a run as :meth:`_track_run` does, with the work split: this thread receives and
-        decodes groups of packets (about ``PIPELINE_GROUP_BYTES``) while a worker denoises, maps and
-        updates the chain (:class:`.TrackerPipeline`: the same updates as ``feed``). The run's updates are
-        collected as the worker finishes them (:meth:`_collect`), so this thread goes on to the next
-        packets meanwhile; they are waited for at the end of a stream or when no packet is waiting."""
+        """Track a long run as :meth:`_track_run` does, with the work split: this thread decodes,
+        denoises and maps groups of ``PIPELINE_GROUP_PACKETS`` packets while a worker updates the
+        chain on the group before (:class:`.TrackerPipeline`: the same updates as ``feed``)."""
         pipeline = self._pipeline_of(self.tracker)
-        tag = (np.array([p.t_last_us for p in run]), np.array([p.sent_ns for p in run]))
-        groups: list[list[EventPacket]] = [[]]
-        for packet in run:
-            if groups[-1] and sum(len(p.data) for p in groups[-1]) >= PIPELINE_GROUP_BYTES:
-                groups.append([])
-            groups[-1].append(packet)
+        batches: list[CentrelineBatch] = []
+        pipeline.emit_to(batches)
+        groups = [run[i : i + PIPELINE_GROUP_PACKETS] for i in range(0, len(run), PIPELINE_GROUP_PACKETS)]
         try:
             for g, group in enumerate(groups):
                 try:
@@ -335,78 +322,43 @@ class TrackerService:
                 self.events += sum(len(c) for c in chunks)
                 for i, events in enumerate(chunks):
                     last = g == len(groups) - 1 and i == len(chunks) - 1
-                    pipeline.feed(events, run[-1].t_last_us if last else None, tag)
-            self._in_flight += len(run)
+                    pipeline.feed(events, run[-1].t_last_us if last else None)
+            pipeline.drain()
         except Exception as exc:  # noqa: BLE001 - the core choked on this data: a fresh tracker goes on
-            self._in_flight += len(run)
-            self._pipeline_failed(exc)
-        self._collect(wait=end_of_stream or len(self.packets_sub.channel) == 0)
-        if end_of_stream:
-            self._track([], run, end_of_stream)
-
-    def _collect(self, wait: bool) -> None:
-        """Queue the updates the chain's worker has finished (all of them, ``wait``ing, if ``wait``).
-
-        If the worker failed, the packets it held are counted as failed and a fresh tracker goes on.
-        """
-        if self._pipeline is None:
-            return
-        if wait:
-            try:
-                self._pipeline.drain()
-            except Exception as exc:  # noqa: BLE001 - the core choked on this data: a fresh tracker goes on
-                self._pipeline_failed(exc)
-                return
-            self._in_flight = 0
-        while self._advanced:
-            batch, (horizons, sent_ns) = self._advanced.popleft()
-            self._add(batch, self._source_ns_of(batch, horizons, sent_ns))
-
-    def _pipeline_failed(self, exc: Exception) -> None:
-        """The chain's update on the worker failed: the packets it held are counted as failed (their
-        updates are dropped) and a fresh tracker goes on."""
-        self.undecodable_packets += self._in_flight
-        log.debug("tracker: the chain's worker failed with %d packet(s) in hand", self._in_flight, exc_info=exc)
-        self.problems.add(
-            "packets that failed to track", f"{self._in_flight} packet(s): {type(exc).__name__}: {exc}", self._in_flight
-        )
-        self._in_flight = 0
-        if self._pipeline is not None:
-            self._pipeline.abandon()
-            self._pipeline = None
-        self._advanced.clear()
-        self.tracker = self.tracker_factory()
+            self._failed(run, exc)
+            self.tracker = self.tracker_factory()
+            batches = []
+        self._track(batches, run, end_of_stream, advanced=True)
 
     def _pipeline_of(self, tracker: Any) -> TrackerPipeline:
         """The worker of ``tracker`` (a new tracker, after a restart or a failure, gets a new one)."""
-        if self._pipeline is not None and self._pipeline.tracker is not tracker:
-            self._collect(wait=True)
-            if self._pipeline is not None:  # (a failure has dropped it already)
+        if self._pipeline is None or self._pipeline.tracker is not tracker:
+            if self._pipeline is not None:
                 self._pipeline.abandon()
-                self._pipeline = None
-        if self._pipeline is None:
-            self._pipeline = TrackerPipeline(
-                tracker, lambda batch, tag: self._advanced.append((batch, tag)), prepare_on_worker=True
-            )
+            self._pipeline = TrackerPipeline(tracker, lambda batch, _tag: None)
         return self._pipeline
 
-    def _track(self, chunks: list[np.ndarray], run: list[EventPacket], end_of_stream: bool) -> None:
+    def _track(self, chunks: list, run: list[EventPacket], end_of_stream: bool, advanced: bool = False) -> None:
         """Feed the decoded chunks (the last with the run's horizon: the camera says every event up
-        to it has come, so the windows ending there are complete now) and queue the updates."""
+        to it has come, so the windows ending there are complete now) and queue the updates;
+        ``advanced``: ``chunks`` are the updates already (tracked on two threads)."""
         tracker = self.tracker
         batch: CentrelineBatch | None = None
         source_ns = _NO_NS
         try:
-            self._collect(wait=True)  # the worker's updates come first (and it leaves the tracker)
-            batches = [
-                tracker.feed(events, run[-1].t_last_us if i == len(chunks) - 1 else None)
-                for i, events in enumerate(chunks)
-            ]
+            batches = (
+                chunks
+                if advanced
+                else [
+                    tracker.feed(events, run[-1].t_last_us if i == len(chunks) - 1 else None)
+                    for i, events in enumerate(chunks)
+                ]
+            )
             if end_of_stream:
                 batches.append(tracker.finish())
             if batches:
                 batch = batches[0] if len(batches) == 1 else CentrelineBatch.concatenate(batches)
-                source_ns = self._source_ns(batch, run)
+                source_ns = self._source_ns(batch, run, tracker)
         except Exception as exc:  # noqa: BLE001 - the core choked on this data: a fresh tracker goes on
             batch = None
             self._failed(run, exc)
@@ -431,15 +383,16 @@ class TrackerService:
             "packets that failed to track", f"packets {run[0].seq}-{run[-1].seq}: {type(exc).__name__}: {exc}", len(run)
         )
 
-    def _source_ns(self, batch: CentrelineBatch, run: list[EventPacket]) -> np.ndarray:
+    @staticmethod
+    def _source_ns(batch: CentrelineBatch, run: list[EventPacket], tracker: Any) -> np.ndarray:
         """(n_t,) ``sent_ns`` of the packet that brought each update's newest events."""
-        return self._source_ns_of(batch, np.array([p.t_last_us for p in run]), np.array([p.sent_ns for p in run]))
-
-    def _source_ns_of(self, batch: CentrelineBatch, horizons_us: np.ndarray, sent_ns: np.ndarray) -> np.ndarray:
-        """As :meth:`_source_ns`, from the run's horizons and ``sent_ns``."""
-        if len(sent_ns) == 1 or len(batch) == 0:
-            return np.full(len(batch), sent_ns[-1], dtype=np.int64)
-        return newest_packet_ns(self.tracker.params.schedule.window_ends_us(batch.t_s), horizons_us, sent_ns)
+        if len(run) == 1 or len(batch) == 0:
+            return np.full(len(batch), run[-1].sent_ns, dtype=np.int64)
+        return newest_packet_ns(
+            tracker.params.schedule.window_ends_us(batch.t_s),
+            np.array([p.t_last_us for p in run]),
+            np.array([p.sent_ns for p in run]),
+        )
 
     def _add(self, batch: CentrelineBatch, source_ns: np.ndarray) -> None:
         if len(batch) == 0:

@@ -31,21 +31,11 @@ class TrackerPipeline:
     Args:
         tracker: the core tracker (only the worker calls its ``advance``; only the caller ``prepare``).
         emit: called on the worker with each chunk's updates and the tag given to :meth:`feed`.
-        depth: chunks waiting for the worker at most (bounds the memory).
-        prepare_on_worker: the worker prepares the chunks too (the caller's thread only hands them
-            over): the better split when the caller has work of its own per chunk (the live
-            tracker decodes packets; preparing costs more than the chain update).
+        depth: prepared chunks waiting for the worker at most (bounds the memory).
     """
 
-    def __init__(
-        self,
-        tracker: Tracker,
-        emit: Callable[[CentrelineBatch, Any], None],
-        depth: int = 4,
-        prepare_on_worker: bool = False,
-    ) -> None:
+    def __init__(self, tracker: Tracker, emit: Callable[[CentrelineBatch, Any], None], depth: int = 4) -> None:
         self.tracker = tracker
-        self._prepare_on_worker = prepare_on_worker
         self._emit = emit
         self._queue: queue.Queue[Any] = queue.Queue(maxsize=depth)
         self._error: BaseException | None = None
@@ -54,15 +44,14 @@ class TrackerPipeline:
         self._closed = False
 
     def feed(self, events: np.ndarray, complete_through_us: int | None = None, tag: Any = None) -> None:
-        """Prepare ``events`` (here, or on the worker) and queue them for the chain update (blocks
-        while ``depth`` wait)."""
+        """Prepare ``events`` here and queue them for the chain update (blocks while ``depth`` wait)."""
         self._check()
-        self._put((events if self._prepare_on_worker else self.tracker.prepare(events), complete_through_us, tag))
+        chunk = self.tracker.prepare(events)
+        self._put((chunk, complete_through_us, tag))
 
-    @property
-    def busy(self) -> bool:
-        """Chunks fed are still waiting for the worker or being advanced."""
-        return self._queue.unfinished_tasks > 0
+    def emit_to(self, batches: list[CentrelineBatch]) -> None:
+        """From now on, append the updates to ``batches`` (call between drains)."""
+        self._emit = lambda batch, _tag: batches.append(batch)
 
     def abandon(self) -> None:
         """Stop the worker after what is queued, without raising its error (the tracker is dropped)."""
@@ -127,8 +116,6 @@ class TrackerPipeline:
                 chunk, complete_through_us, tag = item
                 if isinstance(chunk, PreparedChunk):
                     batch = tracker.advance(chunk, complete_through_us)
-                elif isinstance(chunk, np.ndarray):
-                    batch = tracker.feed(chunk, complete_through_us)
                 else:
                     batch = tracker.finish()
                 self._emit(batch, tag)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
-from flagtrack.daemon.core.tracker import Tracker
+from flagtrack.daemon.core.tracker import PreparedChunk, Tracker
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, TrackerStatus
 from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
 from flagtrack.daemon.services.tracker import TrackerService, TrackerServiceConfig
@@ -509,9 +509,16 @@ class _FailingTracker(Tracker):
     fail_at_us = 30_000
 
     def feed(self, events: np.ndarray, complete_through_us: int | None = None) -> CentrelineBatch:
-        if len(events) and events["t"][0] <= self.fail_at_us <= events["t"][-1]:
-            raise ValueError("the chain cannot take this chunk")
+        self._check(events["t"])
         return super().feed(events, complete_through_us)
+
+    def advance(self, chunk: PreparedChunk, complete_through_us: int | None = None) -> CentrelineBatch:
+        self._check(chunk.t)
+        return super().advance(chunk, complete_through_us)
+
+    def _check(self, t: np.ndarray) -> None:
+        if len(t) and t[0] <= self.fail_at_us <= t[-1]:
+            raise ValueError("the chain cannot take this chunk")
 
 
 @pytest.mark.parametrize("min_packets", [1 << 30, 8], ids=["one thread", "two threads"])
