@@ -2,22 +2,27 @@
 
 Three processes on this machine, joined by Zenoh over loopback TCP (multicast scouting off): a
 ``flagtrack tracker`` (listening), a ``flagtrack camera`` replaying a flapping-line recording
-(``drivers/sim/quickline``, about 6 Mev/s of camera data) and this process, which subscribes to the
-centrelines and the tracker status.
+(``drivers/sim/quickline``, made on first use with ``--camera-rate`` Mev/s of camera data, 40 by
+default: a sensor near its read-out limit) and this process, which subscribes to the centrelines and
+the tracker status.
 
-The camera hands the tracker the recording's own EVT 3.0 bytes, cut into packets (native bytes, as a
-device's), and each process loads the kernels built by ``flagtrack kernels build`` when there is one
-(the line "kernels" says which).
+The camera hands the tracker the recording's own EVT 3.0 bytes, cut into packets of ``--packet-us``
+of camera time (native bytes, as a device's), and each process loads the kernels built by
+``flagtrack kernels build`` when there is one (the line "kernels" says which).
 
 1. Throughput: the file is replayed as fast as possible; the sustained rate is the events of the
    file over the time from the first packet to the tracker's last centreline, and the tracker must
    report no missing packet.
-2. Latency: the file is replayed once in real time scaled to ``--latency-rate`` (5 Mev/s by default;
-   at most ``--latency-seconds``; not looped, so the camera hands over the file's own bytes);
-   each update's latency runs from the adapter's reception of the packet that completed its window
-   (``sent_ns``) to the publication of the centreline message by the tracker (``published_ns``,
-   the latency the live-pipeline issue asks for) and to its arrival here (the bus hop back to a
-   subscriber in another process included); p50 and p99 of both.
+2. Real time: the same file at its own pace (speed 1), as the device would send it; the tracker
+   *keeps up* if no packet is lost and the latency of the last tenth of the updates (median) is
+   within 10 ms of that of the first tenth (a tracker that falls behind adds its backlog to every
+   update's latency). p50 and p99 of the latency to publication.
+3. Latency: a recording of ``--latency-rate`` Mev/s (5 by default; made on first use) replayed at
+   its own pace for at most ``--latency-seconds``; each update's latency runs from the adapter's
+   reception of the packet that completed its window (``sent_ns``) to the publication of the
+   centreline message by the tracker (``published_ns``, the latency the live-pipeline issue asks
+   for) and to its arrival here (the bus hop back to a subscriber in another process included);
+   p50 and p99 of both.
 
 With ``--secure`` each run is made twice, plain and then secured as ``bus.security`` secures a rig
 (mutual TLS on every link, each process its own certificate, access control made from the rig,
@@ -44,13 +49,20 @@ from pathlib import Path
 from typing import Any
 
 COMMAND = "live"
+KEPT_UP_MS = 10.0
+"""The real-time run kept up if its last updates are at most this much later than its first (median)."""
 HELP = "sustained event rate and latency of camera -> Zenoh -> tracker on a replayed recording"
 DESCRIPTION = __doc__
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of the live benchmark."""
-    parser.add_argument("--seconds", type=float, default=2.0, help="recording length, s (~6 Mev/s: 2 s ~ 12 M events)")
+    parser.add_argument(
+        "--seconds", type=float, default=2.0, help="recording length, s (at 40 Mev/s: 2 s ~ 80 M events)"
+    )
+    parser.add_argument(
+        "--camera-rate", type=float, default=40.0, help="event rate of the recording (camera data), Mev/s"
+    )
     parser.add_argument("--latency-rate", type=float, default=5.0, help="event rate of the latency run, Mev/s")
     parser.add_argument("--latency-seconds", type=float, default=4.0, help="wall time of the latency run, s")
     parser.add_argument("--tau", type=float, default=2.5e-4, help="tracker update interval, s")
@@ -78,30 +90,38 @@ def run(args: argparse.Namespace) -> int:
 
     if args.packet_us < 1:
         raise SystemExit("flagtrack bench live: --packet-us must be positive")
+    if args.camera_rate <= 0 or args.latency_rate <= 0 or args.seconds <= 0:
+        raise SystemExit("flagtrack bench live: --camera-rate, --latency-rate and --seconds must be positive")
     cache = args.cache or Path(tempfile.gettempdir()) / "flagtrack-bench"
     cache.mkdir(parents=True, exist_ok=True)
-    recording = cache / f"live-{args.seconds:g}s.raw"
-    if not recording.exists():
-        print(f"bench live: making {recording} ...", file=sys.stderr)
-        make_recording(recording, args.seconds)
-    with open_events(recording) as reader:
-        n_events = sum(len(chunk.events) for chunk in reader)
+
+    def recording_of(seconds: float, rate_mev_s: float) -> tuple[Path, int]:
+        """The cached recording of ``seconds`` at about ``rate_mev_s``, and its number of events."""
+        path = cache / f"live-{seconds:g}s-{rate_mev_s:g}mevs.raw"
+        if not path.exists():
+            print(f"bench live: making {path} ...", file=sys.stderr)
+            make_recording(path, seconds, rate_mev_s=rate_mev_s)
+        with open_events(path) as reader:
+            return path, sum(len(chunk.events) for chunk in reader)
+
+    recording, n_events = recording_of(args.seconds, args.camera_rate)
+    latency_recording, latency_events = recording_of(args.latency_seconds, args.latency_rate)
     file_rate = n_events / args.seconds
     tracker = {"root": list(ROOT), "length": LENGTH, "tau_s": args.tau}
     wakeup = _wakeup_lateness_ms()
-    speed = args.latency_rate * 1e6 / file_rate
     runs: dict[str, dict[str, Any]] = {}
-    for secure in (False, True) if args.secure else (False,):  # each secured run right after its plain twin
-        suffix = "_secure" if secure else ""
-        runs["throughput" + suffix] = _measure(
-            recording, tracker, args.packet_us, speed=0.0, loop=False, wall_s=None, secure=secure
-        )
-    for secure in (False, True) if args.secure else (False,):
-        suffix = "_secure" if secure else ""
-        runs["latency" + suffix] = _measure(
-            recording, tracker, args.packet_us, speed=speed, loop=False, wall_s=args.latency_seconds, secure=secure
-        )
-    throughput, latency = runs["throughput"], runs["latency"]
+    plans = [
+        ("throughput", recording, 0.0, None),
+        ("realtime", recording, 1.0, args.seconds),
+        ("latency", latency_recording, 1.0, args.latency_seconds),
+    ]
+    for name, path, speed, wall_s in plans:
+        secured = args.secure and name != "realtime"  # (the secured figures are throughput and latency)
+        for secure in (False, True) if secured else (False,):  # each secured run right after its plain twin
+            runs[name + ("_secure" if secure else "")] = _measure(
+                path, tracker, args.packet_us, speed=speed, loop=False, wall_s=wall_s, secure=secure
+            )
+    throughput, realtime, latency = runs["throughput"], runs["realtime"], runs["latency"]
     results = {
         "kernels": _kernels_state(),
         "events": n_events,
@@ -110,6 +130,13 @@ def run(args: argparse.Namespace) -> int:
         "sustained_mev_s": n_events / throughput["elapsed_s"] / 1e6 if throughput["complete"] else None,
         "throughput_missing_packets": throughput["missing_packets"],
         "throughput_updates": throughput["updates"],
+        "realtime_kept_up": realtime["kept_up"],
+        "realtime_missing_packets": realtime["missing_packets"],
+        "realtime_updates": realtime["updates"],
+        "realtime_publish_latency_p50_ms": realtime["publish_p50_ms"],
+        "realtime_publish_latency_p99_ms": realtime["publish_p99_ms"],
+        "realtime_cpu_cores": realtime["cpu_cores"],
+        "latency_file_rate_mev_s": latency_events / args.latency_seconds / 1e6,
         "latency_rate_mev_s": args.latency_rate,
         "latency_updates": latency["updates"],
         "latency_p50_ms": latency["p50_ms"],
@@ -140,6 +167,11 @@ def run(args: argparse.Namespace) -> int:
             else "  throughput: the tracker did not finish the stream"
         )
         print(
+            f"  real time at {file_rate / 1e6:.1f} Mev/s over {realtime['updates']} updates: "
+            f"{'kept up' if realtime['kept_up'] else 'fell behind'}, {realtime['missing_packets']} packets lost, "
+            f"to publication p50 {realtime['publish_p50_ms']:.2f} ms, p99 {realtime['publish_p99_ms']:.2f} ms"
+        )
+        print(
             f"  latency at {args.latency_rate:g} Mev/s over {latency['updates']} updates, "
             f"{latency['missing_packets']} packets lost:"
         )
@@ -152,7 +184,11 @@ def run(args: argparse.Namespace) -> int:
             f"  this machine, idle: a 1 ms sleep wakes up p50 {wakeup[0]:.2f} ms, p99 {wakeup[1]:.2f} ms late "
             f"(every hop of the pipeline waits for such a wake-up)"
         )
-        for label, cores in (("throughput run", throughput["cpu_cores"]), ("latency run", latency["cpu_cores"])):
+        for label, cores in (
+            ("throughput run", throughput["cpu_cores"]),
+            ("real-time run", realtime["cpu_cores"]),
+            ("latency run", latency["cpu_cores"]),
+        ):
             if cores:
                 used = ", ".join(f"{name} {value:.2f}" for name, value in cores.items())
                 print(f"  CPU in the {label} (cores; this machine has {os.cpu_count()}): {used}")
@@ -306,8 +342,10 @@ def _measure(  # noqa: PLR0915 - one measurement, step by step
                 proc.communicate(timeout=30)
     lat = np.concatenate(latencies) if latencies else np.zeros(0)
     pub = np.concatenate(published) if published else np.zeros(0)
+    tenth = max(len(pub) // 10, 1)
     return {
         "complete": complete,
+        "kept_up": bool(len(pub) and missing == 0 and np.median(pub[-tenth:]) <= np.median(pub[:tenth]) + KEPT_UP_MS),
         "updates": updates,
         "missing_packets": missing,
         "cpu_cores": cpu,

@@ -53,8 +53,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
 
-def make_recording(path: Path, seconds: float, seed: int = 0) -> None:
-    """Write ``seconds`` of a flapping line (~6 Mev/s) to ``path``, streaming (bounded memory)."""
+RATE_PER_DENSITY_MEV_S = 0.305
+"""Camera event rate of the flapping line per event per pixel area it sweeps (measured: 20 -> 6.1 Mev/s)."""
+
+
+def make_recording(path: Path, seconds: float, seed: int = 0, rate_mev_s: float = 6.1) -> None:
+    """Write ``seconds`` of a flapping line (about ``rate_mev_s`` of camera data) to ``path``,
+    streaming (bounded memory)."""
     from flagtrack.drivers.formats import open_writer
     from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
 
@@ -66,7 +71,7 @@ def make_recording(path: Path, seconds: float, seed: int = 0) -> None:
             int(seconds * 1e6),
             640,
             480,
-            QuickLineParams(events_per_px2=20),
+            QuickLineParams(events_per_px2=rate_mev_s / RATE_PER_DENSITY_MEV_S),
             seed=seed,
             chunk_us=50_000,
         ):

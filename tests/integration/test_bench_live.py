@@ -21,6 +21,8 @@ def test_bench_live_reports_rate_latency_and_cpu_without_loss(tmp_path: Path) ->
             "live",
             "--seconds",
             "0.3",
+            "--camera-rate",
+            "6",
             "--latency-seconds",
             "1.0",
             "--latency-rate",
@@ -37,15 +39,19 @@ def test_bench_live_reports_rate_latency_and_cpu_without_loss(tmp_path: Path) ->
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result["events"] > 1_000_000  # 0.3 s of a flapping line at ~6 Mev/s
     assert result["throughput_missing_packets"] == 0 and result["latency_missing_packets"] == 0
+    assert result["realtime_missing_packets"] == 0 and result["realtime_updates"] > 800  # 0.3 s: 1200 windows
+    assert result["realtime_kept_up"] is True  # 6 Mev/s at its own pace: far below what the tracker takes
+    assert 0 < result["realtime_publish_latency_p50_ms"] <= result["realtime_publish_latency_p99_ms"]
+    assert 0.7 < result["latency_file_rate_mev_s"] < 1.3  # the latency run's own recording, at ~1 Mev/s
     assert result["sustained_mev_s"] > 0.5
-    assert result["latency_updates"] > 400  # 1 s at 1 Mev/s: ~0.16 s of camera time, ~650 updates of 250 us
+    assert result["latency_updates"] > 3000  # 1 s of a 1 Mev/s recording at its own pace: 4000 updates of 250 us
     assert 0 < result["publish_latency_p50_ms"] <= result["publish_latency_p99_ms"]
     assert 0 <= result["wakeup_late_p50_ms"] <= result["wakeup_late_p99_ms"] < 1000
     assert result["publish_latency_p50_ms"] < result["latency_p50_ms"]  # the hop back to a subscriber
-    for run in ("throughput_cpu_cores", "latency_cpu_cores"):
+    for run in ("throughput_cpu_cores", "realtime_cpu_cores", "latency_cpu_cores"):
         cores = result[run]
         assert set(cores) == {"camera", "tracker", "bench"}
         assert 0 < cores["tracker"] <= 4 and all(0 <= value <= 4 for value in cores.values())
     assert result["latency_cpu_cores"]["camera"] > 0  # (as fast as possible, it may be done before the first line)
-    # paced at a sixth of the camera's rate, the tracker works less than flat out
+    # at a sixth of the camera's rate, the tracker works less than flat out
     assert result["latency_cpu_cores"]["tracker"] < result["throughput_cpu_cores"]["tracker"]
