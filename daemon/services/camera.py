@@ -134,12 +134,13 @@ class CameraService:
                 last = (cutter.flush() if cutter is not None else []) + packetizer.flush()
                 horizon = max(packetizer.horizon_us, cutter.horizon_us if cutter is not None else -1, precut_horizon)
                 last = last or [Packet(b"", horizon, horizon, 0, 0, 0, 0)]
-                self._publish(last, 0, info, events_pub, rate_pub, rates, end_of_stream=True, native=cutter is not None)
+                native = cutter is not None or precut_horizon >= 0
+                self._publish(last, 0, info, events_pub, rate_pub, rates, end_of_stream=True, native=native)
                 self.reached_eof = True
                 return
             if data is None:
                 continue
-            if data.packets is not None and cutter is None and self._fits(data.packets):  # cut by the adapter
+            if data.packets and cutter is None and self._fits(data.packets):  # cut by the adapter
                 precut_horizon = max(precut_horizon, *(p.t_last_us for p in data.packets))
                 self._publish(data.packets, data.arrival_ns, info, events_pub, rate_pub, rates, native=True)
             elif data.raw is not None:  # the device's own words: cut, not decoded

@@ -137,6 +137,7 @@ def test_a_paced_replay_hands_over_its_packets_and_the_bytes_are_scanned_once(
     scanned = sum(n for n in scans if n > 8)  # (8 bytes: the service's warm-up)
     assert scanned == (0 if slice_us == 1000 else len(body(source)))
     assert all(p.t_last_us - p.t_first_us < 1000 for p in packets)  # the service's packet size either way
+    assert all(p.native for p in packets)  # the end of stream too
     decoded = np.concatenate([decode_packet(p.encoding, p.data, p.t_offset_us)[0] for p in packets])
     np.testing.assert_array_equal(decoded, events)
     assert b"".join(p.data[p.preamble_bytes :] for p in packets) == body(source)
