@@ -6,21 +6,22 @@ import logging
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from flagtrack.daemon.errors import ConfigError, DriverError, FlagtrackError
 from flagtrack.daemon.rig.config import HARDWARE_ADAPTERS, CameraConfig, RigConfig
 from flagtrack.daemon.services.camera import CameraService
 from flagtrack.daemon.services.recorder import RecorderService
 from flagtrack.daemon.services.runner import Service
-from flagtrack.daemon.services.supervisor.service import FlagGeometry, SupervisorService
 from flagtrack.daemon.services.tracker import TrackerService
-from flagtrack.daemon.services.viewer import ViewerService
 from flagtrack.daemon.tracking.setup import TrackingSetup, processing_attrs, tracking_setup
 from flagtrack.daemon.transport import Bus
 from flagtrack.daemon.typed_yaml import with_path
 from flagtrack.drivers.camera.base import Camera, CameraInfo
 from flagtrack.drivers.tunnel.base import WindTunnel
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.services.supervisor.service import SupervisorService
 
 log = logging.getLogger(__name__)
 
@@ -178,6 +179,8 @@ def build_services(
         )
         services.append(TrackerService(bus, cfg, setup.factory, setup.units))
     if "viewer" in names:
+        from flagtrack.daemon.services.viewer import ViewerService  # rerun: only where a viewer runs
+
         services.append(
             ViewerService(bus, replace(rig.viewer, camera_id=rig.camera.id), exit_after_final=exit_at_end_of_stream)
         )
@@ -194,6 +197,8 @@ def build_services(
 
 def build_supervisor(rig: RigConfig, bus: Bus, tunnel: WindTunnel, resume_dir: Path | None = None) -> SupervisorService:
     """The supervisor of ``rig``, with its opened (not started) tunnel."""
+    from flagtrack.daemon.services.supervisor.service import FlagGeometry, SupervisorService  # SciPy: here only
+
     tracker = rig.tracker
     flag = FlagGeometry(float(tracker.length or 1.0), tuple(tracker.root or (0.0, 0.0)), float(tracker.direction_deg))
     return SupervisorService(bus, rig.supervisor, tunnel, rig.camera.id, flag, rig.snapshot(), resume_dir, rig.sensor)

@@ -14,7 +14,6 @@ from flagtrack.daemon.rig.build import build_services, open_camera, open_hardwar
 from flagtrack.daemon.rig.config import RigConfig, check_rig
 from flagtrack.daemon.services.centreline_file import CentrelineFileService
 from flagtrack.daemon.services.runner import RunReport, Service, run_services
-from flagtrack.daemon.services.supervisor.service import SupervisorService
 from flagtrack.daemon.services.tracker import warm_up_kernels
 from flagtrack.daemon.sweep import figures
 from flagtrack.daemon.tracking.setup import TrackingSetup, processing_attrs, tracking_setup
@@ -82,6 +81,8 @@ def run_rig(
                 camera=camera,
             )
             if on_supervisor_state is not None:
+                from flagtrack.daemon.services.supervisor.service import SupervisorService  # (SciPy: when asked)
+
                 for service in services:
                     if isinstance(service, SupervisorService):
                         service.add_observer(on_supervisor_state)

@@ -61,6 +61,23 @@ def test_command_start_up_leaves_yaml_and_package_metadata_unimported() -> None:
     assert out.strip() == "[]"
 
 
+def test_a_service_process_starts_without_rerun_or_scipy_unless_it_runs_them(tmp_path) -> None:
+    """Every service reads the whole rig config: the viewer's rerun and the supervisor's SciPy (~1 s
+    together) are imported only by the processes that run a viewer or a supervisor."""
+    rig = tmp_path / "rig.yaml"
+    rig.write_text("rig: lab\ntracker: {root: [100, 240], length: 200}\n")
+    heavy = "{'rerun', 'scipy.signal', 'scipy.optimize'}"
+    code = (
+        "import sys; from flagtrack.daemon.rig.config import load_rig; from flagtrack.daemon.rig import run; "
+        f"load_rig({str(rig)!r}, services=('tracker',)); print(sorted({heavy} & set(sys.modules)))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+    code = "import sys; from flagtrack.daemon.services.viewer import ViewerService; print('rerun' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "True"  # what needs rerun still comes from the package, when asked for
+
+
 def test_kernels_status_names_the_cache_folder_and_says_when_there_is_no_build(tmp_path, monkeypatch, capsys) -> None:
     monkeypatch.setenv("FLAGTRACK_KERNEL_CACHE", str(tmp_path))
     assert cli.main(["kernels", "status", "--json"]) == 0

@@ -1,8 +1,25 @@
-"""The supervisor: wind tunnel, flag state from event rates, sweeps, feedback control, safe state."""
+"""The supervisor: wind tunnel, flag state from event rates, sweeps, feedback control, safe state.
+
+The service itself (and the analysis it imports: SciPy's signal processing, ~0.5-1 s) is imported
+when first used, so a process that only reads the ``supervisor:`` section of a rig (every service's
+config) starts without it.
+"""
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from flagtrack.daemon.services.supervisor.section import FeedbackConfig, SupervisorConfig
-from flagtrack.daemon.services.supervisor.service import FlagGeometry, SupervisorService
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.services.supervisor.service import FlagGeometry, SupervisorService
 
 __all__ = ["FeedbackConfig", "FlagGeometry", "SupervisorConfig", "SupervisorService"]
+_LAZY = {"FlagGeometry": ".service", "SupervisorService": ".service"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

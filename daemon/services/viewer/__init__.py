@@ -18,10 +18,15 @@ and centreline messages of another tracker setup (other samples or joints) are s
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from .config import ViewerConfig, effective_sink
-from .layout import TIMELINE, blueprint
-from .logger import RerunLogger, age_colours, close_recording, open_recording, supervisor_text
-from .service import ViewerService
+
+if TYPE_CHECKING:
+    from .layout import TIMELINE, blueprint
+    from .logger import RerunLogger, age_colours, close_recording, open_recording, supervisor_text
+    from .service import ViewerService
 
 __all__ = [
     "TIMELINE",
@@ -35,3 +40,21 @@ __all__ = [
     "open_recording",
     "supervisor_text",
 ]
+_LAZY = {
+    "TIMELINE": ".layout",
+    "blueprint": ".layout",
+    "RerunLogger": ".logger",
+    "age_colours": ".logger",
+    "close_recording": ".logger",
+    "open_recording": ".logger",
+    "supervisor_text": ".logger",
+    "ViewerService": ".service",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """What needs rerun is imported when first used: a process that only reads the ``viewer:``
+    section of a rig (every service's config) starts without rerun (~0.5 s)."""
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
