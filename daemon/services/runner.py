@@ -12,7 +12,6 @@ import contextlib
 import logging
 import os
 import signal
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -143,6 +142,14 @@ class ServiceGroup:
         return self.report
 
 
+def _say(line: str) -> None:
+    """Write a line to stderr from a signal handler: straight to the file descriptor, since the handler
+    may interrupt the main thread in the middle of its own write to ``sys.stderr`` (a second write
+    into the same buffered stream raises "reentrant call", in the main thread, and the line is lost)."""
+    with contextlib.suppress(OSError):
+        os.write(2, (line + "\n").encode())
+
+
 @contextlib.contextmanager
 def capture_signals(group: ServiceGroup, on_force: Callable[[], None] | None = None) -> Iterator[None]:
     """While inside: the first SIGINT/SIGTERM stops the group gracefully, the second forces the process
@@ -152,10 +159,10 @@ def capture_signals(group: ServiceGroup, on_force: Callable[[], None] | None = N
         group.report.signal_count += 1
         name = signal.Signals(signum).name
         if group.report.signal_count == 1:
-            print(f"flagtrack: {name} received, stopping (again to force)", file=sys.stderr)
             group.stop.request(f"stopped by {name}")
+            _say(f"flagtrack: {name} received, stopping (again to force)")
             return
-        print(f"flagtrack: second {name}, forcing exit", file=sys.stderr)
+        _say(f"flagtrack: second {name}, forcing exit")
         if on_force is not None:
             on_force()
         os._exit(130)
