@@ -55,6 +55,10 @@ class DriverError(FlagtrackError):
         super().__init__(f"{device}: {message}" if device else message)
 
 
+class PortInUseError(DriverError):
+    """A serial port another process holds (opened exclusively): the message names the holder."""
+
+
 class SchemaError(FlagtrackError):
     """A bus message is malformed or of an unknown version.
 

@@ -157,15 +157,12 @@ def _set(args: argparse.Namespace) -> int:
 
 
 def _stop(args: argparse.Namespace) -> int:
-    from flagtrack.daemon.errors import DriverError
+    from flagtrack.daemon.errors import DriverError, PortInUseError
     from flagtrack.drivers.tunnel.setup import open_tunnel
 
     try:
         tunnel = open_tunnel(_config(args))
-    except DriverError as exc:
-        if "port in use" not in str(exc):
-            raise
-        # the owner keeps the port: the way to stop the tunnel now is to stop the owner
+    except PortInUseError as exc:  # the owner keeps the port: the way to stop the tunnel now is to stop it
         raise DriverError(f"{exc}; to stop the tunnel, stop its owner (SIGTERM ramps the tunnel to zero)") from exc
     try:
         tunnel.safe_stop()

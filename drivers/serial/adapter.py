@@ -13,7 +13,7 @@ import logging
 
 import serial
 
-from flagtrack.daemon.errors import DriverError
+from flagtrack.daemon.errors import DriverError, PortInUseError
 from flagtrack.drivers.serial.holder import port_holders
 
 log = logging.getLogger(__name__)
@@ -58,7 +58,7 @@ class SerialAdapter:
         except (serial.SerialException, OSError, ValueError) as exc:
             if "exclusively lock" in str(exc):
                 holders = "; ".join(port_holders(port)) or "a process this user cannot see"
-                raise DriverError(f"port in use, held by {holders}; not opened", device=port) from exc
+                raise PortInUseError(f"port in use, held by {holders}; not opened", device=port) from exc
             raise DriverError(f"cannot open serial port: {exc}", device=port) from exc
 
     def _send(self, data: bytes) -> None:
