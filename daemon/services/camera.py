@@ -143,8 +143,8 @@ class CameraService:
             if data.packets and cutter is None and self._fits(data.packets):  # cut by the adapter
                 precut_horizon = max(precut_horizon, *(p.t_last_us for p in data.packets))
                 self._publish(data.packets, data.arrival_ns, info, events_pub, rate_pub, rates, native=True)
-            elif data.raw is not None:  # the device's own words: cut, not decoded
-                raw = data.raw
+            elif data.raw is not None or data.packets:  # the device's own words: cut, not decoded
+                raw = data.raw if data.raw is not None else b"".join(p.data[p.preamble_bytes :] for p in data.packets)
                 if cutter is None:
                     params = PacketParams(self.cfg.packet_us, self.cfg.max_packet_events)
                     cutter = NativeCutter(info.encoding, params, info.t_offset_us)

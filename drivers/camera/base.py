@@ -45,10 +45,11 @@ class CameraData:
             has been delivered), or None if the camera cannot say.
         raw: the device's bytes in its native encoding (``CameraInfo.encoding``, evt3 or evt2), as
             received: the service cuts them into packets without decoding them.
-        packets: ``raw`` already cut into self-contained packets, when the adapter had to scan the
-            bytes anyway (a paced replay, which cuts them per ``slice_us`` of camera time to pace
-            itself): the service publishes them as they are if they are no longer than its own
-            packets, rather than scanning the bytes a second time.
+        packets: the device's bytes already cut into self-contained packets (instead of ``raw``),
+            when the adapter had to scan them anyway (a paced replay, which cuts them per
+            ``slice_us`` of camera time to pace itself): the service publishes them as they are if
+            they are no longer than its own packets, rather than scanning the bytes a second time,
+            and otherwise cuts their bytes again.
     """
 
     events: np.ndarray

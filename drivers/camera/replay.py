@@ -133,8 +133,7 @@ class ReplayCamera:
         self._pending = None
         if self.native:  # events holds the file's bytes, or the packet a paced replay cut
             if isinstance(events, Packet):
-                raw = events.data[events.preamble_bytes :]
-                return CameraData(empty_events(), empty_triggers(), time.time_ns(), t_until, raw=raw, packets=[events])
+                return CameraData(empty_events(), empty_triggers(), time.time_ns(), t_until, packets=[events])
             until = t_until if t_until >= 0 else None
             return CameraData(empty_events(), empty_triggers(), time.time_ns(), t_until_us=until, raw=events)
         return CameraData(events, triggers, time.time_ns(), t_until_us=t_until)
