@@ -24,6 +24,14 @@ of camera time (native bytes, as a device's), and each process loads the kernels
    for) and to its arrival here (the bus hop back to a subscriber in another process included);
    p50 and p99 of both.
 
+4. The bus alone: the latency run's recording replayed at its own pace to this process, no tracker;
+   p50 and p99 of each packet's time from the adapter's reception (``sent_ns``) to its arrival here.
+   Every update pays at least this before the tracker starts on it.
+
+From the throughput run it also derives the CPU each event costs the camera and the tracker (their
+cores over the sustained rate) and the rate the machine's cores could carry at that cost if nothing
+else ran and the work split perfectly (the pipeline's ceiling here).
+
 With ``--secure`` each run is made twice, plain and then secured as ``bus.security`` secures a rig
 (mutual TLS on every link, each process its own certificate, access control made from the rig,
 default deny), and the secured figures are reported next to the plain ones with their ratio.
@@ -121,13 +129,18 @@ def run(args: argparse.Namespace) -> int:
             runs[name + ("_secure" if secure else "")] = _measure(
                 path, tracker, args.packet_us, speed=speed, loop=False, wall_s=wall_s, secure=secure
             )
+    bus = _bus_floor(latency_recording, args.packet_us, args.latency_seconds)
     throughput, realtime, latency = runs["throughput"], runs["realtime"], runs["latency"]
+    sustained = (
+        n_events / throughput["elapsed_s"] / 1e6 if throughput["complete"] and throughput["elapsed_s"] > 0 else None
+    )
+    per_event = _cpu_per_event_ns(throughput["cpu_cores"], sustained) if sustained else {}
     results = {
         "kernels": _kernels_state(),
         "events": n_events,
         "file_rate_mev_s": file_rate / 1e6,
         "packet_us": args.packet_us,
-        "sustained_mev_s": n_events / throughput["elapsed_s"] / 1e6 if throughput["complete"] else None,
+        "sustained_mev_s": sustained,
         "throughput_missing_packets": throughput["missing_packets"],
         "throughput_updates": throughput["updates"],
         "realtime_kept_up": realtime["kept_up"],
@@ -148,53 +161,78 @@ def run(args: argparse.Namespace) -> int:
         "latency_cpu_cores": latency["cpu_cores"],
         "wakeup_late_p50_ms": wakeup[0],
         "wakeup_late_p99_ms": wakeup[1],
+        "bus_packets": bus["packets"],
+        "bus_p50_ms": bus["p50_ms"],
+        "bus_p99_ms": bus["p99_ms"],
+        "cpu_ns_per_event": per_event,
+        "cpu_ceiling_mev_s": (os.cpu_count() or 1) * 1e3 / sum(per_event.values()) if per_event else None,
     }
     if args.secure:
         results.update(_secure_results(n_events, runs, results))
     if args.json:
         print(json.dumps(results))
     else:
-        print(
-            f"camera -> Zenoh -> tracker, separate processes, {n_events / 1e6:.1f} M events "
-            f"({file_rate / 1e6:.1f} Mev/s of camera data), tau = {args.tau * 1e6:g} us, "
-            f"packets of {args.packet_us} us"
-        )
-        print(f"  kernels: {results['kernels']}")
-        sustained = results["sustained_mev_s"]
-        print(
-            f"  throughput: {sustained:.1f} Mev/s sustained, {throughput['missing_packets']} packets lost"
-            if sustained
-            else "  throughput: the tracker did not finish the stream"
-        )
-        print(
-            f"  real time at {file_rate / 1e6:.1f} Mev/s over {realtime['updates']} updates: "
-            f"{'kept up' if realtime['kept_up'] else 'fell behind'}, {realtime['missing_packets']} packets lost, "
-            f"to publication p50 {realtime['publish_p50_ms']:.2f} ms, p99 {realtime['publish_p99_ms']:.2f} ms"
-        )
-        print(
-            f"  latency at {args.latency_rate:g} Mev/s over {latency['updates']} updates, "
-            f"{latency['missing_packets']} packets lost:"
-        )
-        print(
-            f"    to publication by the tracker: p50 {latency['publish_p50_ms']:.2f} ms, "
-            f"p99 {latency['publish_p99_ms']:.2f} ms"
-        )
-        print(f"    to arrival at a subscriber:    p50 {latency['p50_ms']:.2f} ms, p99 {latency['p99_ms']:.2f} ms")
-        print(
-            f"  this machine, idle: a 1 ms sleep wakes up p50 {wakeup[0]:.2f} ms, p99 {wakeup[1]:.2f} ms late "
-            f"(every hop of the pipeline waits for such a wake-up)"
-        )
-        for label, cores in (
-            ("throughput run", throughput["cpu_cores"]),
-            ("real-time run", realtime["cpu_cores"]),
-            ("latency run", latency["cpu_cores"]),
-        ):
-            if cores:
-                used = ", ".join(f"{name} {value:.2f}" for name, value in cores.items())
-                print(f"  CPU in the {label} (cores; this machine has {os.cpu_count()}): {used}")
-        if args.secure:
-            _print_secure(results)
+        _print_plain(args, results, runs, bus)
     return 0
+
+
+def _print_plain(
+    args: argparse.Namespace, results: dict[str, Any], runs: dict[str, dict[str, Any]], bus: dict[str, Any]
+) -> None:
+    """The figures as lines for a reader."""
+    throughput, realtime, latency = runs["throughput"], runs["realtime"], runs["latency"]
+    wakeup = (results["wakeup_late_p50_ms"], results["wakeup_late_p99_ms"])
+    per_event = results["cpu_ns_per_event"]
+    print(
+        f"camera -> Zenoh -> tracker, separate processes, {results['events'] / 1e6:.1f} M events "
+        f"({results['file_rate_mev_s']:.1f} Mev/s of camera data), tau = {args.tau * 1e6:g} us, "
+        f"packets of {args.packet_us} us"
+    )
+    print(f"  kernels: {results['kernels']}")
+    sustained = results["sustained_mev_s"]
+    print(
+        f"  throughput: {sustained:.1f} Mev/s sustained, {throughput['missing_packets']} packets lost"
+        if sustained
+        else "  throughput: the tracker did not finish the stream"
+    )
+    print(
+        f"  real time at {results['file_rate_mev_s']:.1f} Mev/s over {realtime['updates']} updates: "
+        f"{'kept up' if realtime['kept_up'] else 'fell behind'}, {realtime['missing_packets']} packets lost, "
+        f"to publication p50 {realtime['publish_p50_ms']:.2f} ms, p99 {realtime['publish_p99_ms']:.2f} ms"
+    )
+    print(
+        f"  latency at {args.latency_rate:g} Mev/s over {latency['updates']} updates, "
+        f"{latency['missing_packets']} packets lost:"
+    )
+    print(
+        f"    to publication by the tracker: p50 {latency['publish_p50_ms']:.2f} ms, "
+        f"p99 {latency['publish_p99_ms']:.2f} ms"
+    )
+    print(f"    to arrival at a subscriber:    p50 {latency['p50_ms']:.2f} ms, p99 {latency['p99_ms']:.2f} ms")
+    print(
+        f"  the bus alone at {args.latency_rate:g} Mev/s (camera -> a subscriber, no tracker, "
+        f"{bus['packets']} packets): p50 {bus['p50_ms']:.2f} ms, p99 {bus['p99_ms']:.2f} ms"
+    )
+    if per_event:
+        print(
+            "  CPU per event in the throughput run: "
+            + ", ".join(f"{name} {ns:.1f} ns" for name, ns in per_event.items())
+            + f": {os.cpu_count()} cores at that cost carry at most {results['cpu_ceiling_mev_s']:.1f} Mev/s"
+        )
+    print(
+        f"  this machine, idle: a 1 ms sleep wakes up p50 {wakeup[0]:.2f} ms, p99 {wakeup[1]:.2f} ms late "
+        f"(every hop of the pipeline waits for such a wake-up)"
+    )
+    for label, cores in (
+        ("throughput run", throughput["cpu_cores"]),
+        ("real-time run", realtime["cpu_cores"]),
+        ("latency run", latency["cpu_cores"]),
+    ):
+        if cores:
+            used = ", ".join(f"{name} {value:.2f}" for name, value in cores.items())
+            print(f"  CPU in the {label} (cores; this machine has {os.cpu_count()}): {used}")
+    if args.secure:
+        _print_secure(results)
 
 
 def _kernels_state() -> str:
@@ -287,11 +325,7 @@ def _measure(  # noqa: PLR0915 - one measurement, step by step
                 {
                     **common,
                     "bus": {"connect": [endpoint], **security},
-                    "camera": {
-                        "adapter": "replay",
-                        "packet_us": packet_us,
-                        "replay": {"path": str(recording), "speed": speed, "loop": loop, "slice_us": packet_us},
-                    },
+                    "camera": _camera_section(recording, packet_us, speed, loop),
                 }
             )
         )
@@ -355,6 +389,62 @@ def _measure(  # noqa: PLR0915 - one measurement, step by step
         "publish_p50_ms": float(np.percentile(pub, 50)) if len(pub) else float("nan"),
         "publish_p99_ms": float(np.percentile(pub, 99)) if len(pub) else float("nan"),
     }
+
+
+def _camera_section(recording: Path, packet_us: int, speed: float, loop: bool) -> dict[str, Any]:
+    """The ``camera:`` section of a replay of ``recording`` cut into packets of ``packet_us``."""
+    return {
+        "adapter": "replay",
+        "packet_us": packet_us,
+        "replay": {"path": str(recording), "speed": speed, "loop": loop, "slice_us": packet_us},
+    }
+
+
+def _bus_floor(recording: Path, packet_us: int, wall_s: float) -> dict[str, Any]:
+    """The camera's packets straight to this process at the recording's pace, for at most ``wall_s``
+    from the first: how many came, and p50 and p99 (ms) of their time from ``sent_ns`` to arrival."""
+    import numpy as np
+
+    from flagtrack.daemon.rig.config import load_rig
+    from flagtrack.daemon.schema import EventPacket
+    from flagtrack.daemon.transport import Bus
+
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    rig = f"bus{os.getpid()}{int(time.time() * 1000) % 100000}"
+    with tempfile.TemporaryDirectory() as tmp:
+        bench_cfg, camera_cfg = Path(tmp) / "bench.yaml", Path(tmp) / "camera.yaml"
+        bench_cfg.write_text(json.dumps({"rig": rig, "bus": {"listen": [endpoint]}}))
+        camera = _camera_section(recording, packet_us, 1.0, False)
+        camera_cfg.write_text(json.dumps({"rig": rig, "bus": {"connect": [endpoint]}, "camera": camera}))
+        transit_ms: list[float] = []
+        with Bus(load_rig(bench_cfg, services=()).bus_config_for(["operator"])) as bus:
+            packets = bus.subscribe(bus.keys.camera_events("cam0"), EventPacket, capacity=1_000_000)
+            camera_proc = _start("camera", camera_cfg)
+            try:
+                deadline = time.monotonic() + 120  # the camera process starts (kernels loaded) within this
+                while time.monotonic() < deadline:
+                    packet = packets.recv(timeout_s=0.5)
+                    if packet is None:
+                        continue
+                    transit_ms.append((time.time_ns() - packet.sent_ns) * 1e-6)
+                    if len(transit_ms) == 1:
+                        deadline = time.monotonic() + wall_s
+                    if packet.end_of_stream:
+                        break
+            finally:
+                camera_proc.send_signal(signal.SIGINT)
+                camera_proc.communicate(timeout=30)
+    lat = np.array(transit_ms)
+    return {
+        "packets": len(lat),
+        "p50_ms": float(np.percentile(lat, 50)) if len(lat) else float("nan"),
+        "p99_ms": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
+    }
+
+
+def _cpu_per_event_ns(cores: dict[str, float], rate_mev_s: float) -> dict[str, float]:
+    """CPU ns per event of the camera and the tracker, from their cores at ``rate_mev_s``."""
+    return {name: cores[name] * 1e3 / rate_mev_s for name in ("camera", "tracker") if name in cores}
 
 
 def _secure_section(folder: Path) -> dict[str, Any]:

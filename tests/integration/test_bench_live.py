@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -53,5 +54,15 @@ def test_bench_live_reports_rate_latency_and_cpu_without_loss(tmp_path: Path) ->
         assert set(cores) == {"camera", "tracker", "bench"}
         assert 0 < cores["tracker"] <= 4 and all(0 <= value <= 4 for value in cores.values())
     assert result["latency_cpu_cores"]["camera"] > 0  # (as fast as possible, it may be done before the first line)
+    # the bus alone: 1 s of the latency recording, packets of 1 ms, each timed from the adapter to here
+    assert 900 <= result["bus_packets"] <= 1100
+    assert 0 < result["bus_p50_ms"] <= result["bus_p99_ms"]
+    per_event = result["cpu_ns_per_event"]
+    assert set(per_event) == {"camera", "tracker"} and all(ns > 0 for ns in per_event.values())
+    cores = os.cpu_count() or 1
+    assert result["cpu_ceiling_mev_s"] == pytest.approx(cores * 1e3 / sum(per_event.values()))
+    # the tracker's cores over the sustained rate: the same figure as CPU ns per event
+    tracker_ns = result["throughput_cpu_cores"]["tracker"] * 1e3 / result["sustained_mev_s"]
+    assert per_event["tracker"] == pytest.approx(tracker_ns)
     # at a sixth of the camera's rate, the tracker works less than flat out
     assert result["latency_cpu_cores"]["tracker"] < result["throughput_cpu_cores"]["tracker"]
