@@ -172,13 +172,11 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(results))
     else:
-        _print_plain(args, results, runs, bus)
+        _print_plain(args, results, runs)
     return 0
 
 
-def _print_plain(
-    args: argparse.Namespace, results: dict[str, Any], runs: dict[str, dict[str, Any]], bus: dict[str, Any]
-) -> None:
+def _print_plain(args: argparse.Namespace, results: dict[str, Any], runs: dict[str, dict[str, Any]]) -> None:
     """The figures as lines for a reader."""
     throughput, realtime, latency = runs["throughput"], runs["realtime"], runs["latency"]
     wakeup = (results["wakeup_late_p50_ms"], results["wakeup_late_p99_ms"])
@@ -211,7 +209,7 @@ def _print_plain(
     print(f"    to arrival at a subscriber:    p50 {latency['p50_ms']:.2f} ms, p99 {latency['p99_ms']:.2f} ms")
     print(
         f"  the bus alone at {args.latency_rate:g} Mev/s (camera -> a subscriber, no tracker, "
-        f"{bus['packets']} packets): p50 {bus['p50_ms']:.2f} ms, p99 {bus['p99_ms']:.2f} ms"
+        f"{results['bus_packets']} packets): p50 {results['bus_p50_ms']:.2f} ms, p99 {results['bus_p99_ms']:.2f} ms"
     )
     if per_event:
         print(
