@@ -1,0 +1,73 @@
+"""``flagtrack bench live``'s derived figures and how it prints them (no processes)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from typing import Any
+
+import pytest
+
+from flagtrack.daemon.bench import live
+
+
+def _results(per_event: dict[str, float], missing: int) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    run = {
+        "updates": 8000,
+        "missing_packets": missing,
+        "kept_up": True,
+        "publish_p50_ms": 1.0,
+        "publish_p99_ms": 2.0,
+        "p50_ms": 1.5,
+        "p99_ms": 2.5,
+        "cpu_cores": {"camera": 0.5, "tracker": 1.25, "bench": 0.02},
+    }
+    results = {
+        "events": 80_000_000,
+        "file_rate_mev_s": 40.0,
+        "kernels": "compiled ahead of time",
+        "sustained_mev_s": 36.0,
+        "wakeup_late_p50_ms": 0.1,
+        "wakeup_late_p99_ms": 0.2,
+        "bus_packets": 4001,
+        "bus_p50_ms": 0.3,
+        "bus_p99_ms": 1.8,
+        "cpu_ns_per_event": per_event,
+        "cpu_ceiling_mev_s": 2e3 / sum(per_event.values()) if per_event else None,
+    }
+    return results, {"throughput": run, "realtime": run, "latency": run}
+
+
+def _throughput(missing: int, complete: bool = True) -> dict[str, Any]:
+    cores = {"camera": 0.5, "tracker": 1.25, "bench": 0.02}
+    return {"complete": complete, "elapsed_s": 2.0, "missing_packets": missing, "cpu_cores": cores}
+
+
+def test_cpu_per_event_is_the_cores_over_the_sustained_rate() -> None:
+    figures = live._throughput_figures(_throughput(missing=0), 72_000_000)  # 36 Mev/s
+    assert figures["sustained_mev_s"] == pytest.approx(36.0)
+    ns = {"camera": 0.5e3 / 36.0, "tracker": 1.25e3 / 36.0}  # (not the bench's own process)
+    assert figures["cpu_ns_per_event"] == pytest.approx(ns)
+    cores = os.cpu_count() or 1
+    assert figures["cpu_ceiling_mev_s"] == pytest.approx(cores * 1e3 / sum(ns.values()))
+
+
+def test_a_run_that_lost_packets_gives_no_cost_per_event() -> None:
+    # the file outran the tracker's queue: its rate counts events the tracker never saw
+    figures = live._throughput_figures(_throughput(missing=859), 72_000_000)
+    assert figures["sustained_mev_s"] == pytest.approx(36.0)
+    assert figures["cpu_ns_per_event"] == {} and figures["cpu_ceiling_mev_s"] is None
+    unfinished = live._throughput_figures(_throughput(missing=0, complete=False), 72_000_000)
+    assert unfinished == {"sustained_mev_s": None, "cpu_ns_per_event": {}, "cpu_ceiling_mev_s": None}
+
+
+@pytest.mark.parametrize("lossless", [True, False])
+def test_the_ceiling_is_printed_only_from_a_lossless_run(lossless: bool, capsys: pytest.CaptureFixture) -> None:
+    per_event = {"camera": 13.9, "tracker": 34.7} if lossless else {}
+    results, runs = _results(per_event, missing=0 if lossless else 859)
+    args = argparse.Namespace(tau=2.5e-4, packet_us=1000, latency_rate=20.0, secure=False)
+    live._print_plain(args, results, runs)
+    out = capsys.readouterr().out
+    assert "the bus alone at 20 Mev/s (camera -> a subscriber, no tracker, 4001 packets): p50 0.30 ms" in out
+    assert ("carry at most 41.2 Mev/s" in out) is lossless
+    assert ("CPU per event: not measured (the throughput run lost packets" in out) is not lossless
