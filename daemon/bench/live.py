@@ -374,6 +374,7 @@ def _measure(  # noqa: PLR0915 - one measurement, step by step
     lat = np.concatenate(latencies) if latencies else np.zeros(0)
     pub = np.concatenate(published) if published else np.zeros(0)
     tenth = max(len(pub) // 10, 1)
+    (lat_p50, lat_p99), (pub_p50, pub_p99) = _p50_p99(lat), _p50_p99(pub)
     return {
         "complete": complete,
         "kept_up": bool(len(pub) and missing == 0 and np.median(pub[-tenth:]) <= np.median(pub[:tenth]) + KEPT_UP_MS),
@@ -381,10 +382,10 @@ def _measure(  # noqa: PLR0915 - one measurement, step by step
         "missing_packets": missing,
         "cpu_cores": cpu,
         "elapsed_s": ((last_ns or 0) - (first_ns or 0)) * 1e-9,
-        "p50_ms": float(np.percentile(lat, 50)) if len(lat) else float("nan"),
-        "p99_ms": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
-        "publish_p50_ms": float(np.percentile(pub, 50)) if len(pub) else float("nan"),
-        "publish_p99_ms": float(np.percentile(pub, 99)) if len(pub) else float("nan"),
+        "p50_ms": lat_p50,
+        "p99_ms": lat_p99,
+        "publish_p50_ms": pub_p50,
+        "publish_p99_ms": pub_p99,
     }
 
 
@@ -431,12 +432,17 @@ def _bus_floor(recording: Path, packet_us: int, wall_s: float) -> dict[str, Any]
             finally:
                 camera_proc.send_signal(signal.SIGINT)
                 camera_proc.communicate(timeout=30)
-    lat = np.array(transit_ms)
-    return {
-        "packets": len(lat),
-        "p50_ms": float(np.percentile(lat, 50)) if len(lat) else float("nan"),
-        "p99_ms": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
-    }
+    p50, p99 = _p50_p99(np.array(transit_ms))
+    return {"packets": len(transit_ms), "p50_ms": p50, "p99_ms": p99}
+
+
+def _p50_p99(values_ms: Any) -> tuple[float, float]:
+    """p50 and p99 of some latencies (ms), NaN for none."""
+    import numpy as np
+
+    if len(values_ms) == 0:
+        return float("nan"), float("nan")
+    return float(np.percentile(values_ms, 50)), float(np.percentile(values_ms, 99))
 
 
 def _throughput_figures(throughput: dict[str, Any], n_events: int) -> dict[str, Any]:
@@ -447,10 +453,11 @@ def _throughput_figures(throughput: dict[str, Any], n_events: int) -> dict[str, 
     sustained = n_events / throughput["elapsed_s"] / 1e6 if done else None
     lossless = throughput["missing_packets"] == 0
     per_event = _cpu_per_event_ns(throughput["cpu_cores"], sustained) if sustained is not None and lossless else {}
+    ns = sum(per_event.values())  # 0 if no clock tick of CPU fell in a very short run: no ceiling then
     return {
         "sustained_mev_s": sustained,
         "cpu_ns_per_event": per_event,
-        "cpu_ceiling_mev_s": (os.cpu_count() or 1) * 1e3 / sum(per_event.values()) if per_event else None,
+        "cpu_ceiling_mev_s": (os.cpu_count() or 1) * 1e3 / ns if ns > 0 else None,
     }
 
 
@@ -479,7 +486,7 @@ def _wakeup_lateness_ms(n: int = 1000) -> tuple[float, float]:
         start = time.perf_counter()
         time.sleep(1e-3)
         late[i] = (time.perf_counter() - start) * 1e3 - 1.0
-    return float(np.percentile(late, 50)), float(np.percentile(late, 99))
+    return _p50_p99(late)
 
 
 def _cpu_snapshot(procs: dict[str, subprocess.Popen]) -> dict[str, float]:

@@ -71,3 +71,16 @@ def test_the_ceiling_is_printed_only_from_a_lossless_run(lossless: bool, capsys:
     assert "the bus alone at 20 Mev/s (camera -> a subscriber, no tracker, 4001 packets): p50 0.30 ms" in out
     assert ("carry at most 41.2 Mev/s" in out) is lossless
     assert ("CPU per event: not measured (the throughput run lost packets" in out) is not lossless
+
+
+def test_no_ceiling_from_a_run_too_short_for_a_clock_tick_of_cpu() -> None:
+    throughput = {**_throughput(missing=0), "cpu_cores": {"camera": 0.0, "tracker": 0.0, "bench": 0.0}}
+    figures = live._throughput_figures(throughput, 72_000_000)
+    assert figures["cpu_ns_per_event"] == {"camera": 0.0, "tracker": 0.0}
+    assert figures["cpu_ceiling_mev_s"] is None  # not a division by zero
+
+
+def test_p50_p99_of_no_latencies_is_nan() -> None:
+    p50, p99 = live._p50_p99([])
+    assert p50 != p50 and p99 != p99  # NaN
+    assert live._p50_p99([1.0, 2.0, 3.0]) == pytest.approx((2.0, 2.98))
