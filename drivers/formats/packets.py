@@ -203,10 +203,9 @@ class Packetizer:
         packets = []
         for q in range(n_packets):
             i0, i1, n_tr = int(starts[q]), int(stops[q]), int(n_triggers[q])
-            t_first = int(horizons[q])
-            if i1 > i0:
-                t_first = int(cols.t[i0])
-            elif n_tr:
+            # the earliest time, events and triggers alike: the one the time offset was taken from
+            t_first = int(cols.t[i0:i1].min()) if i1 > i0 else int(horizons[q])
+            if n_tr:
                 t_first = min(t_first, int(triggers["t"][tr_bounds[q] : tr_bounds[q + 1]].min()))
             packets.append(
                 Packet(

@@ -7,6 +7,8 @@ import pytest
 
 from flagtrack.daemon.core.events import TRIGGER_DTYPE, make_events
 from flagtrack.daemon.errors import FormatError
+from flagtrack.daemon.schema import EventPacket
+from flagtrack.daemon.services.sequence import packet_problem
 from flagtrack.drivers.formats.codec import LOOP_US, Encoder
 from flagtrack.drivers.formats.packets import Packetizer, PacketParams, decode_packet, slot_table
 
@@ -90,6 +92,36 @@ def test_packets_that_need_more_room_than_usual_are_still_encoded() -> None:
     np.testing.assert_array_equal(events, late)
     np.testing.assert_array_equal(triggers, trigger)
     np.testing.assert_array_equal(decode_packet("evt3", packets[1].data, packets[1].t_offset_us)[0], after)
+
+
+def test_a_packet_starting_with_a_trigger_of_the_loop_before_passes_the_bus_check() -> None:
+    """A held trigger in one time loop and the packet's events in the next: the packet's first time
+    is the trigger's, the one its offset was taken from, so the tracker and the recorder place it
+    (the demo once lost such a packet at 67 s: offset 3 loops, first event in the 4th)."""
+    loop_us = 1 << 24
+    trigger = np.zeros(1, dtype=TRIGGER_DTYPE)
+    trigger["t"] = 4 * loop_us - 700_000
+    events = make_events([4 * loop_us + 50_000, 4 * loop_us + 50_500], [5, 6], [5, 6], [1, 0])
+    packetizer = Packetizer("evt3", 640, 480)
+    packets = packetizer.push(events, trigger, t_until_us=4 * loop_us + 51_000)
+    assert packets[0].n_triggers == 1
+    assert packets[0].t_first_us == trigger["t"][0]
+    for packet in packets:
+        message = EventPacket(
+            camera_id="cam0",
+            seq=0,
+            t_first_us=packet.t_first_us,
+            t_last_us=packet.t_last_us,
+            n_events=packet.n_events,
+            width=640,
+            height=480,
+            encoding="evt3",
+            sent_ns=0,
+            data=packet.data,
+            t_offset_us=packet.t_offset_us,
+            n_triggers=packet.n_triggers,
+        )
+        assert packet_problem(message) is None
 
 
 def test_an_encoding_without_encoder_is_refused_up_front() -> None:
