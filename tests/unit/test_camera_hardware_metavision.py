@@ -79,7 +79,7 @@ def test_the_hal_decodes_opaque_buffers_and_says_how_far_the_stream_is_complete(
         got.append(data)
     hal = camera._device
     camera.close()
-    assert not hal.get_i_event_cd_decoder().callbacks and not hal.get_i_event_ext_trigger_decoder().callbacks
+    assert not hal.get_i_event_cd_decoder()._callbacks and not hal.get_i_event_ext_trigger_decoder()._callbacks
     triggers = np.concatenate([d.triggers for d in got])
     assert len(cam.sent_triggers) > 10
     np.testing.assert_array_equal(triggers, cam.sent_triggers)

@@ -256,7 +256,7 @@ class I_ROI:  # noqa: N801
 
 
 class I_ErcModule:  # noqa: N801
-    MAX_RATE = 1_000_000_000
+    _MAX_RATE = 1_000_000_000
 
     def __init__(self) -> None:
         self._enabled = False
@@ -270,7 +270,7 @@ class I_ErcModule:  # noqa: N801
         return self._enabled
 
     def set_cd_event_rate(self, events_per_sec: int) -> bool:
-        if not 0 <= events_per_sec <= self.MAX_RATE:
+        if not 0 <= events_per_sec <= self._MAX_RATE:
             raise RuntimeError(f"HalException: ERC rate {events_per_sec} out of range")
         self._count = int(events_per_sec * ERC_PERIOD_US // 1_000_000)  # events per reference period
         return True
@@ -282,18 +282,21 @@ class I_ErcModule:  # noqa: N801
         return 0
 
     def get_max_supported_cd_event_rate(self) -> int:
-        return self.MAX_RATE
+        return self._MAX_RATE
 
     @property
-    def count_per_period(self) -> int:
+    def _count_per_period(self) -> int:
         return self._count
 
 
 class I_TriggerIn:  # noqa: N801
-    class Channel(enum.IntEnum):
+    class Channel(enum.Enum):  # a pybind11 enum: not an int, but int() gives its value
         MAIN = 0
         AUX = 1
         LOOPBACK = 2
+
+        def __int__(self) -> int:
+            return int(self.value)
 
     def __init__(self) -> None:
         self._enabled: set[int] = set()
@@ -372,12 +375,12 @@ class Device:
         self._erc = I_ErcModule() if sensor.erc else None
         self._trigger = I_TriggerIn()
         self._stream = I_EventsStream(self)
-        self._decoder = I_Decoder(self.api)
+        self._decoder = I_Decoder(self._api)
         self._geometry = I_Geometry(sensor)
-        self._hw = (I_HW_Identification if self.api().startswith("5") else _HwIdentification4)(camera, fmt)
+        self._hw = (I_HW_Identification if self._api().startswith("5") else _HwIdentification4)(camera, fmt)
 
     @staticmethod
-    def api() -> str:
+    def _api() -> str:
         return _fake.api
 
     def get_i_ll_biases(self) -> I_LL_Biases:
@@ -410,13 +413,13 @@ class Device:
     def get_i_hw_identification(self) -> I_HW_Identification:
         return self._hw
 
-    def header(self) -> str:
+    def _header(self) -> str:
         """The RAW header the HAL writes (``log_raw_data``)."""
         sensor = self.camera.spec
         fmt = f"{self.format};height={sensor.height};width={sensor.width}"
         return f"% camera_integrator_name Prophesee\n% format {fmt}\n% serial_number {self.camera.serial}\n% end\n"
 
-    def make_feed(self) -> _fake_streams.ByteFeed:
+    def _make_feed(self) -> _fake_streams.ByteFeed:
         """The sensor's output under the settings in force, as the format's bytes (and the decoder for them)."""
         camera, sensor = self.camera, self.camera.spec
         if camera.events is None:
@@ -436,7 +439,7 @@ class Device:
         if self._erc is not None and self._erc.is_enabled():
             slot = events["t"] // ERC_PERIOD_US
             rank = np.arange(len(events)) - np.searchsorted(slot, slot, side="left")
-            events = events[rank < self._erc.count_per_period]
+            events = events[rank < self._erc._count_per_period]
         triggers = camera.triggers if self._trigger.is_enabled(0) else camera.triggers[:0]
         camera.sent_events, camera.sent_triggers = events, triggers
         encoding = {"EVT3": "evt3", "EVT2": "evt2", "EVT21": "evt21"}[self.format]

@@ -17,7 +17,9 @@ from typing import Any
 
 import numpy as np
 
-EVENT_CD_DTYPE = np.dtype({"names": ["x", "y", "p", "t"], "formats": ["<u2", "<u2", "<i2", "<i8"], "itemsize": 16})
+EVENT_CD_DTYPE = np.dtype(
+    {"names": ["x", "y", "p", "t"], "formats": ["<u2", "<u2", "<i2", "<i8"], "offsets": [0, 2, 4, 8], "itemsize": 16}
+)
 """``metavision_sdk_base.EventCD``."""
 EVENT_EXT_TRIGGER_DTYPE = np.dtype(
     {"names": ["p", "t", "id"], "formats": ["<i2", "<i8", "<i2"], "offsets": [0, 8, 16], "itemsize": 24}
@@ -62,19 +64,21 @@ def buffer_bytes(raw: Any, api: str) -> bytes:
 
 
 class _Callbacks:
-    def __init__(self) -> None:
-        self.callbacks: dict[int, tuple[Callable[[np.ndarray], object], bool]] = {}
+    """Callbacks by id (``_callbacks``), each given copies or lent memory."""
 
-    def add(self, callback: Callable[[np.ndarray], object], lend: bool) -> int:
+    def __init__(self) -> None:
+        self._callbacks: dict[int, tuple[Callable[[np.ndarray], object], bool]] = {}
+
+    def _add(self, callback: Callable[[np.ndarray], object], lend: bool) -> int:
         callback_id = next(_ids)
-        self.callbacks[callback_id] = (callback, lend)
+        self._callbacks[callback_id] = (callback, lend)
         return callback_id
 
     def remove_callback(self, callback_id: int) -> bool:
-        return self.callbacks.pop(callback_id, None) is not None
+        return self._callbacks.pop(callback_id, None) is not None
 
-    def dispatch(self, events: np.ndarray) -> None:
-        for callback, lend in list(self.callbacks.values()):
+    def _dispatch(self, events: np.ndarray) -> None:
+        for callback, lend in list(self._callbacks.values()):
             array = events.copy()
             callback(array)
             if lend:  # the HAL reuses this memory for the next events
@@ -83,15 +87,15 @@ class _Callbacks:
 
 class I_EventDecoder_EventCD(_Callbacks):  # noqa: N801 - the bindings' name
     def add_event_buffer_callback(self, arg0: Callable[[np.ndarray], object]) -> int:
-        return self.add(arg0, lend=False)
+        return self._add(arg0, lend=False)
 
     def add_event_buffer_nocopy_callback(self, arg0: Callable[[np.ndarray], object]) -> int:
-        return self.add(arg0, lend=True)
+        return self._add(arg0, lend=True)
 
 
 class I_EventDecoder_EventExtTrigger(_Callbacks):  # noqa: N801
     def add_event_buffer_callback(self, arg0: Callable[[np.ndarray], object]) -> int:
-        return self.add(arg0, lend=True)
+        return self._add(arg0, lend=True)
 
 
 class I_Decoder:  # noqa: N801 - the bindings' name of I_EventsStreamDecoder
@@ -111,29 +115,29 @@ class I_Decoder:  # noqa: N801 - the bindings' name of I_EventsStreamDecoder
             chunk = events[start : start + CD_BUFFER_EVENTS]
             cd = np.empty(len(chunk), EVENT_CD_DTYPE)
             cd["x"], cd["y"], cd["p"], cd["t"] = chunk["x"], chunk["y"], chunk["p"], chunk["t"]
-            self.cd.dispatch(cd)
+            self.cd._dispatch(cd)
         for trigger in triggers:
             one = np.empty(1, EVENT_EXT_TRIGGER_DTYPE)
             one["p"], one["t"], one["id"] = trigger["edge"], trigger["t"], trigger["channel"]
-            self.trigger.dispatch(one)
+            self.trigger._dispatch(one)
         last = max([self._last_t] + [int(a["t"].max()) for a in (events, triggers) if len(a)])
         if last != self._last_t:
             self._last_t = last
-            for callback, _ in list(self._time.callbacks.values()):
+            for callback, _ in list(self._time._callbacks.values()):
                 callback(last)
 
     def get_last_timestamp(self) -> int:
         return self._last_t
 
     def add_time_callback(self, cb: Callable[[int], object]) -> int:
-        return self._time.add(cb, lend=False)
+        return self._time._add(cb, lend=False)
 
     def remove_callback(self, callback_id: int) -> bool:
         return self._time.remove_callback(callback_id)
 
 
 class I_EventsStream:  # noqa: N801
-    """The device's stream: buffers from the device's feed (``device.make_feed()`` at ``start``)."""
+    """The device's stream: buffers from the device's feed (``device._make_feed()`` at ``start``)."""
 
     def __init__(self, device: Any) -> None:
         self._device = device
@@ -143,7 +147,7 @@ class I_EventsStream:  # noqa: N801
 
     def start(self) -> None:
         self._device.camera.started += 1
-        self._feed = self._device.make_feed()
+        self._feed = self._device._make_feed()
 
     def stop(self) -> None:
         self._device.camera.stopped += 1
@@ -168,7 +172,7 @@ class I_EventsStream:  # noqa: N801
         data, self._pending = self._pending or b"", None
         if self._log is not None:
             self._log.write(data)
-        api = self._device.api()
+        api = self._device._api()
         if api.startswith("5"):
             return raw_buffer(data)
         if api == "4.6":
@@ -182,7 +186,7 @@ class I_EventsStream:  # noqa: N801
         except OSError:
             return False
         self.stop_log_raw_data()
-        log.write(self._device.header().encode())
+        log.write(self._device._header().encode())
         self._log = log
         return True
 
