@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Literal
 
 from flagtrack.daemon.errors import ConfigError, DriverError
@@ -35,7 +36,13 @@ from flagtrack.drivers.camera.hardware import (
     plain,
     sdk_version,
 )
-from flagtrack.drivers.camera.metavision_stream import DeviceBytes, HalDecoded, HalStream, buffers_are_opaque
+from flagtrack.drivers.camera.metavision_stream import (
+    DeviceBytes,
+    HalDecoded,
+    HalStream,
+    buffers_are_opaque,
+    start_raw_log,
+)
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +68,8 @@ class MetavisionConfig:
         trigger_in: enable (True) or disable (False) the main external trigger input (None: untouched).
         evt21_endianness: EVT 2.1 word layout; ``auto`` follows the format string, else OpenEB's rule.
         stall_timeout_s: raise "camera stopped delivering data" after this long without any byte (0: never).
+        raw_log_dir: at each open, start a new RAW file in this folder with the camera's own bytes as the
+            HAL records them (``log_raw_data``): the device's stream, byte for byte (None: no such file).
     """
 
     serial: str | int = ""
@@ -71,6 +80,7 @@ class MetavisionConfig:
     trigger_in: bool | None = None
     evt21_endianness: Literal["auto", "little", "legacy"] = "auto"
     stall_timeout_s: float = 5.0
+    raw_log_dir: str | None = None
 
     def __post_init__(self) -> None:
         check_serial(self.serial)
@@ -146,6 +156,7 @@ class MetavisionCamera:
             self._stream = self._make_stream(hal, device, hw, native, width, height)
             settings["data_path"] = "hal_decoder" if isinstance(self._stream, HalDecoded) else "device_bytes"
             self._events_stream = device.get_i_events_stream()
+            settings["raw_log"] = self._start_raw_log(serial)
             self._events_stream.start()
         except BaseException:
             if self._stream is not None:
@@ -189,6 +200,14 @@ class MetavisionCamera:
                 log.debug("%s: stopping the events stream failed: %s", self.label, exc)
         if stream is not None:
             stream.close()
+
+    def _start_raw_log(self, serial: str) -> str | None:
+        if self.cfg.raw_log_dir is None:
+            return None
+        try:
+            return start_raw_log(self._events_stream, Path(self.cfg.raw_log_dir).expanduser(), serial)
+        except OSError as exc:
+            raise ConfigError(f"cannot write the camera's bytes there: {exc}", key=f"{KEY}.raw_log_dir") from exc
 
     def _stream_stopped(self) -> None:
         """The events stream says it has stopped (``poll_buffer`` < 0): a camera only does when unplugged."""

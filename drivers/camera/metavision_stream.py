@@ -11,7 +11,9 @@ callbacks of its CD and external-trigger decoders.
 
 from __future__ import annotations
 
+import re
 import time
+from pathlib import Path
 from types import ModuleType
 from typing import Any, Protocol
 
@@ -108,6 +110,26 @@ class HalDecoded:
         callbacks, self._callbacks = self._callbacks, []
         for facility, callback_id in callbacks:
             call_or_none(facility, "remove_callback", callback_id)
+
+
+def start_raw_log(events_stream: Any, folder: Path, serial: str) -> str:
+    """Have the HAL write the stream's bytes (header and all) to a new file in ``folder``; its path.
+
+    The HAL writes each buffer as it is taken (``get_latest_raw_data``), until the stream stops.
+
+    Raises:
+        OSError: the folder or the file cannot be made.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    stem = f"{re.sub(r'[^A-Za-z0-9_.-]', '_', serial) or 'camera'}_{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
+    path = folder / f"{stem}.raw"
+    for n in range(1, 1000):
+        if not path.exists():
+            break
+        path = folder / f"{stem}_{n}.raw"
+    if not events_stream.log_raw_data(str(path)):
+        raise OSError(f"OpenEB's HAL cannot write {path}")
+    return str(path)
 
 
 def events_from_hal(cd: np.ndarray) -> np.ndarray:

@@ -3,7 +3,7 @@
 The HAL opens a RAW file as a device (``DeviceDiscovery.open_raw_file``): :class:`FileCamera` is the
 metavision adapter with only that open changed (and the end of the file is the end of the stream).
 
-    python -m tests.integration.openeb_child read RAW OUT_DIR      # the adapter's events and info
+    python -m tests.integration.openeb_child read RAW OUT_DIR      # the adapter's events, info, and raw log
     python -m tests.integration.openeb_child service RAW OUT_DIR   # through the camera service, over Zenoh
     python -m tests.integration.openeb_child surface RAW OUT.json  # the bindings' names and buffer types
 """
@@ -27,8 +27,8 @@ EVENTS_PER_BUFFER = 1000  # RawFileConfig.n_events_to_read: many buffers per fil
 class FileCamera(MetavisionCamera):
     """The metavision adapter on a RAW file opened by the HAL as a device (no index file is written)."""
 
-    def __init__(self, path: Path) -> None:
-        super().__init__(MetavisionConfig(stall_timeout_s=0))
+    def __init__(self, path: Path, raw_log_dir: Path | None = None) -> None:
+        super().__init__(MetavisionConfig(stall_timeout_s=0, raw_log_dir=str(raw_log_dir) if raw_log_dir else None))
         self.path = path
 
     def _open_device(self, hal: Any) -> Any:
@@ -43,8 +43,8 @@ class FileCamera(MetavisionCamera):
 
 
 def read(raw: Path, out: Path) -> None:
-    """The adapter's events, triggers and info for the whole file."""
-    camera = FileCamera(raw)
+    """The adapter's events, triggers and info for the whole file; the HAL's log of its bytes in OUT_DIR/log."""
+    camera = FileCamera(raw, out / "log")
     info = camera.open()
     events, triggers, reads, horizons = [], [], 0, []
     try:

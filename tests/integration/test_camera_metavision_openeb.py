@@ -1,7 +1,8 @@
 """The metavision adapter on the real OpenEB HAL, which opens a RAW file as a device.
 
 Each real RAW recording, read through the adapter (in hundreds of HAL buffers), gives exactly the
-events flagtrack's own reader gives; one goes through the camera service and out of its packets
+events flagtrack's own reader gives, and the HAL's log of the device's bytes (``raw_log_dir``) is
+the recording's EVT stream byte for byte; one goes through the camera service and out of its packets
 unchanged. A recording flagtrack simulated opens in the HAL too, which reports flagtrack as its
 integrator; flagtrack-written triggers come through. The fake ``metavision_hal`` has the real
 module's names, method names, event dtypes and buffer type.
@@ -83,6 +84,11 @@ def copy_in(source: Path, folder: Path) -> Path:
     return Path(shutil.copy(source, folder / source.name))
 
 
+def body_offset(data: bytes) -> int:
+    """Where the EVT stream of a RAW file's bytes starts."""
+    return parse_raw_header(data[: 1 << 16])[1]
+
+
 def adapter_output(out: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.load(out / "events.npy"), np.load(out / "triggers.npy")
 
@@ -105,6 +111,9 @@ def test_the_adapter_hands_over_every_event_of_a_real_recording(
     horizons = [h for h in info["horizons"] if h is not None]
     assert horizons == sorted(horizons) and horizons[-1] >= rec.events["t"][-1]
     assert sorted(p.name for p in raw.parent.iterdir()) == [name]  # no index file written beside it
+    logged = Path(info["settings"]["raw_log"]).read_bytes()  # the HAL's copy of the device's bytes
+    source = raw.read_bytes()
+    assert logged[body_offset(logged) :] == source[body_offset(source) :]
 
 
 @pytest.mark.shared_data

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -84,6 +85,29 @@ def test_the_hal_decodes_opaque_buffers_and_says_how_far_the_stream_is_complete(
     assert len(cam.sent_triggers) > 10
     np.testing.assert_array_equal(triggers, cam.sent_triggers)
     assert horizon == max(cam.sent_events["t"][-1], cam.sent_triggers["t"][-1])
+
+
+@pytest.mark.parametrize("api", ["5.1", "4.6"])
+def test_the_hal_logs_the_cameras_own_bytes_to_a_new_file_at_each_open(fake_hal, api: str, tmp_path: Path) -> None:
+    fake_hal._fake.use_api(api)
+    fake_hal._fake.plug(fake_hal.FakeHalCamera(serial="00ca/09", duration_us=30_000))
+    logged = []
+    for _ in range(2):
+        camera = metavision.open_from_config({"raw_log_dir": str(tmp_path / "logs")})
+        info = camera.open()
+        feed = camera._events_stream._feed
+        read_until(camera, lambda f=feed: f.exhausted)
+        sent = feed.data
+        camera.close()
+        logged.append(Path(info.settings["raw_log"]))
+    assert logged[0] != logged[1] and logged[0].parent == tmp_path / "logs" and logged[0].name.startswith("00ca_09_")
+    for path in logged:
+        data = path.read_bytes()
+        assert data.endswith(sent) and data[: -len(sent)].endswith(b"% end\n")
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ConfigError, match="cannot write the camera's bytes there") as err:
+        metavision.open_from_config({"raw_log_dir": str(tmp_path / "file")}).open()
+    assert err.value.key == "camera.hardware.raw_log_dir"
 
 
 def test_yaml_settings_are_applied_and_read_back(fake_hal) -> None:
