@@ -6,7 +6,8 @@ is opened with ``DeviceDiscovery.open``. With OpenEB 4.x bindings the buffers of
 (EVT 3.0, 2.0 or 2.1, as ``get_current_data_encoding_format`` says) are handed to the camera
 service as they are (EVT 3.0/2.0: it cuts them into packets) or decoded by our decoders (EVT 2.1).
 OpenEB 5.x bindings do not let Python read a buffer's bytes: the HAL's own decoder turns them into
-events, published as EVT 2.0 (:mod:`.metavision_stream`). Biases, ROI, event rate controller (ERC)
+events, published as EVT 2.0 (:mod:`.metavision_stream`); ``raw_log_dir`` has the HAL write the
+device's own bytes to a file (``log_raw_data``). Biases, ROI, event rate controller (ERC)
 and trigger input come from ``camera.hardware`` and are read back from the device where the
 bindings can (``get_all_biases``, ``get_cd_event_rate``, ``is_enabled``); facilities or methods a
 binding lacks are skipped in read-back.
