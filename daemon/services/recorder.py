@@ -230,6 +230,7 @@ class RecordingPart:
                 packet.width,
                 packet.height,
                 {"camera_id": packet.camera_id, "recorder": f"flagtrack-{__version__}"},
+                simulated=(self.config.get("camera") or {}).get("adapter") == "simulated",
             ) + stream_preamble(packet.encoding, packet.t_offset_us)
             self.raw_path.parent.mkdir(parents=True, exist_ok=True)
             self.raw = open(self.raw_path, "wb")  # noqa: SIM115 - closed in close()

@@ -2,12 +2,15 @@
 
 OpenEB is not on PyPI: it is built from source or installed with Prophesee's Metavision SDK, and
 brings the camera plugins (EVK4, EVK3, SilkyEvCam through CenturyArks' plugin, ...). The camera
-is opened with ``DeviceDiscovery.open``; the raw buffers of its events stream (EVT 3.0, 2.0 or
-2.1, as ``get_current_data_encoding_format`` says) are handed to the camera service as they are
-(EVT 3.0/2.0: it cuts them into packets) or decoded by our decoders (EVT 2.1). Biases, ROI,
-event rate controller (ERC) and trigger input come from ``camera.hardware`` and are read back
-from the device where the bindings can (``get_all_biases``, ``get_cd_event_rate``, ``is_enabled``).
-Written for OpenEB 4.x/5.x; facilities or methods an older binding lacks are skipped in read-back.
+is opened with ``DeviceDiscovery.open``. With OpenEB 4.x bindings the buffers of its events stream
+(EVT 3.0, 2.0 or 2.1, as ``get_current_data_encoding_format`` says) are handed to the camera
+service as they are (EVT 3.0/2.0: it cuts them into packets) or decoded by our decoders (EVT 2.1).
+OpenEB 5.x bindings do not let Python read a buffer's bytes: the HAL's own decoder turns them into
+events, published as EVT 2.0 (:mod:`.metavision_stream`); ``raw_log_dir`` has the HAL write the
+device's own bytes to a file (``log_raw_data``). Biases, ROI, event rate controller (ERC)
+and trigger input come from ``camera.hardware`` and are read back from the device where the
+bindings can (``get_all_biases``, ``get_cd_event_rate``, ``is_enabled``); facilities or methods a
+binding lacks are skipped in read-back.
 """
 
 from __future__ import annotations
@@ -15,9 +18,8 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Literal
-
-import numpy as np
 
 from flagtrack.daemon.errors import ConfigError, DriverError
 from flagtrack.daemon.typed_yaml import from_mapping
@@ -34,6 +36,13 @@ from flagtrack.drivers.camera.hardware import (
     parse_encoding,
     plain,
     sdk_version,
+)
+from flagtrack.drivers.camera.metavision_stream import (
+    DeviceBytes,
+    HalDecoded,
+    HalStream,
+    buffers_are_opaque,
+    start_raw_log,
 )
 
 log = logging.getLogger(__name__)
@@ -60,6 +69,8 @@ class MetavisionConfig:
         trigger_in: enable (True) or disable (False) the main external trigger input (None: untouched).
         evt21_endianness: EVT 2.1 word layout; ``auto`` follows the format string, else OpenEB's rule.
         stall_timeout_s: raise "camera stopped delivering data" after this long without any byte (0: never).
+        raw_log_dir: at each open, start a new RAW file in this folder with the camera's own bytes as the
+            HAL records them (``log_raw_data``): the device's stream, byte for byte (None: no such file).
     """
 
     serial: str | int = ""
@@ -70,6 +81,7 @@ class MetavisionConfig:
     trigger_in: bool | None = None
     evt21_endianness: Literal["auto", "little", "legacy"] = "auto"
     stall_timeout_s: float = 5.0
+    raw_log_dir: str | None = None
 
     def __post_init__(self) -> None:
         check_serial(self.serial)
@@ -118,7 +130,7 @@ class MetavisionCamera:
         self.label = device_label(cfg.serial)
         self._device: Any = None
         self._events_stream: Any = None
-        self._stream: RawStream | None = None
+        self._stream: HalStream | None = None
         self._stall = StallWatch(cfg.stall_timeout_s, self.label)
 
     def open(self) -> CameraInfo:
@@ -130,7 +142,7 @@ class MetavisionCamera:
             hw = call_or_none(device, "get_i_hw_identification")
             serial = str(call_or_none(hw, "get_serial") or self.cfg.serial)
             self.label = device_label(serial)
-            encoding, endianness, native = self._encoding(hw)
+            native = str(call_or_none(hw, "get_current_data_encoding_format") or self.cfg.format or "")
             settings = {
                 "driver": "openeb",
                 "driver_version": sdk_version("metavision-hal", hal),
@@ -142,11 +154,15 @@ class MetavisionCamera:
             settings["roi"] = self._apply_roi(hal, device, width, height)
             settings["rate_limiter"] = self._apply_erc(device)
             settings["trigger_in"] = self._apply_trigger(hal, device)
-            self._stream = RawStream(encoding, width, height, endianness, device=self.label)
+            self._stream = self._make_stream(hal, device, hw, native, width, height)
+            settings["data_path"] = "hal_decoder" if isinstance(self._stream, HalDecoded) else "device_bytes"
             self._events_stream = device.get_i_events_stream()
+            settings["raw_log"] = self._start_raw_log(serial)
             self._events_stream.start()
         except BaseException:
-            self._device = self._events_stream = None
+            if self._stream is not None:
+                self._stream.close()
+            self._device = self._events_stream = self._stream = None
             raise
         self._device = device
         self._stall = StallWatch(self.cfg.stall_timeout_s, self.label)
@@ -155,33 +171,55 @@ class MetavisionCamera:
         return CameraInfo("metavision", width, height, self._stream.published, serial=serial, settings=settings)
 
     def read(self, timeout_s: float) -> CameraData | None:
-        if self._events_stream is None or self._stream is None:
+        events_stream, stream = self._events_stream, self._stream
+        if events_stream is None or stream is None:
             raise DriverError("camera is not open", device=self.label)
         deadline = time.monotonic() + max(timeout_s, 0.0)
         while True:
             try:
-                status = self._events_stream.poll_buffer()
-                raw = self._events_stream.get_latest_raw_data() if status > 0 else None
+                status = events_stream.poll_buffer()
+                data = stream.take(events_stream.get_latest_raw_data()) if status > 0 else None
             except Exception as exc:
                 raise DriverError(f"camera failed or was unplugged: {exc}", device=self.label) from exc
             if status < 0:
-                raise DriverError("the camera's events stream stopped (unplugged?)", device=self.label)
-            data = _as_bytes(raw) if raw is not None else b""
-            if data:
+                self._stream_stopped()
+            if data is not None:
                 self._stall.fed()
-                return self._stream.take(data)
+                return data
             if time.monotonic() >= deadline:
                 self._stall.check()
                 return None
             time.sleep(POLL_INTERVAL_S)
 
     def close(self) -> None:
-        events_stream, self._events_stream, self._device = self._events_stream, None, None
+        events_stream, stream = self._events_stream, self._stream
+        self._events_stream = self._stream = self._device = None
         if events_stream is not None:
             try:
                 events_stream.stop()
             except Exception as exc:  # noqa: BLE001
                 log.debug("%s: stopping the events stream failed: %s", self.label, exc)
+        if stream is not None:
+            stream.close()
+
+    def _start_raw_log(self, serial: str) -> str | None:
+        if self.cfg.raw_log_dir is None:
+            return None
+        try:
+            return start_raw_log(self._events_stream, Path(self.cfg.raw_log_dir).expanduser(), serial)
+        except OSError as exc:
+            raise ConfigError(f"cannot write the camera's bytes there: {exc}", key=f"{KEY}.raw_log_dir") from exc
+
+    def _stream_stopped(self) -> None:
+        """The events stream says it has stopped (``poll_buffer`` < 0): a camera only does when unplugged."""
+        raise DriverError("the camera's events stream stopped (unplugged?)", device=self.label)
+
+    def _make_stream(self, hal: Any, device: Any, hw: Any, native: str, width: int, height: int) -> HalStream:
+        """The HAL's decoder where the bindings hide the bytes (OpenEB 5), else the device's bytes."""
+        if buffers_are_opaque(hal):
+            return HalDecoded(device, self.label)
+        encoding, endianness = self._encoding(hw, native)
+        return DeviceBytes(RawStream(encoding, width, height, endianness, device=self.label))
 
     def _open_device(self, hal: Any) -> Any:
         try:
@@ -202,9 +240,8 @@ class MetavisionCamera:
             )
         return device
 
-    def _encoding(self, hw: Any) -> tuple[str, str, str]:
-        """(our encoding, EVT 2.1 layout, the camera's format string)."""
-        native = call_or_none(hw, "get_current_data_encoding_format") or self.cfg.format
+    def _encoding(self, hw: Any, native: str) -> tuple[str, str]:
+        """(our encoding, EVT 2.1 layout) of the camera's format string, for our decoders."""
         if not native:
             raise DriverError("cannot tell the camera's data format: set camera.hardware.format", device=self.label)
         try:
@@ -213,11 +250,11 @@ class MetavisionCamera:
             raise DriverError(str(exc), device=self.label) from None
         if self.cfg.evt21_endianness != "auto":
             endianness = self.cfg.evt21_endianness
-        elif encoding == "evt21" and "endianness" not in str(native):
+        elif encoding == "evt21" and "endianness" not in native:
             system_id = call_or_none(hw, "get_system_id")
             prophesee = call_or_none(hw, "get_integrator") == "Prophesee"
             endianness = "legacy" if prophesee and isinstance(system_id, int) and system_id < 0x37 else "little"
-        return encoding, endianness, str(native)
+        return encoding, endianness
 
     def _identification(self, hw: Any) -> dict[str, Any]:
         sensor = call_or_none(hw, "get_sensor_info")
@@ -306,11 +343,3 @@ def _allowed(facility: Any, name: str) -> str:
     info = call_or_none(facility, "get_bias_info", name)
     allowed = call_or_none(info, "get_bias_allowed_range") if info is not None else None
     return f" (allowed: {allowed[0]}..{allowed[1]})" if allowed else ""
-
-
-def _as_bytes(raw: Any) -> bytes:
-    """Bytes of a raw buffer: a numpy array, a buffer-protocol vector, or a plain sequence of ints."""
-    try:
-        return bytes(memoryview(raw).cast("B"))
-    except TypeError:
-        return bytes(np.asarray(raw, dtype=np.uint8))

@@ -68,11 +68,15 @@ class RawWriter:
     """Writes events as a RAW file of EVT 2.0 or 3.0 with a Metavision header.
 
     The header is written with the first events (or on closing) so that it can hold the stream's
-    time offset (``% t_offset_us``, a whole number of time loops; see :mod:`.codec`).
+    time offset (``% t_offset_us``, a whole number of time loops; see :mod:`.codec`). A
+    ``simulated`` stream's header says that flagtrack simulated it (:func:`.raw_header.raw_header`).
     """
 
-    def __init__(self, path: str | Path, *, width: int, height: int, encoding: str | None = None) -> None:
+    def __init__(
+        self, path: str | Path, *, width: int, height: int, encoding: str | None = None, simulated: bool = False
+    ) -> None:
         self.path = Path(path)
+        self.simulated = simulated
         if width is None or height is None:
             raise FormatError("a RAW file needs the sensor width and height", path=str(self.path))
         self.width, self.height = int(width), int(height)
@@ -90,7 +94,7 @@ class RawWriter:
     def _write_header(self) -> None:
         offset = self._encoder.t_offset_us or 0
         extra = {"t_offset_us": offset} if offset else None
-        self._file.write(raw_header(self.encoding, self.width, self.height, extra))
+        self._file.write(raw_header(self.encoding, self.width, self.height, extra, simulated=self.simulated))
         self._header_written = True
 
     def write(self, events: np.ndarray, triggers: np.ndarray | None = None) -> None:

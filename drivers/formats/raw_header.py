@@ -29,6 +29,21 @@ MAX_T_OFFSET_US = 1 << 62
 """The largest ``% t_offset_us`` (either sign) a header may give: event times (int64 µs) must still fit after it."""
 
 
+PROPHESEE_FIELDS = {
+    "camera_integrator_name": "Prophesee",
+    "integrator_name": "Prophesee",
+    "plugin_integrator_name": "Prophesee",
+    "plugin_name": "hal_plugin_prophesee",
+}
+"""Who made the camera and which OpenEB plugin reads it, in the header of a camera's stream."""
+SIMULATED_FIELDS = {
+    "camera_integrator_name": "flagtrack",
+    "integrator_name": "flagtrack",
+    "simulator": f"flagtrack {__version__}",
+}
+"""The same for a stream flagtrack simulated: no camera maker, no plugin."""
+
+
 @dataclass(frozen=True)
 class RawLayout:
     """What a RAW header says about its stream.
@@ -143,25 +158,28 @@ def raw_layout(fields: Mapping[str, str], offsets: Mapping[str, int], path: str 
     return RawLayout(encoding, endianness, width, height, t_offset)
 
 
-def raw_header(encoding: str, width: int, height: int, extra: Mapping[str, object] | None = None) -> bytes:
+def raw_header(
+    encoding: str, width: int, height: int, extra: Mapping[str, object] | None = None, *, simulated: bool = False
+) -> bytes:
     """A RAW header that Metavision/OpenEB opens, for an EVT stream of ``encoding``.
 
     It has the current ``% format`` and ``% geometry`` lines, the older ``% evt`` line, the
     integrator fields with which OpenEB picks its Prophesee plugin, ``extra`` fields, and ``% end``.
+    A ``simulated`` stream names flagtrack as its camera's integrator, and its simulator, instead
+    (OpenEB then opens it with any plugin that reads the format).
     """
     if encoding not in _FORMAT_OUT:
         raise FormatError(f"unknown encoding {encoding!r} (known: evt2, evt21, evt3)")
-    fields: dict[str, object] = {
-        "camera_integrator_name": "Prophesee",
+    maker = SIMULATED_FIELDS if simulated else PROPHESEE_FIELDS
+    known: dict[str, object] = {
         "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S"),
         "evt": _EVT_OUT[encoding],
         "format": f"{_FORMAT_OUT[encoding]};height={int(height)};width={int(width)}",
         "generator": f"flagtrack {__version__}",
         "geometry": f"{int(width)}x{int(height)}",
-        "integrator_name": "Prophesee",
-        "plugin_integrator_name": "Prophesee",
-        "plugin_name": "hal_plugin_prophesee",
+        **maker,
     }
+    fields = dict(sorted(known.items()))
     fields.update(extra or {})
     lines = []
     for key, value in fields.items():

@@ -123,24 +123,16 @@ def truth_batch(kin: FlagKinematics, duration_s: float, rate_hz: float, n_s: int
 
 
 def write_events_file(path: Path, chunks: Iterable[np.ndarray], width: int, height: int) -> tuple[Path, int]:
-    """Write ``chunks`` as EVT 3.0 ``.raw`` (``.npy`` while the formats package has no writer)."""
-    try:
-        from flagtrack.drivers.formats import open_writer  # type: ignore[attr-defined]
-    except ImportError:
-        open_writer = None
+    """Write ``chunks`` as EVT 3.0 ``.raw`` whose header says flagtrack simulated it."""
+    from flagtrack.drivers.formats.raw_file import RawWriter
+
     n = 0
-    if open_writer is not None:
-        path = path.with_suffix(".raw")
-        with open_writer(path, width=width, height=height, encoding="evt3") as writer:
-            for chunk in chunks:
-                writer.write(chunk)
-                n += len(chunk)
-        return path, n
-    path = path.with_suffix(".npy")
-    parts = list(chunks)
-    events = np.concatenate(parts) if parts else np.empty(0)
-    np.save(path, events)
-    return path, len(events)
+    path = path.with_suffix(".raw")
+    with RawWriter(path, width=width, height=height, encoding="evt3", simulated=True) as writer:
+        for chunk in chunks:
+            writer.write(chunk)
+            n += len(chunk)
+    return path, n
 
 
 def simulate_recording(spec: RecordingSpec, out_dir: str | Path, name: str | None = None) -> RecordingResult:

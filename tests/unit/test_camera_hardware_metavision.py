@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,30 +28,86 @@ camera:
 
 
 @pytest.mark.parametrize(
-    "sensor, fmt, options, raw_type, encoding, published",
+    "api, sensor, fmt, options, encoding, published",
     [
-        ("IMX636", "EVT3", "", "numpy", "EVT3", "evt3"),
-        ("IMX636", "EVT21", "", "vector", "EVT21", "evt2"),  # old format string: OpenEB's rule says legacy
-        ("IMX636", "EVT21", "endianness=little", "numpy", "EVT21;endianness=little", "evt2"),
-        ("Gen3.1", None, "", "vector", "EVT2", "evt2"),
+        ("5.1", "IMX636", "EVT3", "", "EVT3", "evt2"),  # OpenEB 5: the HAL decodes, events published as EVT 2.0
+        ("5.1", "IMX636", "EVT21", "", "EVT21", "evt2"),
+        ("5.1", "Gen3.1", None, "", "EVT2", "evt2"),
+        ("4.4", "IMX636", "EVT3", "", "EVT3", "evt3"),  # OpenEB 4: the device's bytes (numpy, then vectors)
+        ("4.6", "IMX636", "EVT21", "", "EVT21", "evt2"),  # old format string: OpenEB's rule says legacy
+        ("4.4", "IMX636", "EVT21", "endianness=little", "EVT21;endianness=little", "evt2"),
+        ("4.6", "Gen3.1", None, "", "EVT2", "evt2"),
     ],
 )
 def test_events_decode_exactly_in_every_format(
-    fake_hal, sensor: str, fmt: str | None, options: str, raw_type: str, encoding: str, published: str
+    fake_hal, api: str, sensor: str, fmt: str | None, options: str, encoding: str, published: str
 ) -> None:
-    cam = fake_hal._fake.plug(
-        fake_hal.FakeHalCamera(sensor=sensor, format_options=options, raw_type=raw_type, duration_us=60_000, seed=7)
-    )
+    fake_hal._fake.use_api(api)
+    cam = fake_hal._fake.plug(fake_hal.FakeHalCamera(sensor=sensor, format_options=options, duration_us=60_000, seed=7))
     camera = metavision.open_from_config({"format": fmt} if fmt else {})
     info = camera.open()
     size = (1280, 720) if sensor == "IMX636" else (640, 480)
     assert (info.adapter, info.width, info.height, info.encoding) == ("metavision", *size, published)
     assert info.settings["device_encoding"] == encoding and info.serial == "00ca0009"
+    assert info.settings["data_path"] == ("hal_decoder" if api == "5.1" else "device_bytes")
     events, triggers, reads = read_until(camera, lambda: camera._events_stream._feed.exhausted)
     camera.close()
     assert reads > 5 and len(cam.sent_events) > 1000
     np.testing.assert_array_equal(events, cam.sent_events)
     np.testing.assert_array_equal(triggers, cam.sent_triggers)
+
+
+def test_the_hal_decodes_opaque_buffers_and_says_how_far_the_stream_is_complete(fake_hal) -> None:
+    """OpenEB 5: the buffer's bytes are out of reach (the first real read failed on them); the HAL's decoder
+    gives the events, triggers in memory it reuses (copied at once), and its last time as the horizon."""
+    opaque = fake_hal._events_stream.raw_buffer(b"\x00" * 8)
+    assert isinstance(opaque, fake_hal.RawBuffer) and opaque.size() == 8
+    for read in (memoryview, bytes, list, lambda b: np.asarray(b, dtype=np.uint8)):
+        with pytest.raises(TypeError):
+            read(opaque)
+    cam = fake_hal._fake.plug(fake_hal.FakeHalCamera(duration_us=80_000, seed=3))
+    camera = metavision.open_from_config({"trigger_in": True})
+    camera.open()
+    got, horizon = [], -1
+    for _ in range(100_000):  # the fake's stream ends
+        if (data := camera.read(0.01)) is None:
+            if camera._events_stream._feed.exhausted:
+                break
+            continue
+        assert data.raw is None and data.t_until_us is not None and data.t_until_us >= horizon
+        assert len(data.events) == 0 or data.events["t"].max() <= data.t_until_us
+        horizon = data.t_until_us
+        got.append(data)
+    hal = camera._device
+    camera.close()
+    assert not hal.get_i_event_cd_decoder()._callbacks and not hal.get_i_event_ext_trigger_decoder()._callbacks
+    triggers = np.concatenate([d.triggers for d in got])
+    assert len(cam.sent_triggers) > 10
+    np.testing.assert_array_equal(triggers, cam.sent_triggers)
+    assert horizon == max(cam.sent_events["t"][-1], cam.sent_triggers["t"][-1])
+
+
+@pytest.mark.parametrize("api", ["5.1", "4.6"])
+def test_the_hal_logs_the_cameras_own_bytes_to_a_new_file_at_each_open(fake_hal, api: str, tmp_path: Path) -> None:
+    fake_hal._fake.use_api(api)
+    fake_hal._fake.plug(fake_hal.FakeHalCamera(serial="00ca/09", duration_us=30_000))
+    logged = []
+    for _ in range(2):
+        camera = metavision.open_from_config({"raw_log_dir": str(tmp_path / "logs")})
+        info = camera.open()
+        feed = camera._events_stream._feed
+        read_until(camera, lambda f=feed: f.exhausted)
+        sent = feed.data
+        camera.close()
+        logged.append(Path(info.settings["raw_log"]))
+    assert logged[0] != logged[1] and logged[0].parent == tmp_path / "logs" and logged[0].name.startswith("00ca_09_")
+    for path in logged:
+        data = path.read_bytes()
+        assert data.endswith(sent) and data[: -len(sent)].endswith(b"% end\n")
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ConfigError, match="cannot write the camera's bytes there") as err:
+        metavision.open_from_config({"raw_log_dir": str(tmp_path / "file")}).open()
+    assert err.value.key == "camera.hardware.raw_log_dir"
 
 
 def test_yaml_settings_are_applied_and_read_back(fake_hal) -> None:
@@ -67,7 +124,8 @@ def test_yaml_settings_are_applied_and_read_back(fake_hal) -> None:
     json.dumps(s)
     events, triggers, _ = read_until(camera, lambda: camera._events_stream._feed.exhausted)
     np.testing.assert_array_equal(events, cam.sent_events)
-    assert len(triggers) == len(cam.triggers) > 0
+    assert len(cam.sent_triggers) == len(cam.triggers) > 0
+    np.testing.assert_array_equal(triggers, cam.sent_triggers)
     assert events["x"].min() >= 320 and events["x"].max() < 960 and events["y"].min() >= 180
     assert np.bincount(events["t"] // 200).max() <= 200
 

@@ -1,33 +1,49 @@
-"""Fake ``metavision_hal`` (tests only): the subset of OpenEB's HAL Python bindings the metavision adapter uses.
+"""Fake ``metavision_hal`` (tests only): the part of OpenEB's HAL Python bindings the metavision adapter uses.
 
-Real API mirrored (OpenEB 4.x/5.x bindings): ``DeviceDiscovery.open(serial[, config])`` (None when no such
-camera), ``DeviceDiscovery.list()``, ``DeviceConfig().set_format(...)``; a device's facilities
-``get_i_geometry()``, ``get_i_hw_identification()`` (serial, system id, sensor info, integrator, current
-and available data encoding formats, system info), ``get_i_ll_biases()`` (set/get/get_all_biases/
-get_bias_info with allowed ranges), ``get_i_roi()`` (``I_ROI.Window``, set_window, enable), ``get_i_erc_module()``
-(set_cd_event_rate / get_cd_event_rate, enable / is_enabled), ``get_i_trigger_in()`` (``I_TriggerIn.Channel``,
-enable / disable / is_enabled), ``get_i_events_stream()`` (start, stop, poll_buffer, get_latest_raw_data).
-A facility the sensor lacks is None, as in the bindings.
+Mirrors OpenEB 5.1 (its names and method names are checked against the real module where it
+imports, tests/integration/test_camera_metavision_openeb.py); ``_fake.use_api("4.6")`` or ``("4.4")``
+gives the older bindings instead. Real API mirrored: ``DeviceDiscovery.open(serial[, config])`` (None
+when no such camera), ``DeviceDiscovery.list()``, ``DeviceConfig().set_format(...)``; a device's
+facilities ``get_i_geometry()``, ``get_i_hw_identification()`` (serial, sensor info, integrator,
+current and available data encoding formats, system info; the system id in 4.x only),
+``get_i_ll_biases()`` (set/get/get_all_biases/get_bias_info with allowed ranges), ``get_i_roi()``
+(``I_ROI.Window``, set_window, enable), ``get_i_erc_module()`` (set_cd_event_rate / get_cd_event_rate,
+enable / is_enabled), ``get_i_trigger_in()`` (``I_TriggerIn.Channel``, enable / disable / is_enabled),
+``get_i_events_stream()``, ``get_i_events_stream_decoder()``, ``get_i_event_cd_decoder()``,
+``get_i_event_ext_trigger_decoder()`` (types and callbacks in :mod:`._events_stream`). A facility the
+sensor lacks is None, as in the bindings.
 
 Device behaviour: streams real EVT bytes (EVT 3.0, 2.0 or 2.1) of a flapping line in buffers of random sizes,
 built at ``start()`` from the settings in force: biases out of their allowed range and unknown bias names
 raise (as the HAL does), the ROI window drops events outside it, the ERC keeps at most N events per 200 µs
 (the rate is quantised to that step, so reading it back differs from the request), the trigger input
 passes triggers only when enabled. Simulates a missing camera, an unplug (``poll_buffer`` returns -1)
-and a stall (no buffers). ``get_latest_raw_data`` returns a numpy array or a list-like vector
-(``raw_type``), the two shapes bindings versions give.
+and a stall (no buffers).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import enum
-from typing import Any
 
 import _fake_streams
 import numpy as np
 
+from flagtrack.drivers.formats import make_decoder
+
+from . import _events_stream
+from ._events_stream import (
+    I_Decoder,
+    I_EventDecoder_EventCD,
+    I_EventDecoder_EventExtTrigger,
+    I_EventsStream,
+)
+
 ERC_PERIOD_US = 200
+API_VERSIONS = ("5.1", "4.6", "4.4")
+"""5.1: RawBuffer (size() only); 4.6: RawDataBuffer (a vector of ints); 4.4: numpy bytes."""
+TEST_CONTROLS = ("FakeHalCamera", "Sensor")
+"""The fake's own classes (the test's controls), not the bindings'."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,7 +103,6 @@ class FakeHalCamera:
         format: data format at open (None: the sensor's first); a DeviceConfig format overrides it.
         format_options: options the HAL appends to the format string (``endianness=legacy``).
         duration_us, seed: the flapping-line source and buffer sizes.
-        raw_type: what get_latest_raw_data returns: ``numpy`` or ``vector``.
         unplug_after_bytes: poll_buffer returns -1 after this many bytes.
         stall_after_bytes: no more buffers after this many bytes.
     """
@@ -98,7 +113,6 @@ class FakeHalCamera:
     format_options: str = ""
     duration_us: int = 200_000
     seed: int = 0
-    raw_type: str = "numpy"
     unplug_after_bytes: int | None = None
     stall_after_bytes: int | None = None
     events: np.ndarray | None = None
@@ -116,9 +130,23 @@ class FakeHalCamera:
 class _Controller:
     def __init__(self) -> None:
         self.cameras: list[FakeHalCamera] = []
+        self.api = API_VERSIONS[0]
 
     def reset(self) -> None:
         self.cameras = []
+
+    def use_api(self, version: str) -> None:
+        """Be the bindings of this OpenEB version: its buffer type (module names included)."""
+        if version not in API_VERSIONS:
+            raise ValueError(f"fake bindings are {API_VERSIONS}, not {version}")
+        self.api = version
+        module = globals()
+        module.pop("RawBuffer", None)
+        module.pop("RawDataBuffer", None)
+        if version.startswith("5"):
+            module["RawBuffer"] = _events_stream.RawBuffer
+        elif version == "4.6":
+            module["RawDataBuffer"] = _events_stream.RawDataBuffer
 
     def plug(self, camera: FakeHalCamera) -> FakeHalCamera:
         self.cameras.append(camera)
@@ -126,10 +154,7 @@ class _Controller:
 
 
 _fake = _Controller()
-
-
-class RawDataBuffer(list):
-    """The bindings' opaque ``std::vector<uint8_t>`` (no buffer protocol: a sequence of ints)."""
+RawBuffer = _events_stream.RawBuffer  # OpenEB 5.1 until _fake.use_api says otherwise
 
 
 class DeviceConfig:
@@ -231,7 +256,7 @@ class I_ROI:  # noqa: N801
 
 
 class I_ErcModule:  # noqa: N801
-    MAX_RATE = 1_000_000_000
+    _MAX_RATE = 1_000_000_000
 
     def __init__(self) -> None:
         self._enabled = False
@@ -245,7 +270,7 @@ class I_ErcModule:  # noqa: N801
         return self._enabled
 
     def set_cd_event_rate(self, events_per_sec: int) -> bool:
-        if not 0 <= events_per_sec <= self.MAX_RATE:
+        if not 0 <= events_per_sec <= self._MAX_RATE:
             raise RuntimeError(f"HalException: ERC rate {events_per_sec} out of range")
         self._count = int(events_per_sec * ERC_PERIOD_US // 1_000_000)  # events per reference period
         return True
@@ -257,18 +282,21 @@ class I_ErcModule:  # noqa: N801
         return 0
 
     def get_max_supported_cd_event_rate(self) -> int:
-        return self.MAX_RATE
+        return self._MAX_RATE
 
     @property
-    def count_per_period(self) -> int:
+    def _count_per_period(self) -> int:
         return self._count
 
 
 class I_TriggerIn:  # noqa: N801
-    class Channel(enum.IntEnum):
+    class Channel(enum.Enum):  # a pybind11 enum: not an int, but int() gives its value
         MAIN = 0
         AUX = 1
         LOOPBACK = 2
+
+        def __int__(self) -> int:
+            return int(self.value)
 
     def __init__(self) -> None:
         self._enabled: set[int] = set()
@@ -313,9 +341,6 @@ class I_HW_Identification:  # noqa: N801
     def get_serial(self) -> str:
         return self._camera.serial
 
-    def get_system_id(self) -> int:
-        return self._camera.spec.system_id
-
     def get_integrator(self) -> str:
         return "Prophesee"
 
@@ -333,35 +358,11 @@ class I_HW_Identification:  # noqa: N801
         return {"Connection": "USB", "Release Version": "3.9.0", "Sensor Name": self._camera.sensor}
 
 
-class I_EventsStream:  # noqa: N801
-    def __init__(self, device: Device) -> None:
-        self._device = device
-        self._feed: _fake_streams.ByteFeed | None = None
-        self._pending: bytes | None = None
+class _HwIdentification4(I_HW_Identification):
+    """OpenEB 4.x's, which also has the system id."""
 
-    def start(self) -> None:
-        self._device.camera.started += 1
-        self._feed = self._device.make_feed()
-
-    def stop(self) -> None:
-        self._device.camera.stopped += 1
-        self._feed = None
-
-    def poll_buffer(self) -> int:
-        camera, feed = self._device.camera, self._feed
-        if feed is None:
-            return -1
-        if camera.unplug_after_bytes is not None and feed.delivered >= camera.unplug_after_bytes:
-            return -1
-        if self._pending is None:
-            self._pending = feed.next()
-        return 0 if self._pending is None else 1
-
-    def get_latest_raw_data(self) -> Any:
-        data, self._pending = self._pending or b"", None
-        if self._device.camera.raw_type == "vector":
-            return RawDataBuffer(data)
-        return np.frombuffer(data, dtype=np.uint8).copy()
+    def get_system_id(self) -> int:
+        return self._camera.spec.system_id
 
 
 class Device:
@@ -374,8 +375,13 @@ class Device:
         self._erc = I_ErcModule() if sensor.erc else None
         self._trigger = I_TriggerIn()
         self._stream = I_EventsStream(self)
+        self._decoder = I_Decoder(self._api)
         self._geometry = I_Geometry(sensor)
-        self._hw = I_HW_Identification(camera, fmt)
+        self._hw = (I_HW_Identification if self._api().startswith("5") else _HwIdentification4)(camera, fmt)
+
+    @staticmethod
+    def _api() -> str:
+        return _fake.api
 
     def get_i_ll_biases(self) -> I_LL_Biases:
         return self._biases
@@ -392,14 +398,29 @@ class Device:
     def get_i_events_stream(self) -> I_EventsStream:
         return self._stream
 
+    def get_i_events_stream_decoder(self) -> I_Decoder:
+        return self._decoder
+
+    def get_i_event_cd_decoder(self) -> I_EventDecoder_EventCD:
+        return self._decoder.cd
+
+    def get_i_event_ext_trigger_decoder(self) -> I_EventDecoder_EventExtTrigger:
+        return self._decoder.trigger
+
     def get_i_geometry(self) -> I_Geometry:
         return self._geometry
 
     def get_i_hw_identification(self) -> I_HW_Identification:
         return self._hw
 
-    def make_feed(self) -> _fake_streams.ByteFeed:
-        """The sensor's output under the settings in force, as the format's bytes."""
+    def _header(self) -> str:
+        """The RAW header the HAL writes (``log_raw_data``)."""
+        sensor = self.camera.spec
+        fmt = f"{self.format};height={sensor.height};width={sensor.width}"
+        return f"% camera_integrator_name Prophesee\n% format {fmt}\n% serial_number {self.camera.serial}\n% end\n"
+
+    def _make_feed(self) -> _fake_streams.ByteFeed:
+        """The sensor's output under the settings in force, as the format's bytes (and the decoder for them)."""
         camera, sensor = self.camera, self.camera.spec
         if camera.events is None:
             camera.events, camera.triggers = _fake_streams.flapping_source(
@@ -418,7 +439,7 @@ class Device:
         if self._erc is not None and self._erc.is_enabled():
             slot = events["t"] // ERC_PERIOD_US
             rank = np.arange(len(events)) - np.searchsorted(slot, slot, side="left")
-            events = events[rank < self._erc.count_per_period]
+            events = events[rank < self._erc._count_per_period]
         triggers = camera.triggers if self._trigger.is_enabled(0) else camera.triggers[:0]
         camera.sent_events, camera.sent_triggers = events, triggers
         encoding = {"EVT3": "evt3", "EVT2": "evt2", "EVT21": "evt21"}[self.format]
@@ -426,4 +447,7 @@ class Device:
             encoding == "evt21" and "endianness" not in camera.format_options and sensor.system_id < 0x37
         )
         data = _fake_streams.encode(encoding, events, triggers, sensor.width, sensor.height, legacy=legacy)
+        self._decoder.words = make_decoder(
+            encoding, width=sensor.width, height=sensor.height, strict=True, endianness="legacy" if legacy else "little"
+        )
         return _fake_streams.ByteFeed(data, seed=camera.seed, stall_after_bytes=camera.stall_after_bytes)
