@@ -123,34 +123,40 @@ def bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return top * (1 - fy) + bottom * fy
 
 
-def ridge_points(image: np.ndarray, params: LineWidthParams) -> tuple[np.ndarray, np.ndarray]:
-    """((k, 2) x, y of ridge points, (k, 2) unit normals there), spread along the line, at most
-    ``max_profiles`` (see the module docstring)."""
-    smooth = gaussian_blur(image, params.smooth_px)
+def curvatures(smooth: np.ndarray, direction_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(most negative curvature, the other, x and y of the unit vector along the first) of ``smooth``,
+    from its Hessian averaged over a Gaussian of ``direction_px``."""
     p = np.pad(smooth, 1, mode="edge")
     sxx = p[1:-1, 2:] - 2 * smooth + p[1:-1, :-2]
     syy = p[2:, 1:-1] - 2 * smooth + p[:-2, 1:-1]
     sxy = 0.25 * (p[2:, 2:] - p[2:, :-2] - p[:-2, 2:] + p[:-2, :-2])
-    sxx, syy, sxy = (gaussian_blur(h, params.direction_px) for h in (sxx, syy, sxy))
+    sxx, syy, sxy = (gaussian_blur(h, direction_px) for h in (sxx, syy, sxy))
     half_trace, root = 0.5 * (sxx + syy), np.hypot(0.5 * (sxx - syy), sxy)
-    lam_min, lam_max = half_trace - root, half_trace + root
     angle = 0.5 * np.arctan2(2 * sxy, sxx - syy) + 0.5 * math.pi  # across the line
-    nx, ny = np.cos(angle), np.sin(angle)
-    top = (
-        np.partition(smooth.ravel(), smooth.size - n_top)[-n_top:]
-        if (n_top := _n_strongest(params)) < smooth.size
-        else smooth
-    )
+    return half_trace - root, half_trace + root, np.cos(angle), np.sin(angle)
+
+
+def ridge_points(image: np.ndarray, params: LineWidthParams) -> tuple[np.ndarray, np.ndarray]:
+    """((k, 2) x, y of ridge points, (k, 2) unit normals there), spread along the line, at most
+    ``max_profiles`` (see the module docstring). The curvatures are computed only around the pixels
+    bright enough to be on the line (its bounding box and a margin)."""
+    smooth = gaussian_blur(image, params.smooth_px)
+    n_top = _n_strongest(params)
+    top = np.partition(smooth.ravel(), smooth.size - n_top)[-n_top:] if n_top < smooth.size else smooth
     floor = max(0.5 * params.ridge_fraction * float(np.median(top)), 1e-12)  # cheap first cut
-    rows, cols = np.nonzero((lam_min < 0) & (-lam_min >= params.min_anisotropy * np.abs(lam_max)) & (smooth >= floor))
-    nx, ny = nx[rows, cols], ny[rows, cols]
-    value = smooth[rows, cols]
-    around = bilinear(smooth, np.concatenate([cols + nx, cols - nx]), np.concatenate([rows + ny, rows - ny]))
+    bright_rows, bright_cols = np.nonzero(smooth >= floor)
+    margin = math.ceil(3 * params.direction_px) + 2
+    r0, c0 = max(int(bright_rows.min()) - margin, 0), max(int(bright_cols.min()) - margin, 0)
+    sub = smooth[r0 : int(bright_rows.max()) + margin + 1, c0 : int(bright_cols.max()) + margin + 1]
+    lam_min, lam_max, nx, ny = curvatures(sub, params.direction_px)
+    rows, cols = np.nonzero((lam_min < 0) & (-lam_min >= params.min_anisotropy * np.abs(lam_max)) & (sub >= floor))
+    nx, ny, value = nx[rows, cols], ny[rows, cols], sub[rows, cols]
+    around = bilinear(sub, np.concatenate([cols + nx, cols - nx]), np.concatenate([rows + ny, rows - ny]))
     ridge = (value >= around[: len(value)]) & (value >= around[len(value) :])
     if np.count_nonzero(ridge):  # the line is the brightest ridge: its strongest points set the bar
-        strongest = np.sort(value[ridge])[-_n_strongest(params) :]
+        strongest = np.sort(value[ridge])[-n_top:]
         ridge &= value >= params.ridge_fraction * float(np.median(strongest))
-    rows, cols, nx, ny = rows[ridge], cols[ridge], nx[ridge], ny[ridge]
+    rows, cols, nx, ny = rows[ridge] + r0, cols[ridge] + c0, nx[ridge], ny[ridge]
     if len(rows) > params.max_profiles:
         pick = np.unique(np.linspace(0, len(rows) - 1, params.max_profiles).round().astype(np.int64))
         rows, cols, nx, ny = rows[pick], cols[pick], nx[pick], ny[pick]
