@@ -174,6 +174,36 @@ class Cadence:
     status_s: float | None = None
 
 
+class _Drawing:
+    """Frames and status lines when their camera time comes (a frame at once, the first status line
+    ``status_s`` after the first data); the latest frame is kept for the next that is due."""
+
+    def __init__(self, cadence: Cadence, on_frame: Callable[[AimFrame], None] | None,
+                 on_status: Callable[[AimFrame], None] | None) -> None:  # fmt: skip
+        self.frame_s = cadence.frame_s if on_frame is not None else None
+        self.status_s = cadence.status_s if on_status is not None else None
+        self.on_frame, self.on_status = on_frame, on_status
+        self.next_frame, self.next_status = -math.inf, math.inf
+        self.latest: AimFrame | None = None
+
+    def __call__(self, acc: AimAccumulator) -> None:
+        t_s = (acc.t_end_us or 0) * 1e-6
+        if self.status_s is not None and self.next_status == math.inf:
+            self.next_status = t_s + self.status_s
+        if self.frame_s is not None and self.on_frame is not None and t_s >= self.next_frame:
+            self.on_frame(self.frame(acc))
+            self.next_frame = t_s + self.frame_s
+        if self.status_s is not None and self.on_status is not None and t_s >= self.next_status:
+            self.on_status(self.frame(acc))
+            self.next_status = t_s + self.status_s
+
+    def frame(self, acc: AimAccumulator) -> AimFrame:
+        """The frame of now (the latest one if nothing came since)."""
+        if self.latest is None or self.latest.t_end_us != acc.t_end_us:
+            self.latest = acc.frame()
+        return self.latest
+
+
 def feed(
     source: Source,
     acc: AimAccumulator,
@@ -184,39 +214,27 @@ def feed(
     """Feed the source's events to ``acc`` until the recording ends, ``duration_s`` has passed or
     Ctrl-C; draw frames and status on the way; return the last frame."""
     events_of = CameraEvents(source.info)
-    wall0: float | None = None  # a camera's duration counts from its first answer (a first read may compile)
-    next_frame, next_status = -math.inf, math.inf  # a frame at once; the first status after status_s
-    latest: AimFrame | None = None
+    draw = _Drawing(cadence, on_frame, on_status)
+    wall0: float | None = None  # a camera's duration counts from its first answer taken in (the first
+    # read or decode may compile)
     try:
         while cadence.duration_s is None or not _elapsed(source, acc, wall0, cadence.duration_s):
             try:
                 data = source.camera.read(0.1)
             except EndOfStream:
                 break
+            if data is not None:
+                try:
+                    acc.push(events_of(data), data.t_until_us)
+                except FormatError as exc:
+                    raise FormatError(f"{source.description}: {exc}") from exc
+                draw(acc)
             wall0 = time.monotonic() if wall0 is None else wall0
-            if data is None:
-                continue
-            try:
-                acc.push(events_of(data), data.t_until_us)
-            except FormatError as exc:
-                raise FormatError(f"{source.description}: {exc}") from exc
-            t_s = (acc.t_end_us or 0) * 1e-6
-            if next_status == math.inf and cadence.status_s is not None:
-                next_status = t_s + cadence.status_s
-            if cadence.frame_s is not None and on_frame is not None and t_s >= next_frame:
-                latest = acc.frame()
-                on_frame(latest)
-                next_frame = t_s + cadence.frame_s
-            if cadence.status_s is not None and on_status is not None and t_s >= next_status:
-                if latest is None or latest.t_end_us != acc.t_end_us:
-                    latest = acc.frame()
-                on_status(latest)
-                next_status = t_s + cadence.status_s
     except KeyboardInterrupt:
         pass  # the first Ctrl-C ends the run: the last frame is still drawn
     finally:
         source.camera.close()
-    return acc.frame() if latest is None or latest.t_end_us != acc.t_end_us else latest
+    return draw.frame(acc)
 
 
 def _elapsed(source: Source, acc: AimAccumulator, wall0: float | None, duration_s: float) -> bool:

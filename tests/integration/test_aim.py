@@ -230,3 +230,19 @@ def test_bad_input_is_one_line_and_exit_2(
     assert code == 2, err
     assert len(err.strip().splitlines()) == 1 and err.startswith("flagtrack aim: error: "), err
     assert says.format(**fill) in err
+
+
+def test_a_hardware_camera_through_its_sdk(
+    fake_nd, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The rig's Prophesee camera (the fake neuromorphic-drivers SDK): the device's EVT 3.0 bytes are
+    decoded, every event the sensor produced is counted, the flapping line is measured."""
+    fake = fake_nd._fake.plug(fake_nd.FakeCamera(duration_us=150_000, seed=5))
+    rig = tmp_path / "rig.yaml"
+    rig.write_text('camera: {id: cam0, adapter: prophesee, hardware: {serial: "00050423", stall_timeout_s: 30}}\n')
+    monkeypatch.delenv("DISPLAY", raising=False)
+    figures = aim_here(capsys, "-c", str(rig), "--duration", "3", "--window-ms", "20")
+    assert figures["source"] == "camera cam0 (prophesee)"
+    assert figures["events"] == len(fake.sent_events) > 1000
+    assert figures["t_end_s"] >= fake.sent_events["t"][-1] * 1e-6
+    assert figures["event_rate_hz"] > 0 and figures["line_width_px"] is not None
