@@ -4,6 +4,7 @@ the chain and grid to draw, the Rerun sink, and the loop that feeds the accumula
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import os
 import time
@@ -22,6 +23,8 @@ from flagtrack.daemon.errors import ConfigError, FormatError
 from flagtrack.drivers.camera.base import Camera, CameraData, CameraInfo, EndOfStream
 from flagtrack.drivers.formats.codec import Decoder, make_decoder
 from flagtrack.drivers.formats.packets import decode_packet
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from flagtrack.daemon.rig.config import RigConfig
@@ -119,6 +122,11 @@ def overlays_for(tracker: TrackingConfig, info: CameraInfo, config_path: str | N
 
         check_input_file(Path(tracker.calibration), "tracker.calibration")
         mapping = load_mapping(tracker.calibration)
+        if tuple(mapping.image_size) != (info.width, info.height):
+            log.warning(
+                "the calibration %s was made on a %dx%d image, the camera gives %dx%d: its grid and the "
+                "chain may be drawn in the wrong place", tracker.calibration, *mapping.image_size, info.width, info.height,
+            )  # fmt: skip
     units = "px" if mapping is None else mapping.units
     chain = None
     if tracker.root is not None and tracker.length is not None:

@@ -246,3 +246,31 @@ def test_a_hardware_camera_through_its_sdk(
     assert figures["events"] == len(fake.sent_events) > 1000
     assert figures["t_end_s"] >= fake.sent_events["t"][-1] * 1e-6
     assert figures["event_rate_hz"] > 0 and figures["line_width_px"] is not None
+
+
+CALIBRATION = {  # 0.5 mm per pixel, plane axes along the image's
+    "format": "flagtrack-calibration", "version": 1, "units": "m", "image_size": [640, 480], "degree": 1,
+    "forward": {"degree": 1, "centre": [0.0, 0.0], "scale": 1.0, "exponents": [[0, 0], [1, 0], [0, 1]],
+                "x": [0.0, 0.0005, 0.0], "y": [0.0, 0.0, 0.0005]},
+    "inverse": {"degree": 1, "centre": [0.0, 0.0], "scale": 1.0, "exponents": [[0, 0], [1, 0], [0, 1]],
+                "x": [0.0, 2000.0, 0.0], "y": [0.0, 0.0, 2000.0]},
+}  # fmt: skip
+
+
+def test_a_calibrated_chain_and_the_calibrations_grid(
+    recordings: dict[float, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The rig's tracker section in metres with its calibration (relative to the rig file): the chain
+    and a grid every 5 cm are drawn over the image (the grid's dotted lines every 100 px)."""
+    import yaml
+
+    (tmp_path / "cal.yaml").write_text(yaml.safe_dump(CALIBRATION))
+    rig = tmp_path / "rig.yaml"
+    rig.write_text("tracker: {root: [0.075, 0.12], length: 0.15, calibration: cal.yaml}\n")
+    png = tmp_path / "cal.png"
+    figures = aim_here(capsys, "-c", str(rig), "--replay", str(recordings[1.0]), "--snapshot", str(png))
+    assert figures["chain"] == {"root": [0.075, 0.12], "direction_deg": 0.0, "length": 0.15, "joints": 10, "units": "m"}
+    assert figures["calibration"] == {"path": str(tmp_path / "cal.yaml"), "units": "m", "grid_step": 0.05}
+    rgb = read_png(png)[..., :3]
+    yellow = (rgb[..., 0] > 0.8) & (rgb[..., 1] > 0.8) & (rgb[..., 2] < 0.3)
+    assert yellow.sum() > 200  # the chain, drawn in pixels
