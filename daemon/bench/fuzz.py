@@ -20,7 +20,6 @@ import tempfile
 import time
 from pathlib import Path
 
-from flagtrack.daemon.bench.fuzz_targets import run_target, targets
 from flagtrack.daemon.errors import FlagtrackError
 
 COMMAND = "fuzz"
@@ -31,6 +30,8 @@ DESCRIPTION = __doc__
 def _round_in_child(folder: str, index: int, examples: int, deadline_s: float, seed: int) -> tuple[int, list[str], int]:
     """One round of target ``index`` in a worker process: (cases, failures, the worker's max RSS in KiB)."""
     import resource
+
+    from flagtrack.daemon.bench.fuzz_targets import run_target, targets
 
     target = targets(Path(folder))[index]
     run_target(target, examples, deadline_s, seed)
@@ -46,6 +47,8 @@ def fuzz(minutes: float, examples_per_round: int = 200, deadline_s: float = 10.0
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
+
+    from flagtrack.daemon.bench.fuzz_targets import targets
 
     started = time.monotonic()
     rss: dict[int, list[int]] = {}  # max RSS of the worker after each round, KiB, by target
