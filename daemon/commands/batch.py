@@ -156,9 +156,10 @@ def _validate(args: argparse.Namespace) -> int:
     import os
 
     from flagtrack.daemon.batch.campaign import plan_run, validate_campaign
-    from flagtrack.daemon.commands.validate import _tracking_setup
+    from flagtrack.daemon.commands._tracking_args import apply_tracking_arguments
     from flagtrack.daemon.errors import ConfigError
-    from flagtrack.daemon.tracking.setup import load_tracking_config_file
+    from flagtrack.daemon.tracking.setup import load_tracking_config_file, tracking_setup
+    from flagtrack.daemon.validation.run import run_tracking_config
 
     _resolve_paths(args)
     factory = _executor_factory(args)
@@ -172,7 +173,8 @@ def _validate(args: argparse.Namespace) -> int:
         load_tracking_config_file(args.config)  # a bad file is one line before anything runs
 
     def setup_for(record: Any) -> Any:  # the set-up `flagtrack validate RUN --reconstruct [-c] [flags]` uses
-        return _tracking_setup(argparse.Namespace(**{**vars(args), "run_dir": record.run_dir}), record)
+        config, where = run_tracking_config(record, args.config)
+        return tracking_setup(apply_tracking_arguments(config, args), path=where)
 
     plans = [plan_run(run, setup_for) for run in runs]
     result = validate_campaign(plans, args.out_dir, factory, force=args.force, checksum=args.checksum, bar=_bar(args))

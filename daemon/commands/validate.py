@@ -97,16 +97,10 @@ def run(args: argparse.Namespace) -> int:
 def _tracking_setup(args: argparse.Namespace, record) -> object:  # noqa: ANN001
     """The tracking set-up of ``--reconstruct``: the ``-c`` file's or the run's own, with the flags applied."""
     from flagtrack.daemon.commands._tracking_args import apply_tracking_arguments
-    from flagtrack.daemon.tracking.section import TrackingConfig
-    from flagtrack.daemon.tracking.setup import load_tracking_config_file, tracking_setup
-    from flagtrack.daemon.typed_yaml import from_mapping
+    from flagtrack.daemon.tracking.setup import tracking_setup
+    from flagtrack.daemon.validation.run import run_tracking_config
 
-    if args.config is not None:
-        config, where = load_tracking_config_file(args.config), str(args.config)
-    else:
-        where = str(args.run_dir / "run.jsonl")
-        stored = record.start.get("config", {}).get("tracker") or {}
-        config = from_mapping(TrackingConfig, stored, path=where, key="config.tracker")
+    config, where = run_tracking_config(record, args.config)
     return tracking_setup(apply_tracking_arguments(config, args), path=where)
 
 
