@@ -23,7 +23,11 @@ if TYPE_CHECKING:  # NumPy is imported when the benchmark runs (fast --help)
 
 COMMAND = "damage"
 HELP = "events kept from recordings with 1-3 flipped bits: stopping at the first fault vs resynchronising"
-DESCRIPTION = __doc__
+DESCRIPTION = """\
+Flips 1-3 random bits in recordings and counts the events each way of reading keeps: stopping at the
+first fault, or resynchronising as `flagtrack reconstruct` does. More: docs/reliability.md,
+docs/commands.md.
+"""
 REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
 
 

@@ -24,7 +24,11 @@ from flagtrack.daemon.errors import FlagtrackError
 
 COMMAND = "fuzz"
 HELP = "fuzz the readers, decoders, YAML loader and serial parsers for M minutes (hypothesis)"
-DESCRIPTION = __doc__
+DESCRIPTION = """\
+Runs the test suite's fuzzing properties (readers, decoders, YAML loader, serial parsers) for
+--minutes and reports the cases run and every failure. Needs hypothesis (the dev extra).
+More: docs/reliability.md, docs/commands.md.
+"""
 
 
 def _round_in_child(folder: str, index: int, examples: int, deadline_s: float, seed: int) -> tuple[int, list[str], int]:

@@ -33,7 +33,11 @@ from flagtrack.daemon.bench.live import _free_port
 
 COMMAND = "soak"
 HELP = "camera -> tracker -> recorder (+ supervisor) as processes for M minutes at R Mev/s: loss, memory, latency"
-DESCRIPTION = __doc__
+DESCRIPTION = """\
+The rig's services as separate processes for --minutes at --rate Mev/s: packets lost, events recorded
+against sent, memory growth of each process and latency per minute. More: docs/reliability.md,
+docs/commands.md.
+"""
 RSS_EVERY_S = 2.0
 
 

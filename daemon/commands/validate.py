@@ -13,16 +13,9 @@ from flagtrack.daemon.commands._tracking_args import add_tracking_arguments
 COMMAND = "validate"
 HELP = "recompute the point-sensor comparison of a finished sweep (figures and table)"
 DESCRIPTION = """\
-For every point of RUN_DIR that has a sensor record, synchronise the sensor with the camera (trigger
-events of the point's raw file, or cross-correlation), compare the sensor's lateral displacement
-with the reconstruction's at the sensor's x (paper, figure 5c-g) and write RUN_DIR/validation/:
-one figure per point, validation.csv (the summary's columns with the recomputed numbers) and
-validation.png (|e|/L and Delta_RMS/L against the speed). The run log is not changed.
-
-  flagtrack validate runs/run-20261121-101500
-  flagtrack validate RUN --sync xcorr                       # ignore the trigger pulses
-  flagtrack validate RUN --centrelines new/                 # centrelines from another reconstruction
-  flagtrack validate RUN --reconstruct --tau 0.0003         # reconstruct every raw file first
+Recompute a finished sweep's comparison with its point sensor: synchronise, compare with the
+reconstruction at the sensor's x, and write RUN_DIR/validation/ (figures, validation.csv,
+validation.png); the run log is not changed. More: docs/sensor.md, docs/commands.md.
 """
 
 
