@@ -2,8 +2,8 @@
 
 Each subcommand lives in its own module of :mod:`flagtrack.daemon.commands`, which defines
 ``COMMAND`` (its name), ``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> int``.
-Command modules import only the standard library at module level so that ``--help`` is fast;
-heavy imports happen inside ``run``.
+Command modules import only the standard library at module level and in ``add_arguments`` so that
+``--help`` is fast (tests/unit/test_cli_help.py); heavy imports happen inside ``run``.
 """
 
 from __future__ import annotations
