@@ -2,8 +2,8 @@
 
 Each subcommand lives in its own module of :mod:`flagtrack.daemon.commands`, which defines
 ``COMMAND`` (its name), ``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> int``.
-Command modules import only the standard library at module level so that ``--help`` is fast;
-heavy imports happen inside ``run``.
+Command modules import only the standard library at module level and in ``add_arguments`` so that
+``--help`` is fast (tests/unit/test_cli_help.py); heavy imports happen inside ``run``.
 """
 
 from __future__ import annotations
@@ -22,6 +22,10 @@ from flagtrack.daemon.errors import FlagtrackError
 from flagtrack.daemon.process import tune_process
 
 log = logging.getLogger(__name__)
+
+#: Libraries that log, at ERROR, a failure flagtrack reports itself in its one error line (pymodbus:
+#: "(22, 'Invalid argument')" before "cannot open the serial port"); shown with -vv only.
+QUIET_LOGGERS = ("pymodbus",)
 
 
 class _VersionAction(argparse.Action):
@@ -68,6 +72,13 @@ def _named_command(argv: Sequence[str]) -> str | None:
     return first if first in {module.COMMAND for module in discover(commands)} else None
 
 
+def _configure_logging(verbose: int) -> None:
+    """WARNING and up on stderr (-v: INFO, -vv: DEBUG); the libraries of ``QUIET_LOGGERS`` only with -vv."""
+    logging.basicConfig(level=logging.WARNING - 10 * min(verbose, 2), format="%(levelname)s %(name)s: %(message)s")
+    for name in QUIET_LOGGERS:
+        logging.getLogger(name).setLevel(logging.DEBUG if verbose >= 2 else logging.CRITICAL)
+
+
 def _print_warnings_as_lines(command: str) -> None:
     """Warnings (a damaged file's words skipped, a truncated end) print as one line, as errors do."""
 
@@ -110,8 +121,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"flagtrack {__version__}")
         raise SystemExit(0)  # as argparse's version action does
     args = build_parser(_named_command(argv)).parse_args(argv)
-    level = logging.WARNING - 10 * min(args.verbose, 2)
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    _configure_logging(args.verbose)
     tune_process()
     from flagtrack.daemon.aot.cache import load as load_compiled_kernels
 

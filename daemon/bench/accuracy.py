@@ -15,15 +15,11 @@ from pathlib import Path
 
 COMMAND = "accuracy"
 HELP = "accuracy of the tracker on simulated recordings (paper section 3): tables, figures, report"
-DESCRIPTION = (
-    __doc__
-    + """
-examples:
-  flagtrack bench accuracy -o bench-accuracy --quick          # a few minutes
-  flagtrack bench accuracy -o bench-accuracy                  # 400 kinematics and every sweep
-  flagtrack bench accuracy -o out --method paper --parts family --n 50
+DESCRIPTION = """\
+The paper's section 3 benchmark on flagtrack's simulator: a family of kinematics, noise sweeps and
+N_j / tau sweeps, reconstructed with the paper's and the robust methods; writes tables, figures and
+a report (--quick: a few minutes). More: docs/benchmark.md, docs/commands.md.
 """
-)
 
 METHOD_CHOICES = ("paper", "robust-classic", "robust")
 PART_CHOICES = ("family", "leak", "shot", "params", "lost")

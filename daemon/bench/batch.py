@@ -30,7 +30,11 @@ from pathlib import Path
 
 COMMAND = "batch"
 HELP = "flagtrack batch (pool and Dask) against one flagtrack reconstruct per file; Dask's per-file cost"
-DESCRIPTION = __doc__
+DESCRIPTION = """\
+Times `flagtrack batch reconstruct` (local pool, and Dask where installed) against one
+`flagtrack reconstruct` process per file, and each executor's fixed and per-file cost.
+More: docs/batch.md, docs/commands.md.
+"""
 
 ROOT, LENGTH, TAU_S = (100.0, 240.0), 200.0, 2.5e-4
 TINY_S = 0.01

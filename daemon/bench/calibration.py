@@ -22,7 +22,10 @@ from flagtrack.daemon.bench._cores import one_core
 
 COMMAND = "calibration"
 HELP = "events/s of the calibration mapping (pixels -> metres), alone and inside the tracker"
-DESCRIPTION = __doc__
+DESCRIPTION = """\
+Events/s of the calibration mapping (pixels -> metres): alone, against a numpy evaluation, and its
+share of the tracker's time. More: docs/calibration.md, docs/commands.md.
+"""
 
 ROOT, LENGTH, TAU_S = (100.0, 240.0), 200.0, 2.5e-4
 

@@ -16,12 +16,18 @@ import sys
 import tempfile
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:  # NumPy is imported when the benchmark runs (fast --help)
+    import numpy as np
 
 COMMAND = "damage"
 HELP = "events kept from recordings with 1-3 flipped bits: stopping at the first fault vs resynchronising"
-DESCRIPTION = __doc__
+DESCRIPTION = """\
+Flips 1-3 random bits in recordings and counts the events each way of reading keeps: stopping at the
+first fault, or resynchronising as `flagtrack reconstruct` does. More: docs/reliability.md,
+docs/commands.md.
+"""
 REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
 
 
@@ -35,12 +41,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _keys(events: np.ndarray) -> np.ndarray:
     """One int64 per event (t, x, y, p), for matching events against the intact file."""
+    import numpy as np
+
     t = events["t"].astype(np.int64)
     return (t << 23) | (events["x"].astype(np.int64) << 12) | (events["y"].astype(np.int64) << 1) | events["p"]
 
 
 def _read(path: Path, strict: bool) -> tuple[np.ndarray, int, int]:
     """(events read, skipped ranges, events lost at most); ``strict``: the events before the first fault."""
+    import numpy as np
+
     from flagtrack.daemon.core.events import empty_events
     from flagtrack.daemon.errors import FormatError
     from flagtrack.drivers.formats import open_events
@@ -59,6 +69,8 @@ def _read(path: Path, strict: bool) -> tuple[np.ndarray, int, int]:
 
 
 def _sources(files: list[Path], folder: Path) -> list[Path]:
+    import numpy as np
+
     if files:
         return files
     real = sorted(REAL.glob("*.raw")) if REAL.is_dir() else []
@@ -77,6 +89,8 @@ def _sources(files: list[Path], folder: Path) -> list[Path]:
 
 def measure(files: list[Path], tries: int, seed: int) -> dict:
     """Flip bits ``tries`` times; the figures of both ways of reading (see the module doc)."""
+    import numpy as np
+
     from flagtrack.drivers.formats.raw_file import RawReader
 
     rng = np.random.default_rng(seed)
@@ -111,6 +125,8 @@ def measure(files: list[Path], tries: int, seed: int) -> dict:
 
 def summarise(rows: list[dict], files: list[str], tries: int, seed: int) -> dict:
     """The figures over every try, and over the tries where reading stopped short."""
+    import numpy as np
+
     cut = [r for r in rows if r["stop"] < 0.999]
     out = {"files": files, "tries": tries, "seed": seed, "tries_cut_short_when_stopping": len(cut)}
     for mode in ("stop", "resync"):

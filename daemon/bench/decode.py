@@ -22,7 +22,10 @@ from flagtrack.daemon.bench._cores import one_core
 
 COMMAND = "decode"
 HELP = "events/s decoding EVT 2.0 / 3.0 files: flagtrack's streaming reader vs the fastest PyPI decoder"
-DESCRIPTION = __doc__
+DESCRIPTION = """\
+Events/s of flagtrack's streaming EVT 2.0 / 3.0 reader against the fastest exact PyPI decoder, on
+one core, on a recording of a flapping line. More: docs/formats.md, docs/commands.md.
+"""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

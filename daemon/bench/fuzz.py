@@ -20,17 +20,22 @@ import tempfile
 import time
 from pathlib import Path
 
-from flagtrack.daemon.bench.fuzz_targets import run_target, targets
 from flagtrack.daemon.errors import FlagtrackError
 
 COMMAND = "fuzz"
 HELP = "fuzz the readers, decoders, YAML loader and serial parsers for M minutes (hypothesis)"
-DESCRIPTION = __doc__
+DESCRIPTION = """\
+Runs the test suite's fuzzing properties (readers, decoders, YAML loader, serial parsers) for
+--minutes and reports the cases run and every failure. Needs hypothesis (the dev extra).
+More: docs/reliability.md, docs/commands.md.
+"""
 
 
 def _round_in_child(folder: str, index: int, examples: int, deadline_s: float, seed: int) -> tuple[int, list[str], int]:
     """One round of target ``index`` in a worker process: (cases, failures, the worker's max RSS in KiB)."""
     import resource
+
+    from flagtrack.daemon.bench.fuzz_targets import run_target, targets
 
     target = targets(Path(folder))[index]
     run_target(target, examples, deadline_s, seed)
@@ -46,6 +51,8 @@ def fuzz(minutes: float, examples_per_round: int = 200, deadline_s: float = 10.0
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
+
+    from flagtrack.daemon.bench.fuzz_targets import targets
 
     started = time.monotonic()
     rss: dict[int, list[int]] = {}  # max RSS of the worker after each round, KiB, by target

@@ -60,7 +60,11 @@ COMMAND = "live"
 KEPT_UP_MS = 10.0
 """The real-time run kept up if its last updates are at most this much later than its first (median)."""
 HELP = "sustained event rate and latency of camera -> Zenoh -> tracker on a replayed recording"
-DESCRIPTION = __doc__
+DESCRIPTION = """\
+Replays a recording through camera -> Zenoh -> tracker as separate processes: sustained throughput,
+keeping up in real time, latency to publication and the bus's own latency (p50, p99); --secure
+repeats each run on a secured bus. More: docs/live.md, docs/commands.md.
+"""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -29,7 +29,11 @@ from flagtrack.daemon.bench._cores import one_core
 
 COMMAND = "reconstruct"
 HELP = "events/s of flagtrack reconstruct end to end (and of the tracker core) on a flapping-line recording"
-DESCRIPTION = __doc__
+DESCRIPTION = """\
+Events/s of `flagtrack reconstruct` end to end on one core (and of the tracker core alone), with its
+start-up cost and peak RSS, on a recording of a flapping line with the paper's parameters.
+More: docs/tracking.md, docs/commands.md.
+"""
 
 ROOT, LENGTH, TAU_S = (100.0, 240.0), 200.0, 2.5e-4
 

@@ -24,15 +24,20 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:  # NumPy is imported when the benchmark runs (fast --help)
+    import numpy as np
 
 from flagtrack.daemon.bench.live import _free_port
 
 COMMAND = "soak"
 HELP = "camera -> tracker -> recorder (+ supervisor) as processes for M minutes at R Mev/s: loss, memory, latency"
-DESCRIPTION = __doc__
+DESCRIPTION = """\
+The rig's services as separate processes for --minutes at --rate Mev/s: packets lost, events recorded
+against sent, memory growth of each process and latency per minute. More: docs/reliability.md,
+docs/commands.md.
+"""
 RSS_EVERY_S = 2.0
 
 
@@ -58,6 +63,8 @@ def rss_mb(pid: int) -> float | None:
 
 def rss_growth_mb(samples: list[tuple[float, float]], after_s: float) -> float:
     """Largest RSS after ``after_s`` minus the RSS at ``after_s`` (samples: (seconds, MB)), MB."""
+    import numpy as np
+
     if not samples:
         return 0.0
     times = np.array([t for t, _ in samples])
@@ -129,6 +136,8 @@ class Sampler:
 
 def soak(minutes: float, rate_mev_s: float, tau_s: float, recording: Path, folder: Path) -> dict[str, Any]:
     """Run the processes for ``minutes`` at ``rate_mev_s``; the figures (see the module doc)."""
+    import numpy as np
+
     from flagtrack.daemon.rig.config import load_rig
     from flagtrack.daemon.schema import CameraStatus, CentrelineMessage, TrackerStatus
     from flagtrack.daemon.transport import Bus

@@ -9,7 +9,9 @@ import pkgutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from types import ModuleType
-from typing import Any
+from typing import Any, cast
+
+from flagtrack.daemon.commands._lazy import LazySubcommands, declares_commands
 
 
 @dataclass(frozen=True)
@@ -27,7 +29,7 @@ def discover(package: ModuleType) -> list[Any]:
     """The commands of ``package``'s modules (a module with ``COMMAND``, or its ``COMMANDS``), by name."""
     found: list[Any] = []
     for info in pkgutil.iter_modules(package.__path__):
-        if info.name.startswith("_"):
+        if info.name.startswith("_") or not declares_commands(info, f"{package.__name__}.{info.name}"):
             continue
         module = importlib.import_module(f"{package.__name__}.{info.name}")
         if hasattr(module, "COMMAND"):
@@ -39,7 +41,9 @@ def discover(package: ModuleType) -> list[Any]:
 def add_subcommands(parser: argparse.ArgumentParser, package: ModuleType, dest: str, only: str | None = None) -> None:
     """Add one subparser per command module of ``package`` (or only the one named ``only``); each sets
     ``args.run``."""
-    subparsers = parser.add_subparsers(dest=dest, metavar="COMMAND", required=True)
+    subparsers = cast(
+        LazySubcommands, parser.add_subparsers(dest=dest, metavar="COMMAND", required=True, action=LazySubcommands)
+    )
     for module in discover(package):
         if only is not None and only != module.COMMAND:
             continue
@@ -49,6 +53,4 @@ def add_subcommands(parser: argparse.ArgumentParser, package: ModuleType, dest: 
             description=getattr(module, "DESCRIPTION", "") or module.HELP,
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )
-        module.add_arguments(sub)
-        if not sub.get_default("run"):
-            sub.set_defaults(run=module.run)
+        subparsers.defer(sub, module)  # its options are added when the command line names it

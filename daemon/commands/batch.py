@@ -13,27 +13,13 @@ from flagtrack.daemon.commands._tracking_args import add_tracking_arguments
 
 COMMAND = "batch"
 HELP = "reconstruct many recordings, or revalidate many sweep runs, on local cores or a Dask cluster"
-_EXIT = """\
-exit status: 0 every input done or up to date, 1 some input failed (its row says why; the others
-finished), 2 bad options or inputs (nothing run), 130 interrupted (a rerun resumes).
+DESCRIPTION = """\
+Process a campaign on this machine's cores (--jobs N) or on Dask (--scheduler local:N or
+tcp://HOST:8786): `batch reconstruct` writes every recording's centreline file, `batch validate`
+redoes every sweep run's sensor comparison. A rerun skips what is up to date and resumes an
+interrupted batch. Exit status: 0 done, 1 some input failed, 2 bad options, 130 interrupted.
+More: docs/batch.md, docs/commands.md.
 """
-DESCRIPTION = f"""\
-Process a campaign: every recording into its centreline file (batch reconstruct), or every sweep run's
-points reconstructed and its point-sensor comparison recomputed (batch validate), on a local process
-pool (--jobs N, default: every core) or on Dask (--scheduler local:N for a LocalCluster here,
---scheduler tcp://HOST:8786 for a lab's cluster; pip install -e ".[cluster]"). Workers read the inputs
-and write the outputs themselves, by path: on a cluster every worker must see the same paths.
-
-A rerun skips what is up to date (same input size, time or content, same parameters; it says
-"skipped (up to date)"), redoes what changed, and resumes an interrupted batch; outputs are written
-under a temporary name and renamed when whole. OUT_DIR gets batch.csv (input, events, duration,
-updates, seconds, worker, status, error, output) and batch.json (the rows and the parameters).
-
-  flagtrack batch reconstruct campaign/ -o out/ --root 102 240 --length 200 --tau 0.0003
-  flagtrack batch reconstruct 'data/**/*.raw' -o out/ -c tracking.yaml --scheduler local:4
-  flagtrack batch validate runs/run-* -o study/ --tau 0.0003 --scheduler tcp://head:8786
-
-{_EXIT}"""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -75,24 +61,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     _common(val)
 
 
-_RECONSTRUCT = f"""\
-One centreline file per recording, OUT_DIR/<stem>_centrelines.h5, the same as `flagtrack reconstruct
-INPUT -o ...` with the same options writes (every dataset and attribute), plus the batch's own
-batch_input_size, batch_input_mtime_ns, batch_input_blake2b and batch_params_blake2b attributes. Two
-inputs of the same stem (a/run1.raw, b/run1.raw) are refused: batch them with different -o folders.
-The duration column is the time the centrelines span (last minus first update time), s.
+_RECONSTRUCT = """\
+One centreline file per recording, OUT_DIR/<stem>_centrelines.h5, as `flagtrack reconstruct` writes
+it (with the batch's stamps); OUT_DIR gets batch.csv and batch.json. Exit status as `flagtrack batch`.
+More: docs/batch.md, docs/commands.md.
+"""
 
-{_EXIT}"""
-
-_VALIDATE = f"""\
-For each RUN_DIR, what `flagtrack validate RUN_DIR --reconstruct [tracker options]` does: every point
-with a sensor record is reconstructed (with the run's tracker section, or -c's, and the flags) into
-RUN_DIR/validation/centrelines/, then RUN_DIR/validation/ gets the point figures, validation.csv and
-validation.png. Points of every run are spread over the workers. OUT_DIR gets one row per run in
-batch.csv, batch.json (with every point's row) and campaign.png (A/L against the speed of every run).
-A/L is the run's own (validate recomputes the sensor comparison and Delta_RMS, not A/L).
-
-{_EXIT}"""
+_VALIDATE = """\
+For each RUN_DIR, what `flagtrack validate RUN_DIR --reconstruct` does, the points of every run spread
+over the workers; OUT_DIR gets batch.csv, batch.json and campaign.png. Exit status as `flagtrack batch`.
+More: docs/batch.md, docs/commands.md.
+"""
 
 
 def _common(parser: argparse.ArgumentParser) -> None:
@@ -156,9 +135,10 @@ def _validate(args: argparse.Namespace) -> int:
     import os
 
     from flagtrack.daemon.batch.campaign import plan_run, validate_campaign
-    from flagtrack.daemon.commands.validate import _tracking_setup
+    from flagtrack.daemon.commands._tracking_args import apply_tracking_arguments
     from flagtrack.daemon.errors import ConfigError
-    from flagtrack.daemon.tracking.setup import load_tracking_config_file
+    from flagtrack.daemon.tracking.setup import load_tracking_config_file, tracking_setup
+    from flagtrack.daemon.validation.run import run_tracking_config
 
     _resolve_paths(args)
     factory = _executor_factory(args)
@@ -172,7 +152,8 @@ def _validate(args: argparse.Namespace) -> int:
         load_tracking_config_file(args.config)  # a bad file is one line before anything runs
 
     def setup_for(record: Any) -> Any:  # the set-up `flagtrack validate RUN --reconstruct [-c] [flags]` uses
-        return _tracking_setup(argparse.Namespace(**{**vars(args), "run_dir": record.run_dir}), record)
+        config, where = run_tracking_config(record, args.config)
+        return tracking_setup(apply_tracking_arguments(config, args), path=where)
 
     plans = [plan_run(run, setup_for) for run in runs]
     result = validate_campaign(plans, args.out_dir, factory, force=args.force, checksum=args.checksum, bar=_bar(args))

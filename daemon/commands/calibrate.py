@@ -10,26 +10,10 @@ from pathlib import Path
 COMMAND = "calibrate"
 HELP = "calibrate pixels -> plane metres from a blinking checkerboard recording; map pixel positions"
 DESCRIPTION = """\
-flagtrack calibrate REC.raw --board 9x6 --square-mm 20 -o cal.yaml [--origin-corner top-left|...|I,J]
-                    [--x-axis right|left|up|down] [--y-axis ...] [--origin-offset-mm DX DY] [--degree 3]
-                    [--period-ms T] [--figure cal.png]
-flagtrack calibrate map cal.yaml X Y [X Y ...] [--json]
-
-The board is shown blinking (on / dark) on a screen in the light-sheet plane. The events of each
-blink switch are added into a pseudo-image, the board's inner corners are found (sub-pixel), the
-corner chosen by --origin-corner becomes (0, 0) (place it at the flag's root, or give its offset
-from the root with --origin-offset-mm), plane x grows along --x-axis (downstream) and y a quarter
-turn counter-clockwise from it on the image unless --y-axis says otherwise. A polynomial of total
-degree --degree maps pixels to metres. Writes cal.yaml and a figure (pseudo-image, corners with
-their i,j indices, origin, axes, residual vectors); prints the residuals in mm and pixels.
-
-Corners are named in image terms: i counts from the left, j from the top; `top-left` is 0,0.
-
-`map` prints the plane coordinates (metres) of pixel positions, e.g. to read the root and the rest
-direction of the flag in the calibrated frame (--json: a list of [x_m, y_m]).
-
-Use the calibration with `flagtrack reconstruct -c cfg.yaml` where cfg.yaml has
-`tracker: {calibration: cal.yaml, root: [0, 0], length: 0.18, ...}` (lengths then in metres).
+Calibrate pixels -> plane metres from a recording of a checkerboard blinking in the light-sheet
+plane: finds the inner corners, puts the origin at --origin-corner, fits a polynomial of --degree,
+writes the calibration YAML and a figure and prints the residuals. `flagtrack calibrate map CAL X Y
+...` prints the plane coordinates of pixel positions. More: docs/calibration.md, docs/commands.md.
 """
 
 

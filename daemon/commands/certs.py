@@ -9,27 +9,16 @@ from pathlib import Path
 COMMAND = "certs"
 HELP = "make and check the certificates of a secured bus (a private CA, one identity per service)"
 DESCRIPTION = """\
-Certificates for mutual TLS on the bus (bus.security.tls, docs/security.md):
-
-  flagtrack certs init DIR --identities camera,tracker,recorder,viewer,supervisor,sensor,operator,router
-      a new private CA (DIR/ca.pem; its key DIR/ca/ca.key, mode 0600: keep it off the rig's hosts)
-      and one key and certificate per identity (DIR/NAME.pem, DIR/NAME.key, common name NAME)
-  flagtrack certs issue DIR NAME [--host router.lab --host 192.0.2.10] [--replace]
-      one more identity, or a new key and certificate for one (--replace: renewal)
-  flagtrack certs check DIR [--within-days 30]
-      what expires when; exit 1 naming each certificate that has expired, expires within the
-      days given, was not signed by DIR's CA or whose key is not its own or readable by others
-
-A listener's certificate must name the host names and addresses others connect to (--host; by
-default localhost and 127.0.0.1): give the router's its address. Names: 1-32 lowercase letters,
-digits, '_' or '-', starting with a letter (a name becomes a file name and a common name).
+Certificates for mutual TLS on the bus (bus.security.tls): `init` makes a private CA and one
+identity per service, `issue` adds or renews one, `check` says what expires when (exit 1 when
+something must be renewed). More: docs/security.md, docs/commands.md.
 """
 DEFAULT_IDENTITIES = "camera,tracker,recorder,viewer,supervisor,sensor,operator,router"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Subcommands of ``flagtrack certs``."""
-    from flagtrack.daemon.security.certs import CA_DAYS, LEAF_DAYS, WARN_DAYS
+    from flagtrack.daemon.security.cert_days import CA_DAYS, LEAF_DAYS, WARN_DAYS
 
     sub = parser.add_subparsers(dest="certs_command", metavar="ACTION", required=True)
     init = sub.add_parser("init", help="a new CA and one certificate per identity")

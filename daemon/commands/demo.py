@@ -13,14 +13,10 @@ from typing import Any
 COMMAND = "demo"
 HELP = "run the whole rig with no hardware: a short up-and-down sweep through the simulated flutter onset"
 DESCRIPTION = """\
-Simulated wind tunnel on a pseudo-terminal, simulated camera (the digital twin), tracker, recorder,
-supervisor, viewer and the paper's validation sensor (a simulated laser distance sensor across the
-flag at x/L = 0.73, its clock synchronised with the camera's by trigger pulses, as
-deploy/rig-sensor-sim.yaml), over Zenoh on loopback: a sweep from 4 to 6 m/s and back in 0.25 m/s
-steps through the flag's onset (4.9 m/s going up) and decay (4.4 m/s coming down). Takes about 2
-minutes. A line per point and (on a terminal) a progress bar show on stderr (--quiet: none). Prints
-the onset and decay found, the worst sensor error e/L RMS of the flapping points and where the
-results are; --json ends with one JSON object (paths absolute).
+The whole rig with no hardware, over Zenoh on loopback: simulated tunnel, camera (digital twin),
+tracker, recorder, supervisor, viewer and point sensor, in a sweep from 4 to 6 m/s and back through
+the flag's onset and decay (about 2 minutes). Prints the onset and decay found, the sensor error and
+where the results are. More: docs/commands.md.
 """
 
 ONSET_MPS, DECAY_MPS, STEP_MPS = 4.9, 4.4, 0.25

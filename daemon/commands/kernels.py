@@ -9,14 +9,9 @@ import sys
 COMMAND = "kernels"
 HELP = "compile the tracking and codec kernels ahead of time (fast start), or show the build"
 DESCRIPTION = """\
-Every command that decodes or tracks runs numba-compiled kernels. Without a build, each process
-imports numba and loads its cached kernels (~0.5 s of start-up); with one, the kernels load as a
-plain extension module. `build` compiles them for this machine's CPU (about a minute, once per
-install or upgrade) into $FLAGTRACK_KERNEL_CACHE (default ~/.cache/flagtrack/kernels). A build
-whose sources differ from the installed ones is not used. FLAGTRACK_KERNELS=numba ignores builds.
-
-  flagtrack kernels build
-  flagtrack kernels status [--json]
+Compile the numba kernels of decoding and tracking for this machine ahead of time (`build`, about a
+minute), so that each command loads them at once instead of ~0.5 s; `status` shows the build.
+More: docs/commands.md.
 """
 
 

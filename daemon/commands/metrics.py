@@ -9,23 +9,9 @@ import sys
 COMMAND = "metrics"
 HELP = "accuracy metrics of centreline files (compare a reconstruction with the ground truth)"
 DESCRIPTION = """\
-flagtrack metrics compare RECON.h5 TRUTH.h5 [--json]
-
-Compares two centreline files (DESIGN.md HDF5 layout) on their common time span: the truth is
-interpolated at the reconstruction's times and arc lengths. Prints, in this order:
-  delta_rms_over_l     RMS tip distance / L
-  max_eps_rms_over_l   maximum over time of the RMS distance along the arc length / L
-  twi                  travelling-wave index of the reconstruction (complex orthogonal decomposition)
-  twi_ref              travelling-wave index of the truth on the same times
-then twi_abs_error, n_common, t_start_s, t_stop_s, length, and
-  joint_rms_over_l     RMS distance of the chain joints to the truth's / L (needs /joints/x, /joints/y)
-  cloud_rms_over_l     RMS of the reconstruction's Delta_RMS (events to centreline) / L
-  cloud_rms_ref_over_l the same of the truth (needs its /delta_rms)
-L is the truth's `length` attribute (else its arc-length span).
-
-The truth needs only /t, /s, /x, /y (a truth from another simulator); a metric that needs what it
-lacks is printed as n/a (null in --json, with the reason under "not_available"). A line on stderr
-says which of the truth's datasets were used; --json has them under "truth_datasets".
+`flagtrack metrics compare RECON.h5 TRUTH.h5`: the accuracy of a reconstruction against the truth on
+their common time span (tip distance, arc-length distance, travelling-wave index, joint and
+event-cloud distances, over L). More: docs/simulator.md, docs/commands.md.
 """
 
 #: The datasets of the truth each optional metric reads.

@@ -14,15 +14,10 @@ COMMAND = "reconstruct"
 EXIT_AT_ONCE = True  # the process ends when the file is written (no interpreter teardown: ~0.15 s)
 HELP = "reconstruct the centreline of the flag from an event file (HDF5 out)"
 DESCRIPTION = """\
-Track the flag's centreline through a recording with the chain of Raynaud & Mulleners (2024) and
-write the smoothed centrelines, joints and Delta_RMS per update to an HDF5 file (docs/tracking.md).
-
-Lengths are in the events' units: pixels (an event at (x, y) is the pixel whose centre is at (x, y))
-or metres with a calibration; angles in degrees from +x towards +y; times in seconds on the
-recording's clock (event t in us / 1e6). Flags override the config file's `tracker:` section.
-
-example:
-  flagtrack reconstruct run.raw -o run.h5 --root 102 240 --length 200 --tau 0.00025
+Track the flag's centreline through a recording (Raynaud & Mulleners 2024) and write the smoothed
+centrelines, joints and Delta_RMS per update to an HDF5 file. Lengths in the events' units (pixels,
+or metres with --calibration); flags override the config's `tracker:` section.
+More: docs/tracking.md, docs/commands.md.
 """
 
 log = logging.getLogger(__name__)

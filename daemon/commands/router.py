@@ -14,21 +14,10 @@ if TYPE_CHECKING:  # zenoh is imported only when the router runs (fast --help)
 COMMAND = "router"
 HELP = "run a Zenoh router (joins camera and tracker hosts; same runtime as zenohd)"
 DESCRIPTION = """\
-Run the Zenoh runtime that eclipse-zenoh carries in router mode, listening on the given endpoints
-(loopback by default: name the interface other hosts reach it on), until Ctrl-C (or SIGTERM).
-Services on other hosts then use `bus: {mode: client, connect: [tcp/<router>:7447]}` (see
-deploy/rig-camera-host.yaml and deploy/rig-tracker-host.yaml), or zenohd with
-deploy/zenoh-router.json5 does the same job.
-
-With -c rig.yaml the router listens where the rig's clients connect (`bus.connect`) and takes the
-rig's `bus.security` section: mutual TLS on every link with
-the `router` identity's certificate (tls/ endpoints only), user/password, and with `acl: true` the
-access-control rules made from the rig (default deny; each identity its own keys). `--zenohd-config`
-prints the same router as a zenohd config file (deploy/zenoh-router-secure.json5), `--rules` the
-rules one line each. See docs/security.md.
-
-The first signal closes the router gracefully, a second one forces the process out (exit 130), as
-for the other services.
+Run a Zenoh router (eclipse-zenoh's runtime, as zenohd) that joins the rig's hosts, until Ctrl-C or
+SIGTERM. With -c rig.yaml it listens where the rig's clients connect and takes the rig's
+bus.security (TLS, access control); --zenohd-config prints the same router as a zenohd config.
+More: docs/security.md, docs/commands.md.
 """
 DEFAULT_PORT = 7447
 

@@ -12,14 +12,9 @@ from typing import Any
 COMMAND = "runs"
 HELP = "list the sweep runs of a folder: date, points, onset and decay, status"
 DESCRIPTION = """\
-List the run folders of RUNS_DIR (the supervisor's runs_dir, or `flagtrack demo`'s output folder):
-when each started, how many of its planned points are done, the onset and decay speeds it found and
-how it ended (finished, stopped and why, error, or incomplete: no stop record, so running or killed;
-resume it with `flagtrack sweep --resume RUN_DIR`). Read from each run's run.jsonl; a folder that is
-not a run, or whose log cannot be read, is listed with the reason.
-
-  flagtrack runs list runs/
-  flagtrack runs list runs/ --json        # one JSON array, one object per folder
+List the sweep runs of RUNS_DIR: when each started, its points done, the onset and decay found and
+how it ended (an incomplete one resumes with `flagtrack sweep --resume RUN_DIR`).
+More: docs/commands.md.
 """
 
 

@@ -9,17 +9,9 @@ import os
 COMMAND = "simulate"
 HELP = "simulate event-camera recordings of flapping flags (EVT 3.0 .raw + ground-truth .h5 + .json)"
 DESCRIPTION = """\
-flagtrack simulate OUT_DIR [--seed N] [--n N] [--duration S] [--leak-rate HZ] [--shot-noise HZ]
-                           [--width W --height H] [--tilted] [--jobs J]
-flagtrack simulate OUT_DIR --checkerboard [--corners 9x6] [--square-mm 20] [--blink-ms 100] [--periods 3]
-
-Each recording i = 0..N-1 uses seed SEED + i: kinematics drawn from the paper's family (travelling +
-standing wave, 2A/L in 0.085-1.05, lambda/L in 1.5-3.0), the laser line rendered on the sensor and
-an ESIM/v2e-style pixel model (thresholds with spread, refractory period, leak, shot noise).
-Writes sim_SEED.raw (events), sim_SEED_truth.h5 (centreline layout of DESIGN.md) and sim_SEED.json.
-Without --duration a recording lasts 3-6 flapping periods (drawn from the seed).
---checkerboard writes checkerboard.raw and checkerboard.json (true corners in plane and pixels),
-seen through the paper's tilted camera, for calibration.
+Simulated event recordings of flapping flags with their ground truth: per seed an EVT 3.0 .raw, a
+truth .h5 (the centreline file layout) and a .json; --checkerboard makes a calibration recording
+instead. More: docs/simulator.md, docs/commands.md.
 """
 
 

@@ -9,16 +9,10 @@ from pathlib import Path
 COMMAND = "sweep"
 HELP = "run a wind-speed sweep with the rig of -c rig.yaml, or resume one (--resume RUN_DIR)"
 DESCRIPTION = """\
-Run the rig's services with the supervisor in sweep mode: for each point of the config's
-`supervisor.sweep` plan, set and verify the speed, settle, record events and centrelines, and
-append the point's numbers to RUN_DIR/run.jsonl; then write summary.csv, amplitude.png, run.json
-(the run for programs) and README.txt (what each file is). Whatever happens, the tunnel ends ramped
-to zero and the stop record says why. A line per finished point (index/total, speed, branch, flag
-state, A/L, f, lost fraction, sensor error) and, on a terminal, a progress bar with the elapsed time
-and the ETA show on stderr (--quiet: none).
-
-  flagtrack sweep -c deploy/rig-sweep-sim.yaml
-  flagtrack sweep --resume runs/run-20261121-101500      # finished points are not redone
+Run an unattended wind-speed sweep with the rig of -c rig.yaml (or resume one: --resume RUN_DIR):
+each point of the plan is set, settled, recorded and logged to RUN_DIR/run.jsonl, then the summary,
+figures and README.txt are written; whatever happens the tunnel ends ramped to zero.
+Example: flagtrack sweep -c deploy/rig-sensor-sim.yaml. More: docs/tunnel.md, docs/commands.md.
 """
 
 

@@ -12,16 +12,9 @@ from typing import Any
 COMMAND = "tunnel"
 HELP = "wind tunnel: run a simulated one on a pty, or set/get/stop the one of a config"
 DESCRIPTION = """\
-Wind-tunnel utilities (see docs/tunnel.md).
-
-  flagtrack tunnel sim [--protocol ascii|modbus]   simulated tunnel on a pseudo-terminal;
-                                                   prints its path, runs until Ctrl-C/SIGTERM
-  flagtrack tunnel get  -c rig.yaml                read speed and fault
-  flagtrack tunnel set 5.0 -c rig.yaml             ramp to 5 m/s, verify, hold (keep-alive)
-                                                   until Ctrl-C/SIGTERM, then ramp to zero
-  flagtrack tunnel stop -c rig.yaml                ramp to zero and stop
-
---port overrides the config's port (e.g. the path printed by `tunnel sim`).
+Wind-tunnel utilities: `sim` runs a simulated tunnel on a pseudo-terminal; `get`, `set` and `stop`
+read, set (ramped, verified, held until Ctrl-C) and stop the tunnel of -c rig.yaml (--port overrides
+its port). More: docs/tunnel.md, docs/commands.md.
 """
 
 

@@ -15,16 +15,9 @@ if TYPE_CHECKING:
 COMMAND = "up"
 HELP = "run the rig's services in one process (-c rig.yaml), or replay a file through them (--replay)"
 DESCRIPTION = """\
-Run camera, tracker, recorder and viewer (the `services:` of the rig config) in one process,
-talking over Zenoh (peer mode, loopback, unless the config's `bus:` says otherwise).
-
-  flagtrack up -c deploy/rig-sim.yaml
-  flagtrack up --replay run.raw --exit-at-eof --centrelines run.h5 --rrd run.rrd --root 102 240 --length 200
-
-With --replay, the file is played through camera adapter -> Zenoh -> tracker (same options and
-results as `flagtrack reconstruct`). The first Ctrl-C stops gracefully; a second one forces.
-With a supervisor that sweeps, a line per finished point and (on a terminal) a progress bar show
-on stderr, as in `flagtrack sweep` (--quiet: none).
+Run the rig's services (the config's `services:`) in one process over Zenoh, or replay a recording
+through camera -> Zenoh -> tracker (--replay: the results of `flagtrack reconstruct`). The first
+Ctrl-C stops gracefully, a second one forces. More: docs/live.md, docs/commands.md.
 """
 
 log = logging.getLogger(__name__)

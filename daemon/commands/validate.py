@@ -13,16 +13,9 @@ from flagtrack.daemon.commands._tracking_args import add_tracking_arguments
 COMMAND = "validate"
 HELP = "recompute the point-sensor comparison of a finished sweep (figures and table)"
 DESCRIPTION = """\
-For every point of RUN_DIR that has a sensor record, synchronise the sensor with the camera (trigger
-events of the point's raw file, or cross-correlation), compare the sensor's lateral displacement
-with the reconstruction's at the sensor's x (paper, figure 5c-g) and write RUN_DIR/validation/:
-one figure per point, validation.csv (the summary's columns with the recomputed numbers) and
-validation.png (|e|/L and Delta_RMS/L against the speed). The run log is not changed.
-
-  flagtrack validate runs/run-20261121-101500
-  flagtrack validate RUN --sync xcorr                       # ignore the trigger pulses
-  flagtrack validate RUN --centrelines new/                 # centrelines from another reconstruction
-  flagtrack validate RUN --reconstruct --tau 0.0003         # reconstruct every raw file first
+Recompute a finished sweep's comparison with its point sensor: synchronise, compare with the
+reconstruction at the sensor's x, and write RUN_DIR/validation/ (figures, validation.csv,
+validation.png); the run log is not changed. More: docs/sensor.md, docs/commands.md.
 """
 
 
@@ -97,16 +90,10 @@ def run(args: argparse.Namespace) -> int:
 def _tracking_setup(args: argparse.Namespace, record) -> object:  # noqa: ANN001
     """The tracking set-up of ``--reconstruct``: the ``-c`` file's or the run's own, with the flags applied."""
     from flagtrack.daemon.commands._tracking_args import apply_tracking_arguments
-    from flagtrack.daemon.tracking.section import TrackingConfig
-    from flagtrack.daemon.tracking.setup import load_tracking_config_file, tracking_setup
-    from flagtrack.daemon.typed_yaml import from_mapping
+    from flagtrack.daemon.tracking.setup import tracking_setup
+    from flagtrack.daemon.validation.run import run_tracking_config
 
-    if args.config is not None:
-        config, where = load_tracking_config_file(args.config), str(args.config)
-    else:
-        where = str(args.run_dir / "run.jsonl")
-        stored = record.start.get("config", {}).get("tracker") or {}
-        config = from_mapping(TrackingConfig, stored, path=where, key="config.tracker")
+    config, where = run_tracking_config(record, args.config)
     return tracking_setup(apply_tracking_arguments(config, args), path=where)
 
 

@@ -30,15 +30,10 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.security.cert_days import CA_DAYS, LEAF_DAYS, WARN_DAYS
 from flagtrack.daemon.security.files import require_private
 from flagtrack.daemon.security.names import IDENTITY_RE, identity_problem
 
-CA_DAYS = 3650
-"""Validity of a new CA: 10 years (its key stays off the rig; rotating it means new certificates everywhere)."""
-LEAF_DAYS = 730
-"""Validity of an identity's certificate: 2 years (``flagtrack certs check`` says when to renew)."""
-WARN_DAYS = 30
-"""``flagtrack certs check`` fails for a certificate that expires within this many days."""
 DEFAULT_HOSTS = ("localhost", "127.0.0.1")
 CA_CERT = "ca.pem"
 CA_KEY = Path("ca") / "ca.key"

@@ -1,4 +1,4 @@
-"""Writes the tracker's centrelines from the bus to one HDF5 file (DESIGN.md layout)."""
+"""Writes the tracker's centrelines from the bus to one HDF5 file (the layout of docs/tracking.md)."""
 
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ fsynced every ``fsync_interval_s`` and on close, so a recording cut by a crash i
 last flush. The queue between Zenoh and that loop holds up to ``max_queue_bytes`` (512 MB: a disk
 that falls that far behind loses the oldest packets, counted in the sidecar's ``dropped_packets``).
 Sequence gaps are listed in the sidecar. Commands (start / stop / rotate) come on the
-recorder command key; centrelines can be recorded beside the events (DESIGN.md HDF5 layout).
+recorder command key; centrelines can be recorded beside the events (the centreline file layout).
 
 **One file per camera stream.** The packets of two streams do not make one valid stream (the
 second one's times start again), so when a new stream begins while recording to ``BASE`` (the

@@ -22,7 +22,8 @@ from flagtrack.daemon.sweep.figures import plot_sweep
 from flagtrack.daemon.sweep.runlog import RUN_LOG, PointResult, read_run
 from flagtrack.daemon.sweep.summary import write_summary_csv
 from flagtrack.daemon.tracking.offline import reconstruct_file
-from flagtrack.daemon.tracking.setup import TrackingSetup
+from flagtrack.daemon.tracking.section import TrackingConfig
+from flagtrack.daemon.tracking.setup import TrackingSetup, load_tracking_config_file
 from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.validation.collect import raw_triggers
 from flagtrack.daemon.validation.figures import plot_point
@@ -58,6 +59,16 @@ def run_sensor_config(record: Any, path: str) -> SensorConfig:
         return from_mapping(SensorConfig, config["sensor"], path=path, key="config.sensor")
     except ConfigError as exc:
         raise FormatError(f"stored sensor config is invalid: {exc}", path=path) from exc
+
+
+def run_tracking_config(record: Any, config_file: Path | None = None) -> tuple[TrackingConfig, str]:
+    """The ``tracker:`` section a run's points are reconstructed with, and where it was read: the
+    ``config_file``'s if one is given (``-c``), else the one stored in the run's start record."""
+    if config_file is not None:
+        return load_tracking_config_file(config_file), str(config_file)
+    where = str(record.run_dir / RUN_LOG)
+    stored = record.start.get("config", {}).get("tracker") or {}
+    return from_mapping(TrackingConfig, stored, path=where, key="config.tracker"), where
 
 
 def run_frame(record: Any) -> FlagFrame:

@@ -1,4 +1,4 @@
-"""Centreline HDF5 files (DESIGN.md layout), readable from MATLAB and Python.
+"""Centreline HDF5 files (the layout of docs/tracking.md), readable from MATLAB and Python.
 
 ``/t`` (n_t,) s, ``/s`` (n_s,), ``/x`` ``/y`` (n_t, n_s), ``/joints/x`` ``/joints/y`` (n_t, N_j+1),
 ``/delta_rms`` (n_t,), ``/n_events`` (n_t,) int64, ``/lost`` (n_t,) uint8 (1: the flag was not found

@@ -30,7 +30,7 @@ from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.sensor.base import HostClock, SensorInfo, SensorReading, reading
 from flagtrack.drivers.sensor.poll import Poller, PollParams
 from flagtrack.drivers.serial.adapter import SerialAdapter
-from flagtrack.drivers.tunnel.ascii import NUMBER, compile_pattern
+from flagtrack.drivers.serial.lines import NUMBER, compile_pattern
 
 log = logging.getLogger(__name__)
 

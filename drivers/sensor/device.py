@@ -21,8 +21,8 @@ from typing import Literal
 
 from flagtrack.drivers.sensor.modbus import ModbusSensorMap
 from flagtrack.drivers.serial import modbus_rtu as rtu
+from flagtrack.drivers.serial.lines import split_lines
 from flagtrack.drivers.serial.pty_link import PtyLink
-from flagtrack.drivers.tunnel.sim_responders import split_frames, split_lines
 
 log = logging.getLogger(__name__)
 
@@ -167,7 +167,7 @@ class SimulatedSensorDevice:
         return "".join(line + "\n" for line in lines).encode("ascii")
 
     def _modbus(self, data: bytes) -> bytes:
-        frames, self._buffer = split_frames(self._buffer + data)
+        frames, self._buffer = rtu.split_frames(self._buffer + data)
         out = []
         for frame in frames:
             try:

@@ -74,6 +74,18 @@ def frame_length(buffer: bytes) -> int | None:
     return 0
 
 
+def split_frames(buffer: bytes) -> tuple[list[bytes], bytes]:
+    """The complete request frames of ``buffer`` and the partial rest (dropped when a frame's end
+    cannot be found: unknown function)."""
+    frames: list[bytes] = []
+    while (length := frame_length(buffer)) is not None and len(buffer) >= length:
+        if length == 0:
+            return frames, b""
+        frames.append(buffer[:length])
+        buffer = buffer[length:]
+    return frames, buffer
+
+
 def parse_request(frame: bytes) -> Request:
     """Decode one complete request frame (CRC included).
 

@@ -21,8 +21,7 @@ from dataclasses import dataclass
 
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.serial.adapter import SerialAdapter
-
-NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+from flagtrack.drivers.serial.lines import NUMBER, compile_pattern
 
 
 @dataclass(frozen=True)
@@ -73,14 +72,6 @@ class AsciiProtocol:
         for name in ("set_reply", "stop_reply", "ping_reply"):
             if getattr(self, name) is not None:
                 compile_pattern(name, getattr(self, name))
-
-
-def compile_pattern(name: str, pattern: str) -> re.Pattern[str]:
-    """``re.compile(pattern)``; a bad pattern raises ValueError naming the setting ``name``."""
-    try:
-        return re.compile(pattern)
-    except re.error as exc:
-        raise ValueError(f"{name} is not a valid regular expression: {exc}") from None
 
 
 class AsciiTunnel:

@@ -11,36 +11,14 @@ import logging
 from typing import Protocol
 
 from flagtrack.drivers.serial import modbus_rtu as rtu
+from flagtrack.drivers.serial.lines import split_lines
 from flagtrack.drivers.tunnel.modbus import ModbusMap
 from flagtrack.drivers.tunnel.sim_model import WATCHDOG_FAULT, TunnelModel
 
 log = logging.getLogger(__name__)
 
-MAX_LINE_BYTES = 256
 WATCHDOG_FAULT_CODE = 1  # fault register value of the simulated drive after a watchdog trip
 OTHER_FAULT_CODE = 2
-
-
-def split_lines(buffer: bytes) -> tuple[list[str], bytes, bool]:
-    """The complete non-empty lines of ``buffer`` (stripped), the partial rest, and whether that rest
-    grew over ``MAX_LINE_BYTES`` (then it is dropped: returned empty)."""
-    *complete, rest = buffer.split(b"\n")
-    lines = [line for raw in complete if (line := raw.decode("ascii", errors="replace").strip())]
-    if len(rest) > MAX_LINE_BYTES:
-        return lines, b"", True
-    return lines, rest, False
-
-
-def split_frames(buffer: bytes) -> tuple[list[bytes], bytes]:
-    """The complete Modbus RTU request frames of ``buffer`` and the partial rest (dropped when a
-    frame's end cannot be found: unknown function)."""
-    frames = []
-    while (length := rtu.frame_length(buffer)) is not None and len(buffer) >= length:
-        if length == 0:
-            return frames, b""
-        frames.append(buffer[:length])
-        buffer = buffer[length:]
-    return frames, buffer
 
 
 class Responder(Protocol):
@@ -112,7 +90,7 @@ class ModbusResponder:
         if data:
             self._buffer += data
             self._last_rx_s = now_s
-        frames, self._buffer = split_frames(self._buffer)
+        frames, self._buffer = rtu.split_frames(self._buffer)
         out = []
         for frame in frames:
             reply = self._answer(frame, now_s)
