@@ -18,20 +18,10 @@ if TYPE_CHECKING:
 COMMAND = "aim"
 HELP = "the set-up view: the camera's recent events, event rate, hot pixels, line width (focus), chain"
 DESCRIPTION = """\
-Show what the camera sees while you set it up: the events of the last --window-ms as an image, the
-event rate, hot pixels (pixels firing far above their neighbours), the laser line's width across it
-in pixels (the focus figure: turn the focus ring to make it smallest), the configured chain with its
-search areas and the calibration's grid (docs/viewer.md, "Setting up: flagtrack aim").
-
-  flagtrack aim -c rig.yaml                       # the rig's camera, live in Rerun, until Ctrl-C
-  flagtrack aim -c rig.yaml --duration 10 --json  # ten seconds, then the figures as JSON
-  flagtrack aim --replay run.raw --snapshot aim.png --root 150 240 --length 300
-
-A camera runs until Ctrl-C (or --duration S of wall time); a recording until its end (or S seconds
-of its time). A line per second shows the rate and the line width while a camera (or a replay at
---speed > 0) runs; the figures print at the end (--json: one JSON object on stdout). --snapshot
-writes a PNG of the end, without Rerun; the Rerun view goes to --rrd FILE, --viewer SINK, or else
-the rig's viewer sink (a window where a display exists).
+Show what the camera sees while you set it up: the recent events as an image, the event rate, hot
+pixels, the laser line's width in pixels (the focus figure: make it smallest) and the configured
+chain and calibration grid; live in Rerun, as a PNG (--snapshot) or as JSON (--json).
+See docs/commands.md and docs/viewer.md.
 """
 
 #: The Rerun view is drawn this often (camera time), a status line printed this often.
