@@ -24,10 +24,10 @@ from flagtrack.daemon.services.supervisor.monitor import BusMonitor
 from flagtrack.daemon.services.supervisor.section import SupervisorConfig
 from flagtrack.daemon.sweep.runlog import PointResult
 from flagtrack.daemon.sweep.runner import SweepRunner, SweepSettings
-from flagtrack.daemon.sweep.session import Limits, Monitoring, RunStopped, Session
+from flagtrack.daemon.sweep.session import Limits, Monitoring, Session
 from flagtrack.daemon.transport import Bus
 
-__all__ = ["FlagGeometry", "RunStopped", "SupervisorService"]
+__all__ = ["FlagGeometry", "SupervisorService"]  # FlagGeometry: where the rig builds it from
 
 
 class SupervisorService:
