@@ -137,9 +137,3 @@ def _context(point: Point, run_dir: Path) -> dict[str, object]:
         "raw": str((run_dir / raw).resolve()),
         "centrelines": str((run_dir / lines).resolve()),
     }
-
-
-def watch_point(session: Session, point: Point) -> PointWatch:
-    """Make ``point`` the session's point under way; return its watch."""
-    session.point, session.branch = PointWatch(point), point.branch.value
-    return session.point

@@ -35,7 +35,7 @@ from flagtrack.daemon.sweep.plan import (
 )
 from flagtrack.daemon.sweep.ports import PointMeasure
 from flagtrack.daemon.sweep.progress import SweepProgress
-from flagtrack.daemon.sweep.record import record_point, run_action, watch_point
+from flagtrack.daemon.sweep.record import record_point, run_action
 from flagtrack.daemon.sweep.restart import start_decision
 from flagtrack.daemon.sweep.runfiles import command_line
 from flagtrack.daemon.sweep.runlock import RunLock
@@ -195,7 +195,7 @@ class SweepRunner:
         assert isinstance(point, Point) and self._sweep is not None and session.progress is not None
         retries = self._sweep.retries if self._sweep.on_bad_point == "retry" else 0
         for attempt in range(retries + 1):
-            watch_point(session, point)
+            session.begin_point(point)
             session.progress.start_point(point, session.clock.monotonic())
             log.info("supervisor: point %s%s", point.point_id, f" (attempt {attempt + 1})" if attempt else "")
             self._check_free_space(point)
@@ -251,7 +251,7 @@ class SweepRunner:
         assert self._runlog is not None and session.progress is not None
         self._runlog.point(result)
         self.points_done.append(result)
-        session.point = None
+        session.end_point()
         session.progress.finish_point(result, session.clock.monotonic())
         session.publish(force=True)
 

@@ -19,6 +19,7 @@ from typing import Protocol
 
 from flagtrack.daemon.errors import DriverError, FlagtrackError
 from flagtrack.daemon.schema import RecorderCommand, RecorderStatus
+from flagtrack.daemon.sweep.plan import Point
 from flagtrack.daemon.sweep.ports import Clock, Outside, Report, SystemClock, Tunnel
 from flagtrack.daemon.sweep.progress import SweepProgress
 from flagtrack.daemon.sweep.validity import PointWatch
@@ -150,6 +151,15 @@ class Session:
             if remaining_s <= 0:
                 return
             self.clock.wait(self._stop, min(0.02, remaining_s))
+
+    def begin_point(self, point: Point) -> PointWatch:
+        """``point`` is under way (an attempt at it begins); return its watch."""
+        self.point, self.branch = PointWatch(point), point.branch.value
+        return self.point
+
+    def end_point(self) -> None:
+        """No point is under way (the attempt is recorded)."""
+        self.point = None
 
     def set_speed(self, speed_mps: float) -> None:
         """Ramp the tunnel to ``speed_mps`` (verified); RunStopped when a stop came meanwhile."""
