@@ -30,7 +30,7 @@ def fault_while_recording(fault: str, clear: bool):
     def during(services: list, group: ServiceGroup) -> None:
         supervisor = services[0]
         simulator = supervisor.tunnel.simulator
-        wait_until(lambda: supervisor._point == SECOND and supervisor._readbacks is not None, 60, "point 2 recording")
+        wait_until(lambda: supervisor.recording_point == SECOND, 60, "point 2 recording")
         simulator.inject(mute=True) if fault == "mute" else simulator.inject(stall_mps=4.2)
         wait_until(lambda: any(p.status == "failed" for p in supervisor.points_done), 30, "a failed point")
         if clear:
@@ -60,7 +60,7 @@ def test_a_stalled_fan_fails_the_point_the_retry_measures_it_and_a_hung_loop_let
     def faults(services: list, group: ServiceGroup) -> None:
         supervisor = services[0]
         recorder = next(s for s in services if s.name == "recorder")
-        wait_until(lambda: supervisor._point == FIRST and supervisor._readbacks is not None, 60, "point 1 recording")
+        wait_until(lambda: supervisor.recording_point == FIRST, 60, "point 1 recording")
         take_lines = recorder._take_lines
         stalled = threading.Event()
 
@@ -73,7 +73,7 @@ def test_a_stalled_fan_fails_the_point_the_retry_measures_it_and_a_hung_loop_let
         recorder._take_lines = slow_disk
         fault_while_recording("stall", clear=True)(services, group)
         simulator = supervisor.tunnel.simulator
-        wait_until(lambda: supervisor._point == THIRD and supervisor._readbacks is not None, 60, "point 3 recording")
+        wait_until(lambda: supervisor.recording_point == THIRD, 60, "point 3 recording")
         release = threading.Event()
         supervisor.add_observer(lambda state: release.wait())  # the supervisor's own loop hangs here
         hung_at = time.monotonic()

@@ -210,7 +210,7 @@ def test_a_hung_owner_loop_lets_the_controllers_watchdog_stop_the_fan(sim: Simul
 
 
 def test_a_controller_fault_is_read_through_the_protocol_and_spoils_a_point(sim: SimulatedTunnel) -> None:
-    from flagtrack.daemon.services.supervisor.validity import TunnelWatch
+    from flagtrack.daemon.sweep.validity import TunnelWatch
 
     tunnel, _ = make_tunnel(sim)
     with tunnel:

@@ -10,14 +10,14 @@ import pytest
 
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.schema import RecorderStatus
-from flagtrack.daemon.services.supervisor.validity import (
+from flagtrack.daemon.sweep.plan import load_sweep_config
+from flagtrack.daemon.sweep.validity import (
     TunnelWatch,
     expected_point_bytes,
     free_space_problem,
     recording_problem,
     tunnel_problem,
 )
-from flagtrack.daemon.sweep.plan import load_sweep_config
 
 
 @pytest.mark.parametrize(

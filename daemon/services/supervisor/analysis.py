@@ -65,14 +65,8 @@ def point_metrics(
     tip = lateral[:, -1]
     amplitude = tip_amplitude_over_l(tip, length)
     frequency = flapping_frequency_hz(batch.t_s, tip)  # gaps (dropped packets) are allowed for
-    run = _longest_run(batch.t_s)  # modes need evenly sampled time: no gaps
-    t_run, lateral_run = batch.t_s[run], lateral[run]
     spread = _amplitude_spread(batch.t_s, tip, length, frequency, cycles_window)
-    twi = math.nan
-    if len(t_run) >= 16 and np.all(np.isfinite(lateral_run)):
-        uniform_t = np.linspace(t_run[0], t_run[-1], len(t_run))
-        resampled = np.stack([np.interp(uniform_t, t_run, lateral_run[:, k]) for k in range(lateral.shape[1])], axis=1)
-        twi = travelling_wave_index(resampled)
+    twi = _twi(batch.t_s, lateral)
     delta = batch.delta_rms[np.isfinite(batch.delta_rms)] / length
     return PointMetrics(
         amplitude,
@@ -84,6 +78,18 @@ def point_metrics(
         float(delta.std()) if len(delta) else math.nan,
         float(batch.lost.mean()),
     )
+
+
+def _twi(t_s: np.ndarray, lateral: np.ndarray) -> float:
+    """Travelling-wave index over the longest run of updates without a gap (the modes need evenly
+    sampled time), NaN when it is short (< 16 updates) or not finite."""
+    run = _longest_run(t_s)
+    t_run, lateral_run = t_s[run], lateral[run]
+    if len(t_run) < 16 or not np.all(np.isfinite(lateral_run)):
+        return math.nan
+    uniform_t = np.linspace(t_run[0], t_run[-1], len(t_run))
+    resampled = np.stack([np.interp(uniform_t, t_run, lateral_run[:, k]) for k in range(lateral.shape[1])], axis=1)
+    return float(travelling_wave_index(resampled))
 
 
 def usable_batches(batches: list[CentrelineBatch]) -> list[CentrelineBatch]:

@@ -74,16 +74,21 @@ def check_point(
         fields.update(validation.fields())
         plot_point(validation, figure_path, title)
         fields["sensor_figure"] = str(figure_path.relative_to(run_dir))
-        log.info(
-            "supervisor: sensor %s: %s, e/L RMS %.4f, sync %s %.1f ± %.1f us",
-            cfg.id,
-            validation.status,
-            fields["sensor_error_rms_over_l"],
-            validation.sync.method,
-            validation.sync.offset_us,
-            validation.sync.uncertainty_us,
-        )
+        _log_check(cfg.id, validation, fields["sensor_error_rms_over_l"])
     except Exception as exc:  # noqa: BLE001 - the sensor never fails a point: say what went wrong instead
         log.error("supervisor: sensor check of %s failed: %s", base.name, exc)
         fields["sensor_status"] = f"error: {type(exc).__name__}: {exc}"
     return fields
+
+
+def _log_check(sensor_id: str, validation: Any, error_rms_over_l: float) -> None:
+    sync = validation.sync
+    log.info(
+        "supervisor: sensor %s: %s, e/L RMS %.4f, sync %s %.1f ± %.1f us",
+        sensor_id,
+        validation.status,
+        error_rms_over_l,
+        sync.method,
+        sync.offset_us,
+        sync.uncertainty_us,
+    )

@@ -1,5 +1,5 @@
 """Whether a point is measured as planned: the tunnel throughout settle and record, the recording,
-the free space before it starts. Pure checks (the supervisor gathers what they look at)."""
+the free space before it starts. Pure checks (the sweep runner gathers what they look at)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ from dataclasses import dataclass
 
 from flagtrack.daemon.errors import FlagtrackError
 from flagtrack.daemon.schema import RecorderStatus
+from flagtrack.daemon.sweep.plan import Point
 from flagtrack.daemon.sweep.runlog import PointResult
+from flagtrack.drivers.tunnel.base import TunnelStatus
 
 
 class BadPoint(FlagtrackError):
@@ -48,6 +50,45 @@ class TunnelWatch:
             if now_s - self.since_s < self.grace_s:
                 return None
         return problem
+
+
+class PointWatch:
+    """The point under way: its tunnel watch (from its speed set to the end of its recording), the
+    readbacks while it records, the first problem seen since the last :meth:`check`.
+
+    Attributes:
+        point: the point.
+        tunnel: the tunnel watch, None outside the point's settle and record.
+        readbacks: the tunnel's readbacks while the point records (None when it does not), m/s.
+    """
+
+    def __init__(self, point: Point) -> None:
+        self.point = point
+        self.tunnel: TunnelWatch | None = None
+        self.readbacks: list[float] | None = None
+        self._problem: str | None = None
+
+    @property
+    def recording(self) -> bool:
+        """Whether the point's recording is under way."""
+        return self.readbacks is not None
+
+    def see(self, status: TunnelStatus, now_s: float) -> None:
+        """Take one tunnel status read at ``now_s`` (monotonic s)."""
+        if self.readbacks is not None:
+            self.readbacks.append(status.speed_mps)
+        if self.tunnel is not None and self._problem is None:
+            self._problem = self.tunnel.check(status.speed_mps, status.fault, status.link_ok, now_s)
+
+    def check(self, recorder_error: str) -> None:
+        """Raise BadPoint if the point is spoilt: the recorder failed while it records (the sweep
+        stops), or the tunnel went silent, faulted or left its tolerance."""
+        if recorder_error and self.readbacks is not None:
+            reason = f"recorder: {recorder_error}"
+            raise BadPoint(PointResult.planned(self.point, status="failed", reason=reason), stop=True)
+        if self._problem:
+            reason, self._problem = self._problem, None
+            raise BadPoint(PointResult.planned(self.point, status="failed", reason=reason))
 
 
 def tunnel_problem(
