@@ -14,8 +14,15 @@ import pytest
 from flagtrack.daemon.services.runner import ServiceGroup, run_services
 
 
+class Bare:
+    """Opens nothing (a service's start() opens its subscriptions, devices, files)."""
+
+    def start(self) -> None:
+        pass
+
+
 @dataclass
-class Looping:
+class Looping(Bare):
     name: str
     stopped: bool = False
     ticks: int = 0
@@ -27,7 +34,7 @@ class Looping:
 
 
 @dataclass
-class Finishing:
+class Finishing(Bare):
     name: str
     after: int = 3
     done: list = field(default_factory=list)
@@ -38,7 +45,7 @@ class Finishing:
 
 
 @dataclass
-class Failing:
+class Failing(Bare):
     name: str
 
     def run(self, stop: threading.Event) -> None:
@@ -46,7 +53,7 @@ class Failing:
 
 
 @dataclass
-class Stubborn:
+class Stubborn(Bare):
     name: str
     release: threading.Event = field(default_factory=threading.Event)
 
@@ -153,7 +160,7 @@ def test_signal_handlers_are_restored_after_the_run() -> None:
         seen: dict[int, object] = {}
 
         @dataclass
-        class Peeking:
+        class Peeking(Bare):
             name: str = "camera"
 
             def run(self, stop: threading.Event) -> None:
