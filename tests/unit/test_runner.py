@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from flagtrack.daemon.services.runner import ServiceGroup, run_services
+from flagtrack.daemon.services.runner import ServiceGroup, StartError, run_services
 
 
 class Bare:
@@ -73,6 +73,38 @@ def test_failure_stops_everything_and_is_reported() -> None:
     report = run_services([loop, Failing("camera")], handle_signals=False)
     assert loop.stopped
     assert isinstance(report.errors["camera"], RuntimeError)
+
+
+@dataclass
+class Opening:
+    """Opens a device in start() (``fail``: cannot), closes it in close(); records what it was asked."""
+
+    name: str
+    fail: str = ""
+    calls: list[str] = field(default_factory=list)
+
+    def start(self) -> None:
+        self.calls.append("start")
+        if self.fail:
+            raise OSError(self.fail)
+
+    def close(self) -> None:
+        self.calls.append("close")
+
+    def run(self, stop: threading.Event) -> None:
+        self.calls.append("run")
+
+
+def test_a_service_that_cannot_start_stops_the_group_with_one_line_and_closes_those_started() -> None:
+    tunnel, quiet = Opening("supervisor"), Looping("recorder")
+    broken = Opening("viewer", fail="[Errno 98] Address already in use\n(the port of viewer.grpc_port)")
+    after = Opening("camera/cam0")
+    with pytest.raises(StartError) as caught:
+        run_services([tunnel, quiet, broken, after], handle_signals=False)
+    assert str(caught.value) == "the viewer service could not start: OSError: [Errno 98] Address already in use"
+    assert caught.value.service == "viewer" and isinstance(caught.value.__cause__, OSError)
+    assert tunnel.calls == ["start", "close"] and broken.calls == ["start"] and after.calls == []
+    assert quiet.ticks == 0 and not quiet.stopped  # started (it opens nothing to close), never run
 
 
 def test_shutdown_names_services_that_do_not_stop() -> None:
