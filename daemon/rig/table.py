@@ -74,7 +74,7 @@ def _build_supervisor(b: Build) -> Service:
     from flagtrack.drivers.tunnel.setup import open_tunnel
 
     rig, tunnel = b.rig, b.rig.tunnel
-    assert tunnel is not None  # a needed section (RigSections checks it)
+    assert tunnel is not None  # a needed section (RigConfig checks it)
     tracker = rig.tracker
     root_x, root_y = tracker.root or (0.0, 0.0)
     flag = FlagGeometry(float(tracker.length or 1.0), (float(root_x), float(root_y)), float(tracker.direction_deg))
@@ -199,7 +199,7 @@ def _build_sensor(b: Build) -> Service:
     from flagtrack.drivers.sensor.setup import open_sensor
 
     rig, cfg = b.rig, b.rig.sensor
-    assert cfg is not None  # a needed section (RigSections checks it)
+    assert cfg is not None  # a needed section (RigConfig checks it)
     camera = b.camera_adapter() if "camera" in b.names else None
     if cfg.driver == "simulated" and not hasattr(camera, "truth"):
         raise ConfigError(

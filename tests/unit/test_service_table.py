@@ -3,6 +3,7 @@ it), its name everywhere a service is named, and how it is built, which opens no
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from pathlib import Path
 from typing import Any
@@ -91,7 +92,9 @@ def test_a_service_is_named_in_the_table_only() -> None:
     security = {"identities": {"analysis": ["tracker", "radar"]}}
     with pytest.raises(ConfigError, match="bus.security.identities.analysis.*unknown service 'radar'"):
         from_mapping(RigConfig, {"bus": {"namespace": "flagtrack/x", "security": security}})
+    sections = {field.name for field in dataclasses.fields(RigConfig)}
     for spec in SERVICES:
+        assert set(spec.needs) <= set(spec.sections) <= sections, spec.name
         for section in spec.needs:
             with pytest.raises(ConfigError, match=f"the {spec.name} service needs a '{section}:' section"):
                 from_mapping(RigConfig, {"services": [spec.name]})
