@@ -55,6 +55,9 @@ class RouterService:
     def __init__(self, bus: Bus) -> None:
         self.bus = bus
 
+    def start(self) -> None:
+        """Nothing to open: the session is the caller's (opened first: a busy port is one clear line)."""
+
     def run(self, stop: threading.Event) -> None:
         from flagtrack.daemon.services.sd_notify import beat
 

@@ -1,4 +1,5 @@
-"""``flagtrack camera|tracker|recorder|viewer|supervisor|sensor -c rig.yaml``: one service of the rig alone.
+"""``flagtrack <service> -c rig.yaml``: one service of the rig alone, one command per service of the
+service table (camera, tracker, recorder, viewer, supervisor, sensor).
 
 Each runs in its own process and reaches the others through the config's ``bus:`` section (several
 hosts: see ``deploy/``); ``flagtrack up`` runs them together.
@@ -10,15 +11,7 @@ import argparse
 from pathlib import Path
 
 from flagtrack.daemon.commands._registry import Command
-
-SERVICES = {
-    "camera": "run the camera adapter alone: publish its event packets on the bus",
-    "tracker": "run the live tracker alone: camera packets in, centrelines out",
-    "recorder": "run the recorder alone: camera packets to .raw files on command",
-    "viewer": "run the Rerun viewer bridge alone",
-    "supervisor": "run the supervisor alone: tunnel, flag state from event rates, sweeps or feedback",
-    "sensor": "run the point sensor alone: publish its samples on the bus (docs/sensor.md)",
-}
+from flagtrack.daemon.rig.table import SERVICES
 
 
 def add_service_arguments(parser: argparse.ArgumentParser) -> None:
@@ -40,4 +33,4 @@ def _command(name: str, help_text: str) -> Command:
     return Command(name, help_text, add_service_arguments, lambda args: run_one_service(name, args))
 
 
-COMMANDS = [_command(name, help_text) for name, help_text in SERVICES.items()]
+COMMANDS = [_command(spec.name, spec.help) for spec in SERVICES]

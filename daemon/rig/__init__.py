@@ -1,8 +1,14 @@
 """The composition root: the one place that knows the whole rig.
 
-- :mod:`.config`: the rig file (``RigConfig``), read and checked before anything opens;
-- :mod:`.build`: the services it asks for, each given its own section and the bus;
-- :mod:`.run`: open the bus, run the services, report how the run ended.
+- :mod:`.table`: the service table, every service described once (its name, sections, bus keys,
+  checks, preparation, how it is built);
+- :mod:`.sections`, :mod:`.config`: the rig file (``RigConfig``), read and checked against the
+  table before anything opens;
+- :mod:`.access`: the bus's access-control rules, made from the table;
+- :mod:`.camera`, :mod:`.context`, :mod:`.build`, :mod:`.prepare`: the camera adapter, the table's
+  steps and what they get; the services built (opening nothing) and prepared;
+- :mod:`.run`: open the bus, start the services in table order, run them, report how the run ended.
 
-Kept import-free so ``flagtrack --help`` stays fast: import the submodule you need.
+Kept import-free so ``flagtrack --help`` stays fast: import the submodule you need (:mod:`.table`
+imports only the standard library).
 """

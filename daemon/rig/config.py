@@ -10,107 +10,62 @@ Example (see ``deploy/rig-*.yaml``)::
     recorder: {directory: recordings}
     viewer: {sink: rrd, rrd_path: live.rrd}
     services: [camera, tracker, recorder, viewer]
+
+The sections are :class:`~.sections.RigSections`; the services, the sections each needs and the
+files each checks are the service table's (:mod:`.table`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import importlib
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
 
 from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.rig.sections import HARDWARE_ADAPTERS, CameraConfig, RigSections, viewer_writes_file
+from flagtrack.daemon.rig.table import SERVICE_NAMES, in_table_order
 from flagtrack.daemon.schema import Keys
-from flagtrack.daemon.security.acl import access_control
-from flagtrack.daemon.security.config import REDACTED
 from flagtrack.daemon.security.names import identifier_problem
-from flagtrack.daemon.services.camera import CameraStreamConfig
-from flagtrack.daemon.services.recorder import RecorderConfig, recording_base
-from flagtrack.daemon.services.supervisor.section import SupervisorConfig
-from flagtrack.daemon.services.tracker import TrackerServiceConfig
-from flagtrack.daemon.services.viewer import ViewerConfig, effective_sink
-from flagtrack.daemon.tracking.section import TrackingConfig
 from flagtrack.daemon.tracking.setup import resolve_calibration
 from flagtrack.daemon.transport import BusConfig
-from flagtrack.daemon.typed_yaml import (
-    from_mapping,
-    load_yaml,
-    require_file,
-    require_folder,
-    require_output_file,
-    to_mapping,
-)
-from flagtrack.drivers.camera.replay import ReplayConfig
-from flagtrack.drivers.camera.simulated import SimulatedCameraConfig
-from flagtrack.drivers.sensor.setup import SensorConfig
-from flagtrack.drivers.tunnel.setup import TunnelConfig
+from flagtrack.daemon.typed_yaml import from_mapping, load_yaml
 
-SERVICE_NAMES = ("camera", "tracker", "recorder", "viewer", "supervisor", "sensor")
-HARDWARE_ADAPTERS = ("prophesee", "metavision", "inivation")
+__all__ = [
+    "HARDWARE_ADAPTERS",
+    "SERVICE_NAMES",
+    "CameraConfig",
+    "RigConfig",
+    "check_rig",
+    "load_rig",
+    "viewer_writes_file",
+]
 
 
 @dataclass(frozen=True)
-class CameraConfig(CameraStreamConfig):
-    """The ``camera:`` section: the adapter, and how its stream is cut (the camera service's own fields).
-
-    Attributes:
-        adapter: ``replay`` (a file), ``simulated`` (digital twin), ``prophesee``, ``metavision``, ``inivation``.
-        replay, simulated: settings of those adapters.
-        hardware: settings of a hardware adapter (see docs/cameras.md), passed to it as they are.
-    """
-
-    adapter: Literal["replay", "simulated", "prophesee", "metavision", "inivation"] = "simulated"
-    replay: ReplayConfig | None = None
-    simulated: SimulatedCameraConfig = field(default_factory=SimulatedCameraConfig)
-    hardware: dict[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        if self.adapter == "replay" and self.replay is None:
-            raise ValueError("adapter 'replay' needs a 'replay:' section with a path")
-        if self.packet_us < 1 or self.max_packet_events < 1 or self.rate_interval_s <= 0:
-            raise ValueError("packet_us, max_packet_events and rate_interval_s must be positive")
-
-
-@dataclass(frozen=True)
-class RigConfig:
-    """Everything a rig runs with (YAML sections of the same names)."""
-
-    rig: str = "default"
-    bus: BusConfig | None = None
-    camera: CameraConfig = field(default_factory=CameraConfig)
-    tracker: TrackingConfig = field(default_factory=TrackingConfig)
-    tracker_service: TrackerServiceConfig = field(default_factory=TrackerServiceConfig)
-    recorder: RecorderConfig = field(default_factory=RecorderConfig)
-    viewer: ViewerConfig = field(default_factory=ViewerConfig)
-    tunnel: TunnelConfig | None = None
-    supervisor: SupervisorConfig = field(default_factory=SupervisorConfig)
-    sensor: SensorConfig | None = None
-    services: tuple[str, ...] = ("camera", "tracker", "recorder", "viewer")
-    path: str | None = None
+class RigConfig(RigSections):
+    """A rig: its sections (:class:`~.sections.RigSections`), with ``services`` naming services of the
+    table, each with the sections it needs, and the bus's access-control rules made from the table."""
 
     def __post_init__(self) -> None:
         unknown = [name for name in self.services if name not in SERVICE_NAMES]
         if unknown:
             raise ValueError(f"unknown service {unknown[0]!r} in services (known: {', '.join(SERVICE_NAMES)})")
-        for key, value in self.identifiers().items():  # each becomes part of file names or bus keys
-            problem = identifier_problem(value, "the name")
-            if problem is not None:
-                raise ConfigError(problem, key=key)
-        if "supervisor" in self.services and self.tunnel is None:
-            raise ValueError("the supervisor needs a 'tunnel:' section (driver: simulated for no hardware)")
-        if "sensor" in self.services and self.sensor is None:
-            raise ValueError("the sensor service needs a 'sensor:' section (driver: simulated for no hardware)")
-
-    def identifiers(self) -> dict[str, str]:
-        """The names of this rig that become parts of file names or keys, by their key."""
-        names = {"rig": self.rig, "camera.id": self.camera.id}
-        if self.sensor is not None:
-            names["sensor.id"] = self.sensor.id
-        if self.supervisor.run_name is not None:
-            names["supervisor.run_name"] = self.supervisor.run_name
-        return names
+        super().__post_init__()
+        for spec in in_table_order(self.services):
+            for section in spec.needs:
+                if getattr(self, section) is None:
+                    raise ValueError(
+                        f"the {spec.name} service needs a '{section}:' section (driver: simulated for no hardware)"
+                    )
+        security = self.bus.security if self.bus is not None else None
+        for name, roles in (security.identities if security is not None else {}).items():
+            unknown = [role for role in roles if role not in SERVICE_NAMES]
+            if unknown:
+                raise ConfigError(
+                    f"unknown service {unknown[0]!r} (known: {', '.join(SERVICE_NAMES)})",
+                    key=f"bus.security.identities.{name}",
+                )
 
     @property
     def bus_config(self) -> BusConfig:
@@ -122,6 +77,8 @@ class RigConfig:
         security = self.bus.security
         if security is None or not security.acl:
             return self.bus
+        from flagtrack.daemon.rig.access import access_control
+
         sensors = (self.sensor.id,) if self.sensor is not None else ()
         rules = access_control(Keys(self.bus.namespace), security, (self.camera.id,), sensors)
         return dataclasses.replace(self.bus, access_control=rules)
@@ -138,15 +95,6 @@ class RigConfig:
         if chosen is None or chosen == security.identity:
             return cfg
         return dataclasses.replace(cfg, security=dataclasses.replace(security, identity=chosen))
-
-    def snapshot(self) -> dict[str, Any]:
-        """The whole effective config as plain values (stored beside recordings and in run logs),
-        with the bus password replaced by ``<redacted>`` (files are named, never read into it)."""
-        mapping = to_mapping(self)
-        security = (mapping.get("bus") or {}).get("security") or {}
-        if security.get("password") is not None:
-            security["password"] = REDACTED
-        return mapping
 
 
 def load_rig(path: str | Path, services: Sequence[str] | None = None) -> RigConfig:
@@ -184,7 +132,8 @@ def load_rig(path: str | Path, services: Sequence[str] | None = None) -> RigConf
 
 
 def check_rig(rig: RigConfig, services: Sequence[str]) -> None:
-    """Check what ``services`` need of ``rig`` that a file or a setting can say, opening and creating nothing.
+    """Check what ``services`` need of ``rig`` that a file or a setting can say, opening and creating
+    nothing: each service's own check of the service table (:mod:`.table`).
 
     Input files must exist (``camera.replay.path``, ``tracker.calibration``); output folders must
     exist or be creatable (``recorder.directory`` and ``path``, the ``.rrd`` file's, ``supervisor.runs_dir``);
@@ -195,27 +144,6 @@ def check_rig(rig: RigConfig, services: Sequence[str]) -> None:
     Raises:
         ConfigError: naming the key and the rig file.
     """
-    where = rig.path
-    if "camera" in services:
-        if rig.camera.adapter == "replay" and rig.camera.replay is not None:
-            require_file(rig.camera.replay.path, key="camera.replay.path", path=where)
-        if rig.camera.adapter in HARDWARE_ADAPTERS:
-            module = importlib.import_module(f"flagtrack.drivers.camera.{rig.camera.adapter}")
-            module.check_config(rig.camera.hardware, path=where)
-    if {"tracker", "recorder"} & set(services) and rig.tracker.calibration is not None:  # the recorder's files name it
-        require_file(rig.tracker.calibration, key="tracker.calibration", path=where)
-    if "recorder" in services:
-        require_folder(rig.recorder.directory, key="recorder.directory", path=where)
-        if rig.recorder.path:
-            require_folder(
-                recording_base(rig.recorder.directory, rig.recorder.path).parent, key="recorder.path", path=where
-            )
-    if "viewer" in services and viewer_writes_file(rig.viewer):
-        require_output_file(rig.viewer.rrd_path, key="viewer.rrd_path", path=where)
-    if "supervisor" in services:
-        require_folder(rig.supervisor.runs_dir, key="supervisor.runs_dir", path=where)
-
-
-def viewer_writes_file(cfg: ViewerConfig) -> bool:
-    """Whether the viewer writes ``rrd_path``: sink ``rrd``, or ``auto`` with no display to show a window on."""
-    return effective_sink(cfg) == "rrd"
+    for spec in in_table_order(list(services)):
+        if spec.check is not None:
+            spec.check(rig)

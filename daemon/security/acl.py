@@ -1,8 +1,9 @@
-"""Zenoh access-control rules made from the rig: default deny, each identity its own keys.
+"""Zenoh access-control rules from the rights of each service: default deny, each identity its own keys.
 
-What each service publishes and subscribes to comes from the key expressions of
-:class:`~flagtrack.daemon.schema.Keys` (one definition of every key), for the rig's camera and
-point sensor. A subject is a certificate common name (an identity, see :mod:`.certs`).
+What each service publishes, subscribes to and declares is said once, in the rig's service table
+(:mod:`flagtrack.daemon.rig.access` makes the :class:`Rights` of each from it, with the key
+expressions of :class:`~flagtrack.daemon.schema.Keys`). A subject is a certificate common name (an
+identity, see :mod:`.certs`).
 
 How the rules act (Zenoh 1.x, checked by the tests): on the node that enforces them (the router;
 every peer in peer mode), a message from an identity is ``ingress`` on the link from it, and a
@@ -27,7 +28,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from flagtrack.daemon.schema import Keys
-from flagtrack.daemon.security.config import ROLES, ROUTER, SecurityConfig
+from flagtrack.daemon.security.config import ROUTER, SecurityConfig
 
 
 @dataclass(frozen=True)
@@ -53,53 +54,6 @@ def _unique(items: Iterable[str]) -> tuple[str, ...]:
     return tuple(dict.fromkeys(items))
 
 
-def role_rights(keys: Keys, role: str, camera_ids: Sequence[str], sensor_ids: Sequence[str]) -> Rights:
-    """The rights of service ``role`` (one of :data:`~.config.ROLES`) for these cameras and sensors."""
-    cams, sensors = tuple(camera_ids), tuple(sensor_ids)
-    events = tuple(keys.camera_events(c) for c in cams)
-    rates = tuple(keys.event_rate(c) for c in cams)
-    if role == "camera":
-        return Rights(
-            publish=events + rates + tuple(keys.camera_status(c) for c in cams),
-            subscribe=(keys.tunnel_state(),),  # a simulated camera follows the tunnel's speed
-            tokens=tuple(keys.alive(f"camera/{c}") for c in cams),
-        )
-    if role == "tracker":
-        return Rights(
-            publish=(keys.centrelines(), keys.tracker_status()), subscribe=events, tokens=(keys.alive("tracker"),)
-        )
-    if role == "recorder":
-        return Rights(
-            publish=(keys.recorder_status(),),
-            subscribe=(*events, keys.centrelines(), keys.recorder_command()),
-            tokens=(keys.alive("recorder"),),
-        )
-    if role == "viewer":
-        return Rights(
-            subscribe=(keys.centrelines(), *events, *rates, keys.tunnel_state(), keys.supervisor_state()),
-            tokens=(keys.alive("viewer"),),
-        )
-    if role == "supervisor":
-        return Rights(
-            publish=(keys.supervisor_state(), keys.tunnel_state(), keys.recorder_command()),
-            subscribe=(
-                *rates,
-                keys.centrelines(),
-                keys.recorder_status(),
-                keys.tunnel_command(),
-                *(keys.sensor_samples(s) for s in sensors),
-            ),
-            tokens=(keys.alive("supervisor"),),
-            watch=True,
-        )
-    if role == "sensor":
-        return Rights(
-            publish=tuple(keys.sensor_samples(s) for s in sensors),
-            tokens=tuple(keys.alive(f"sensor/{s}") for s in sensors),
-        )
-    raise ValueError(f"unknown service {role!r} (known: {', '.join(ROLES)})")
-
-
 def operator_rights(keys: Keys) -> Rights:
     """An operator's rights beyond its services': send recorder and tunnel commands, read every key
     of the namespace, watch liveliness."""
@@ -108,18 +62,16 @@ def operator_rights(keys: Keys) -> Rights:
     )
 
 
-def identity_rights(
-    keys: Keys, security: SecurityConfig, camera_ids: Sequence[str], sensor_ids: Sequence[str]
-) -> dict[str, Rights]:
-    """Every identity the rules know and its rights: each service's own name, the identities of
-    ``security.identities`` (the union of their services' rights), the operators (their own services'
-    rights, if any, and :func:`operator_rights`)."""
-    names = [*ROLES, *security.identities, *security.operators]
+def identity_rights(keys: Keys, security: SecurityConfig, services: Mapping[str, Rights]) -> dict[str, Rights]:
+    """Every identity the rules know and its rights, from the rights of each service (by name): each
+    service's own name, the identities of ``security.identities`` (the union of their services'
+    rights), the operators (their own services' rights, if any, and :func:`operator_rights`)."""
+    names = [*services, *security.identities, *security.operators]
     rights: dict[str, Rights] = {}
     for name in dict.fromkeys(names):
         total = Rights()
-        for role in security.roles(name):
-            total = total | role_rights(keys, role, camera_ids, sensor_ids)
+        for role in security.identities.get(name, (name,) if name in services else ()):
+            total = total | services[role]
         if name in security.operators:
             total = total | operator_rights(keys)
         rights[name] = total
@@ -144,15 +96,14 @@ def _grants(keys: Keys, rights: Rights) -> list[tuple[str, list[str], list[str],
     ]
 
 
-def access_control(
-    keys: Keys, security: SecurityConfig, camera_ids: Sequence[str], sensor_ids: Sequence[str] = ()
-) -> dict[str, Any]:
-    """The Zenoh ``access_control`` section for a rig: enabled, default deny, one subject per
-    identity (its certificate common name) with the rules of its rights (see the module docstring)."""
+def access_control(keys: Keys, security: SecurityConfig, services: Mapping[str, Rights]) -> dict[str, Any]:
+    """The Zenoh ``access_control`` section for the rights of each service (by name): enabled, default
+    deny, one subject per identity (its certificate common name) with the rules of its rights (see the
+    module docstring)."""
     rules: list[dict[str, Any]] = []
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
-    for name, rights in identity_rights(keys, security, camera_ids, sensor_ids).items():
+    for name, rights in identity_rights(keys, security, services).items():
         ids: list[str] = []
         for suffix, messages, flows, key_exprs in _grants(keys, rights):
             if key_exprs:

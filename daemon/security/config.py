@@ -33,8 +33,6 @@ from flagtrack.daemon.security.names import identity_problem
 
 REDACTED = "<redacted>"
 """What records hold instead of a password."""
-ROLES = ("camera", "tracker", "recorder", "viewer", "supervisor", "sensor")
-"""The services whose rights the access-control rules know (an identity of the same name has them)."""
 ROUTER = "router"
 """The identity of ``flagtrack router`` (and of zenohd with deploy/zenoh-router-secure.json5)."""
 
@@ -75,7 +73,8 @@ class SecurityConfig:
             ``tls/``); None: no TLS (then neither ``acl`` nor ``identity`` means anything).
         identity: the identity this process presents (default: the one service it runs).
         identities: identity -> the services whose rights it has, for identities that are not a
-            service's name (``analysis: [tracker, recorder, viewer]`` for ``flagtrack up`` on one host).
+            service's name (``analysis: [tracker, recorder, viewer]`` for ``flagtrack up`` on one host;
+            the rig checks the names against its services).
         operators: identities that may in addition send recorder and tunnel commands (and read every key).
         acl: enforce access-control rules made from the rig (default deny).
         user, password, password_file: Zenoh user/password authentication of this process (a
@@ -113,24 +112,12 @@ class SecurityConfig:
             problem = identity_problem(name)
             if problem is not None:
                 raise ConfigError(problem, key=key)
-        for name, roles in self.identities.items():
-            unknown = [role for role in roles if role not in ROLES]
-            if unknown:
-                raise ConfigError(
-                    f"unknown service {unknown[0]!r} (known: {', '.join(ROLES)})", key=f"bus.security.identities.{name}"
-                )
 
     def redacted(self) -> SecurityConfig:
         """This section as records may hold it: the password replaced by :data:`REDACTED` (paths stay)."""
         if self.password is None:
             return self
         return _replace_unchecked(self, password=REDACTED)
-
-    def roles(self, identity: str) -> tuple[str, ...]:
-        """The services whose rights ``identity`` has."""
-        if identity in self.identities:
-            return self.identities[identity]
-        return (identity,) if identity in ROLES else ()
 
     def secrets(self) -> tuple[str, ...]:
         """The password, as far as it can be read (to take it out of error messages)."""

@@ -16,6 +16,8 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from flagtrack.daemon.core.events import make_events
 from flagtrack.daemon.schema import CameraStatus, EventPacket, EventRate
 from flagtrack.daemon.services.sd_notify import beat
@@ -75,7 +77,12 @@ class RateCounter:
 
 
 class CameraService:
-    """Publishes one camera's stream until stopped or until the stream ends."""
+    """Publishes one camera's stream until stopped or until the stream ends.
+
+    ``start()`` declares the publishers; the adapter opens as ``run`` begins (a hardware camera is
+    opened ahead by the rig, so what the device refuses stops the rig before anything else opens)
+    and ``run`` closes it, whatever happens.
+    """
 
     def __init__(self, bus: Bus, cfg: CameraStreamConfig, camera: Camera) -> None:
         self.bus = bus
@@ -87,12 +94,27 @@ class CameraService:
         self.stream_id = 0  # drawn when the stream starts (EventPacket.stream_id)
         self.reached_eof = False
         self.ended = threading.Event()
+        self._publishers: tuple[Publisher, Publisher, Publisher] | None = None  # events, status, rate
+
+    def start(self) -> None:
+        """Declare the events, status and rate publishers."""
+        keys = self.bus.keys
+        self._publishers = (
+            self.bus.publisher(keys.camera_events(self.cfg.id), block=True, express=True),
+            self.bus.publisher(keys.camera_status(self.cfg.id)),
+            self.bus.publisher(keys.event_rate(self.cfg.id)),
+        )
+
+    def close(self) -> None:
+        """Close the adapter, for a camera service that will not run (it may have been opened ahead)."""
+        if not self.ended.is_set():
+            self.ended.set()
+            self.camera.close()
 
     def run(self, stop: threading.Event) -> None:
-        keys = self.bus.keys
-        events_pub = self.bus.publisher(keys.camera_events(self.cfg.id), block=True, express=True)
-        status_pub = self.bus.publisher(keys.camera_status(self.cfg.id))
-        rate_pub = self.bus.publisher(keys.event_rate(self.cfg.id))
+        if self._publishers is None:
+            raise RuntimeError(f"{self.name}: start() first")
+        events_pub, status_pub, rate_pub = self._publishers
         self.bus.declare_alive(self.name)
         self.stream_id = time.time_ns()  # names this stream: a restarted camera is another one
         info: CameraInfo | None = None
@@ -119,7 +141,7 @@ class CameraService:
             info.encoding, info.width, info.height, PacketParams(self.cfg.packet_us, self.cfg.max_packet_events)
         )
         Packetizer(info.encoding, 1, 1).push(
-            make_events([0, 1], [0, 0], [0, 0], [1, 0]), t_until_us=5000
+            make_events(np.array([0, 1]), np.array([0, 0]), np.array([0, 0]), np.array([1, 0])), t_until_us=5000
         )  # load the encoder
         if info.encoding in NATIVE_ENCODINGS:
             NativeCutter(info.encoding).push(bytes(8))  # and the word scan
@@ -144,7 +166,11 @@ class CameraService:
                 precut_horizon = max(precut_horizon, *(p.t_last_us for p in data.packets))
                 self._publish(data.packets, data.arrival_ns, info, events_pub, rate_pub, rates, native=True)
             elif data.raw is not None or data.packets:  # the device's own words: cut, not decoded
-                raw = data.raw if data.raw is not None else b"".join(p.data[p.preamble_bytes :] for p in data.packets)
+                raw = (
+                    data.raw
+                    if data.raw is not None
+                    else b"".join(p.data[p.preamble_bytes :] for p in data.packets or ())
+                )
                 if cutter is None:
                     params = PacketParams(self.cfg.packet_us, self.cfg.max_packet_events)
                     cutter = NativeCutter(info.encoding, params, info.t_offset_us)

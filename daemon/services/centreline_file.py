@@ -12,7 +12,7 @@ import numpy as np
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage
 from flagtrack.daemon.services.sd_notify import beat
-from flagtrack.daemon.transport import Bus
+from flagtrack.daemon.transport import Bus, Subscription
 from flagtrack.drivers.formats.centreline import CentrelineShapeError, CentrelineSink
 
 log = logging.getLogger(__name__)
@@ -36,6 +36,7 @@ class CentrelineFileService:
     """
 
     name = "centrelines"
+    subscription: Subscription  # (opened by start())
 
     def __init__(self, bus: Bus, path: Path, attrs: dict[str, Any], exit_after_final: bool = False) -> None:
         self.bus = bus
@@ -48,12 +49,24 @@ class CentrelineFileService:
         self.gaps: list[list[float]] = []
         self._last: tuple[int, float | None] | None = None  # (seq, t_s of its last update) of the last message
         self.problems = ProblemLog(log, "centrelines")
-        self.subscription = bus.subscribe(
-            bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000, max_bytes=512 << 20
+        self._sink: CentrelineSink | None = None
+
+    def start(self) -> None:
+        """Subscribe to the centrelines; make the file's sink (the file is created at the first update)."""
+        self.subscription = self.bus.subscribe(
+            self.bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000, max_bytes=512 << 20
         )  # a few minutes of kHz updates behind the disk
+        self._sink = CentrelineSink(self.path, self.attrs, flush_interval_s=self.write_interval_s)
+
+    def close(self) -> None:
+        """Close the sink, for a service that will not run (it leaves no file: nothing came)."""
+        if self._sink is not None:
+            self._sink.close()
 
     def run(self, stop: threading.Event) -> None:
-        sink = CentrelineSink(self.path, self.attrs, flush_interval_s=self.write_interval_s)
+        sink = self._sink
+        if sink is None:
+            raise RuntimeError(f"{self.name}: start() first")
         try:
             while not stop.is_set():
                 beat(self.name, f"{self.updates} updates written, {self.rejected} rejected")

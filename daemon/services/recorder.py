@@ -424,21 +424,23 @@ class RecorderService:
         self._last_line_s = 0.0  # monotonic time of the last centreline message (or of the end of stream)
         self._final_seen = False
         self._dropped_before = 0  # the queue's drop count when the current part began
+        self.refused_commands = 0
+        self._free_checked_s = 0.0
 
-        keys = bus.keys
-        self._packets = bus.subscribe(
+    def start(self) -> None:
+        """Subscribe to the camera's packets, the centrelines and the recorder commands."""
+        keys, cfg = self.bus.keys, self.cfg
+        self._packets = self.bus.subscribe(
             keys.camera_events(cfg.camera_id),
             EventPacket,
             capacity=cfg.max_queue_packets,
             max_bytes=cfg.max_queue_bytes,
             ring=True,
         )
-        self._lines = bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000, max_bytes=256 << 20)
-        self._commands = bus.subscribe(
+        self._lines = self.bus.subscribe(keys.centrelines(), CentrelineMessage, capacity=100_000, max_bytes=256 << 20)
+        self._commands = self.bus.subscribe(
             keys.recorder_command(), RecorderCommand, capacity=1000, max_bytes=1 << 20, origins=True
         )
-        self.refused_commands = 0
-        self._free_checked_s = 0.0
 
     def run(self, stop: threading.Event) -> None:
         keys = self.bus.keys
@@ -446,7 +448,7 @@ class RecorderService:
         self.status_pub = self.bus.publisher(keys.recorder_status())
         self.bus.declare_alive(self.name)
         if self.cfg.path:
-            self.start(self.cfg.path, self.cfg.centrelines)
+            self.start_recording(self.cfg.path, self.cfg.centrelines)
         try:
             while not stop.is_set():
                 beat(self.name, self._beat_status())
@@ -523,7 +525,7 @@ class RecorderService:
         self.problems.add("commands refused", f"{why} (on {origin})")
         self._status("error", message=why, request_id=command.request_id)
 
-    def start(self, path: str, centrelines: bool, request_id: str = "") -> None:
+    def start_recording(self, path: str, centrelines: bool, request_id: str = "") -> None:
         """Begin a recording at ``path`` (no extension; relative to the configured directory), as the
         config's ``path`` says (a command's path is checked first, see :meth:`handle`)."""
         self._start_at(recording_base(self.cfg.directory, path), centrelines, request_id)

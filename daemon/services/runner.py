@@ -1,9 +1,12 @@
 """Host services in threads of one process: startup -> main loop -> shutdown (uvicorn's shape).
 
-A service is any object with a ``name`` and ``run(stop: threading.Event) -> None`` that returns
-when ``stop`` is set (or when its own work is done, e.g. a replay at end of file). The first
-SIGINT/SIGTERM asks every service to stop; a second one forces the process out. Shutdown waits
-at most ``shutdown_timeout_s`` and says which services it abandoned.
+A service (:class:`Service`) is built without opening anything, then ``start()`` opens what it needs
+(subscriptions, publishers, devices, files) and ``run(stop)`` works until ``stop`` is set (or its own
+work is done, e.g. a replay at end of file). The runner starts every service, in the given order,
+before any runs; one that cannot start stops the group with one error (:class:`StartError`) after
+those already started are closed. The first SIGINT/SIGTERM asks every service to stop; a second
+one forces the process out. Shutdown waits at most ``shutdown_timeout_s`` and says which services
+it abandoned.
 """
 
 from __future__ import annotations
@@ -16,21 +19,52 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
+from flagtrack.daemon.errors import FlagtrackError
 from flagtrack.daemon.services import sd_notify
 
 log = logging.getLogger(__name__)
 
 
 class Service(Protocol):
-    """A long-running part of the daemon."""
+    """A long-running part of the daemon. Its constructor stores its configuration and opens nothing."""
 
     name: str
+
+    def start(self) -> None:
+        """Open what :meth:`run` needs (subscriptions, publishers, devices, files); raise if it cannot,
+        having released what it opened itself. Called once, before ``run``, by the runner."""
+        ...
 
     def run(self, stop: threading.Event) -> None:
         """Work until ``stop`` is set or the work is done; release everything before returning."""
         ...
+
+
+@runtime_checkable
+class Closable(Protocol):
+    """A service whose :meth:`Service.start` opens more than bus entities (a device, a file), which
+    the bus does not close with itself: ``close()`` releases them when ``run`` will not come (another
+    service failed to start). Closing twice, or after ``run``, does nothing."""
+
+    def close(self) -> None: ...
+
+
+class StartError(FlagtrackError):
+    """A service could not start; the services started before it were closed and none ran.
+
+    Args:
+        service: the service's name.
+        cause: what its ``start()`` raised.
+    """
+
+    def __init__(self, service: str, cause: BaseException) -> None:
+        self.service = service
+        what = str(cause).strip().splitlines()[0] if str(cause).strip() else type(cause).__name__
+        if not isinstance(cause, FlagtrackError):
+            what = f"{type(cause).__name__}: {what}"
+        super().__init__(f"the {service} service could not start: {what}")
 
 
 class StopEvent(threading.Event):
@@ -111,11 +145,45 @@ class ServiceGroup:
             self.stop.request(f"the {service.name} service finished")
 
     def start(self) -> None:
-        """Start every service in its own thread (in the given order)."""
+        """Start every service (``start()``, in the given order), then run each in its own thread.
+
+        A stop requested while they start (a signal) closes those started and runs none.
+
+        Raises:
+            StartError: a service's ``start()`` failed; those started before it are closed, none runs.
+        """
+        started: list[Service] = []
+        for service in self.services:
+            if self.stop.is_set():
+                break
+            try:
+                service.start()
+            except Exception as exc:
+                self._close(started)
+                self.stop.request(f"the {service.name} service could not start: {exc}")
+                raise StartError(service.name, exc) from exc
+            except BaseException:
+                self._close(started)
+                raise
+            started.append(service)
+        if self.stop.is_set():
+            self._close(started)
+            return
         for service in self.services:
             thread = threading.Thread(target=self._run_one, args=(service,), name=f"svc-{service.name}", daemon=True)
             self._threads[service.name] = thread
             thread.start()
+
+    @staticmethod
+    def _close(started: Sequence[Service]) -> None:
+        """Close services that started but will not run, the last started first."""
+        for service in reversed(started):
+            if not isinstance(service, Closable):
+                continue
+            try:
+                service.close()
+            except Exception as exc:  # noqa: BLE001 - the start failure is the error to report
+                log.warning("closing service %s: %s", service.name, exc)
 
     def wait(self, timeout_s: float | None = None) -> bool:
         """Wait until stop is requested or every service returned; True if all returned."""
@@ -184,11 +252,15 @@ def run_services(
     on_force: Callable[[], None] | None = None,
     on_service_end: Callable[[str], object] | None = None,
 ) -> RunReport:
-    """Run services until a signal, a failure, or a finishing service; then shut down.
+    """Start the services (in order), run them until a signal, a failure, or a finishing service;
+    then shut down.
 
     ``on_service_end``: see :class:`ServiceGroup` (``up`` passes the bus's ``undeclare_alive``).
     Under systemd (``$NOTIFY_SOCKET``), READY/WATCHDOG/STATUS follow the services' own
     :func:`sd_notify.beat` calls (:mod:`.sd_notify`).
+
+    Raises:
+        StartError: a service could not start (those started before it are closed; none ran).
     """
     group = ServiceGroup(services, stop_when_any_finishes, on_service_end)
     signals = handle_signals and threading.current_thread() is threading.main_thread()

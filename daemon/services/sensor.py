@@ -18,7 +18,7 @@ import numpy as np
 
 from flagtrack.daemon.schema import SensorSamples
 from flagtrack.daemon.services.sd_notify import beat
-from flagtrack.daemon.transport import Bus
+from flagtrack.daemon.transport import Bus, Publisher
 from flagtrack.drivers.sensor.base import PointSensor, SensorReading
 from flagtrack.drivers.sensor.setup import SensorConfig
 
@@ -50,9 +50,17 @@ class SensorService:
         self._pending_missing = 0
         self._seq = 0
         self._last_log_s = 0.0
+        self._publisher: Publisher | None = None
+
+    def start(self) -> None:
+        """Declare the samples publisher (the driver opens in ``run``, and reopens there after a failure:
+        a sensor that cannot be opened never stops the rig)."""
+        self._publisher = self.bus.publisher(self.bus.keys.sensor_samples(self.cfg.id))
 
     def run(self, stop: threading.Event) -> None:
-        publisher = self.bus.publisher(self.bus.keys.sensor_samples(self.cfg.id))
+        publisher = self._publisher
+        if publisher is None:
+            raise RuntimeError(f"{self.name}: start() first")
         self.bus.declare_alive(self.name)
         sensor: PointSensor | None = None
         retry_at = 0.0
@@ -133,7 +141,7 @@ class SensorService:
         except Exception as exc:  # noqa: BLE001 - closing a dead port
             log.debug("sensor close failed: %s", exc)
 
-    def _publish(self, publisher) -> None:  # noqa: ANN001
+    def _publish(self, publisher: Publisher) -> None:
         readings, self._pending = self._pending, []
         missing = self._pending_missing + sum(r.missing for r in readings)
         self._pending_missing = 0

@@ -36,7 +36,7 @@ from flagtrack.daemon.services.lost_count import LostCount
 from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
 from flagtrack.daemon.tracking.pipeline import TrackerPipeline
-from flagtrack.daemon.transport import Bus
+from flagtrack.daemon.transport import Bus, Publisher, Subscription
 from flagtrack.drivers.formats.packets import decode_packet
 
 log = logging.getLogger(__name__)
@@ -112,6 +112,9 @@ class TrackerService:
     """Tracks one camera live. ``tracker_factory`` builds a fresh core Tracker (one per stream)."""
 
     name = "tracker"
+    packets_sub: Subscription  # (opened by start())
+    _lines_pub: Publisher
+    _status_pub: Publisher
 
     def __init__(self, bus: Bus, cfg: TrackerServiceConfig, tracker_factory: Any, units: str = "px") -> None:
         self.bus = bus
@@ -137,13 +140,19 @@ class TrackerService:
         self._pending_since = 0.0
         self._seq_out = 0
         self._pipeline: TrackerPipeline | None = None  # the chain's worker thread, made on first use
-        self.packets_sub = bus.subscribe(
-            bus.keys.camera_events(cfg.camera_id),
+
+    def start(self) -> None:
+        """Subscribe to the camera's packets; declare the centreline and status publishers."""
+        keys = self.bus.keys
+        self.packets_sub = self.bus.subscribe(
+            keys.camera_events(self.cfg.camera_id),
             EventPacket,
-            capacity=cfg.queue_packets,
-            max_bytes=cfg.queue_bytes,
+            capacity=self.cfg.queue_packets,
+            max_bytes=self.cfg.queue_bytes,
             ring=True,
         )
+        self._lines_pub = self.bus.publisher(keys.centrelines(), block=True, express=True)
+        self._status_pub = self.bus.publisher(keys.tracker_status())
 
     def warm_up(self) -> None:
         """Load the compiled kernels before the first packet (see :func:`warm_up_kernels`)."""
@@ -151,10 +160,7 @@ class TrackerService:
 
     def run(self, stop: threading.Event) -> None:
         self.warm_up()
-        keys = self.bus.keys
-        packets = self.packets_sub
-        self._lines_pub = self.bus.publisher(keys.centrelines(), block=True, express=True)
-        status_pub = self.bus.publisher(keys.tracker_status())
+        packets, status_pub = self.packets_sub, self._status_pub
         self.bus.declare_alive(self.name)
         last_status = time.monotonic()
         window = {"events": 0, "updates": 0, "t": last_status}

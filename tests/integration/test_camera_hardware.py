@@ -73,6 +73,7 @@ def test_service_publishes_the_sensor_events_and_reports_the_stall(
         status_sub = sub_bus.subscribe(sub_bus.keys.camera_status("cam0"), CameraStatus)
         wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"), cam_bus.keys.camera_status("cam0"))
         service = CameraService(cam_bus, CameraStreamConfig(), camera)
+        service.start()
         failure: list[BaseException] = []
 
         def run() -> None:

@@ -34,6 +34,7 @@ def replay_over_bus(path: Path, speed: float = 0.0) -> tuple[list[EventPacket], 
         status_sub = sub_bus.subscribe(keys.camera_status("cam0"), CameraStatus)
         wait_subscribed(cam_bus, keys.camera_events("cam0"), keys.event_rate("cam0"), keys.camera_status("cam0"))
         service = CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(ReplayConfig(path, speed=speed)))
+        service.start()
         service.run(threading.Event())
         packets, statuses = [], []
         while (status := status_sub.recv(timeout_s=5.0)) is not None:

@@ -47,6 +47,7 @@ def test_messages_that_do_not_fit_the_file_are_counted_and_the_stream_is_written
         Bus(BusConfig(namespace="flagtrack/cf", connect=(endpoint,))) as source,
     ):
         service = CentrelineFileService(bus, path, {"length": 200.0}, exit_after_final=True)
+        service.start()
         thread = threading.Thread(target=service.run, args=(threading.Event(),))
         thread.start()
         wait_subscribed(source, source.keys.centrelines())
@@ -87,9 +88,11 @@ def test_the_recorder_and_the_centreline_file_write_the_same_attributes(tmp_path
         service = CentrelineFileService(
             bus, tmp_path / "live.h5", {**processing, "input_file": "flag.raw"}, exit_after_final=True
         )
+        service.start()
         recorder = RecorderService(
             bus, RecorderConfig(directory=tmp_path, path="point_003", centrelines=True), centreline_attrs=processing
         )
+        recorder.start()
         stop = threading.Event()
         threads = [threading.Thread(target=s.run, args=(stop,)) for s in (service, recorder)]
         for thread in threads:

@@ -101,6 +101,7 @@ packets = packets_of(events, 400_000)
 with Bus(BusConfig(namespace="flagtrack/disk", listen=(f"tcp/127.0.0.1:{free_port()}",))) as bus:
     cfg = RecorderConfig(directory=disk, path="full", min_free_mb=0.0, flush_interval_s=0.01)
     recorder = RecorderService(bus, cfg)
+    recorder.start()
     statuses = bus.subscribe(bus.keys.recorder_status(), RecorderStatus)
     stop = threading.Event()
     thread = threading.Thread(target=recorder.run, args=(stop,), daemon=True)

@@ -28,6 +28,7 @@ def test_the_recorder_records_each_gap_with_its_times(tmp_path: Path) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with Bus(BusConfig(namespace="flagtrack/gap", listen=(endpoint,))) as bus:
         recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, path="g", centrelines=True))
+        recorder.start()
         stop = threading.Event()
         thread = threading.Thread(target=recorder.run, args=(stop,))
         thread.start()
@@ -63,6 +64,7 @@ def test_the_centreline_file_records_missing_messages_as_a_gap(tmp_path: Path) -
         Bus(BusConfig(namespace="flagtrack/cg", connect=(endpoint,))) as source,
     ):
         service = CentrelineFileService(bus, path, {"length": 200.0}, exit_after_final=True)
+        service.start()
         thread = threading.Thread(target=service.run, args=(threading.Event(),))
         thread.start()
         wait_subscribed(source, source.keys.centrelines())

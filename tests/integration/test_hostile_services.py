@@ -106,9 +106,11 @@ def services(tmp_path: Path) -> Iterator[tuple[Bus, RecorderService, TrackerServ
     params = TRACKING.tracker_params()
     with Bus(BusConfig(namespace="flagtrack/hostile2")) as bus:
         recorder = RecorderService(bus, RecorderConfig(directory=tmp_path / "rec", path="run"))
+        recorder.start()
         tracker = TrackerService(
             bus, TrackerServiceConfig(status_interval_s=0.2), lambda: Tracker(params, sensor_size=(640, 480))
         )
+        tracker.start()
         tracker.warm_up()
         stop = threading.Event()
         threads = [threading.Thread(target=s.run, args=(stop,), daemon=True) for s in (recorder, tracker)]

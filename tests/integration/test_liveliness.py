@@ -29,6 +29,9 @@ class Heartbeat:
     def __init__(self, bus: Bus) -> None:
         self.bus = bus
 
+    def start(self) -> None:
+        pass
+
     def run(self, stop: threading.Event) -> None:
         self.bus.declare_alive(self.name)
         stop.wait()

@@ -97,6 +97,7 @@ def _publish_all(source: Path, speed: float = 0.0, slice_us: int = 1000) -> list
         wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"))
         config = ReplayConfig(source, speed=speed, width=640, height=480, slice_us=slice_us)
         camera = CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(config))
+        camera.start()
         camera.run(threading.Event())
         packets: list[EventPacket] = []
 

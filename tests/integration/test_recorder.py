@@ -50,12 +50,14 @@ def run_rig(source: Path, rec_cfg: RecorderConfig, speed: float, during=None, re
         Bus(BusConfig(namespace="flagtrack/rec", connect=(endpoint,))) as cam_bus,
     ):
         recorder = RecorderService(rec_bus, rec_cfg, {"test": True})
+        recorder.start()
         stop = threading.Event()
         thread = threading.Thread(target=recorder.run, args=(stop,))
         thread.start()
         wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"), cam_bus.keys.recorder_command())
         replay_cfg = ReplayConfig(source, speed=speed, **(replay or {}))
         camera = CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(replay_cfg))
+        camera.start()
         cam_thread = threading.Thread(target=camera.run, args=(threading.Event(),))
         cam_thread.start()
         if during is not None:
@@ -132,6 +134,7 @@ def test_malformed_packets_are_counted_not_written(tmp_path: Path) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with Bus(BusConfig(namespace="flagtrack/rec", listen=(endpoint,))) as bus:
         recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, path="m"))
+        recorder.start()
         stop = threading.Event()
         thread = threading.Thread(target=recorder.run, args=(stop,))
         thread.start()
@@ -196,6 +199,7 @@ def test_packets_and_commands_that_cannot_be_carried_out_stop_nothing(
         Bus(BusConfig(namespace="flagtrack/rec", listen=(endpoint,))) as bus,
     ):
         recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, path="m"))
+        recorder.start()
         statuses = bus.subscribe(bus.keys.recorder_status(), RecorderStatus)
         stop = threading.Event()
         thread = threading.Thread(target=recorder.run, args=(stop,))
@@ -235,7 +239,7 @@ def offline(path: Path, config) -> CentrelineBatch:
     return reconstruct(path, config)
 
 
-def test_a_restarted_camera_goes_to_a_new_file_and_the_last_centrelines_are_kept(tmp_path: Path) -> None:
+def test_a_restarted_camera_goes_to_a_new_file_and_the_last_centrelines_are_kept(tmp_path: Path) -> None:  # noqa: PLR0915 - one scenario, in the order it happens
     """The camera restarts mid-recording (its packets number from 0 again, its times too): the first
     stream stays in run.raw, the second goes to run_stream2.raw, each exactly as sent, with clean
     sidecars linked to each other; each stream's centrelines go to its own file, and the recorder,
@@ -258,11 +262,13 @@ def test_a_restarted_camera_goes_to_a_new_file_and_the_last_centrelines_are_kept
         Bus(BusConfig(namespace="flagtrack/rs", connect=(endpoint,))) as cam_bus,
     ):
         tracker = TrackerService(svc_bus, TrackerServiceConfig(), lambda: Tracker(params, sensor_size=(640, 480)))
+        tracker.start()
         recorder = RecorderService(
             svc_bus,
             RecorderConfig(directory=tmp_path / "out", path="run", centrelines=True),
             exit_at_end_of_stream=True,
         )
+        recorder.start()
         lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=100_000)
         stop = threading.Event()
         threads = [threading.Thread(target=s.run, args=(stop,)) for s in (tracker, recorder)]
@@ -392,7 +398,8 @@ def test_packets_a_full_queue_drops_are_in_the_sidecar_and_logged(
         Bus(BusConfig(namespace="flagtrack/rfull", listen=(endpoint,))) as bus,
     ):
         recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, max_queue_packets=10))
-        recorder.start("q", centrelines=False)
+        recorder.start()
+        recorder.start_recording("q", centrelines=False)
         wait_subscribed(bus, bus.keys.camera_events("cam0"))
         publish(bus.publisher(bus.keys.camera_events("cam0")), packets)
         assert wait_for(lambda: recorder._packets.channel.dropped == 50)
@@ -424,7 +431,8 @@ def test_the_recorder_queue_is_bounded_by_bytes(tmp_path: Path) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with Bus(BusConfig(namespace="flagtrack/rbytes", listen=(endpoint,))) as bus:
         recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, max_queue_bytes=100_000))
-        recorder.start("b", centrelines=False)
+        recorder.start()
+        recorder.start_recording("b", centrelines=False)
         wait_subscribed(bus, bus.keys.camera_events("cam0"))
         pub = bus.publisher(bus.keys.camera_events("cam0"))
         sizes = []
@@ -471,6 +479,7 @@ def test_a_duplicated_packet_is_dropped_and_the_file_stays_one_stream(tmp_path: 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with Bus(BusConfig(namespace="flagtrack/rdup", listen=(endpoint,))) as bus:
         recorder = RecorderService(bus, RecorderConfig(directory=tmp_path, path="d"))
+        recorder.start()
         stop = threading.Event()
         thread = threading.Thread(target=recorder.run, args=(stop,))
         thread.start()

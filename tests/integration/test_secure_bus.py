@@ -218,9 +218,11 @@ def test_a_valid_identity_cannot_send_what_is_not_its_own(pki: Pki, tmp_path: Pa
         }
         keys = bus["camera"].keys
         recorder = RecorderService(bus["recorder"], RecorderConfig(directory=tmp_path / "rec"))
+        recorder.start()
         tracker = TrackerService(
             bus["tracker"], TrackerServiceConfig(status_interval_s=0.2), lambda: Tracker(params, sensor_size=(640, 480))
         )
+        tracker.start()
         tracker.warm_up()
         monitor = BusMonitor(bus["supervisor"], "cam0", OnsetParams(), ())
         seen = bus["supervisor"].subscribe(keys.centrelines(), CentrelineMessage)  # all that reach the supervisor
@@ -302,6 +304,7 @@ def test_a_recorder_command_naming_a_path_outside_its_folder_is_refused(
             stack.enter_context(Bus(rig.bus_config_for([n]))) for n in ("recorder", "supervisor")
         )
         recorder = RecorderService(recorder_bus, RecorderConfig(directory=rec))
+        recorder.start()
         start(stack, recorder)
         keys = supervisor.keys
         statuses = supervisor.subscribe(keys.recorder_status(), RecorderStatus)

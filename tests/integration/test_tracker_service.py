@@ -51,6 +51,7 @@ def running_tracker(config: TrackingConfig, namespace: str) -> Iterator[tuple[Bu
         service = TrackerService(
             trk_bus, TrackerServiceConfig(status_interval_s=0.2), lambda: Tracker(params, sensor_size=(640, 480))
         )
+        service.start()
         stop = threading.Event()
         thread = threading.Thread(target=service.run, args=(stop,))
         thread.start()
@@ -73,9 +74,9 @@ def live(path: Path, config: TrackingConfig, speed: float = 0.0) -> tuple[Centre
         lines = cam_bus.subscribe(cam_bus.keys.centrelines(), CentrelineMessage, capacity=1_000_000)
         status = cam_bus.subscribe(cam_bus.keys.tracker_status(), TrackerStatus)
         wait_subscribed(service.bus, cam_bus.keys.centrelines(), cam_bus.keys.tracker_status())
-        CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(ReplayConfig(path, speed=speed))).run(
-            threading.Event()
-        )
+        camera = CameraService(cam_bus, CameraStreamConfig(), ReplayCamera(ReplayConfig(path, speed=speed)))
+        camera.start()
+        camera.run(threading.Event())
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
         messages = received(lines)
         stop_service()
@@ -299,6 +300,7 @@ def test_packets_a_full_queue_drops_are_counted_reported_and_logged(caplog: pyte
             TrackerServiceConfig(status_interval_s=0.2, queue_packets=10),
             lambda: Tracker(params, sensor_size=(640, 480)),
         )
+        service.start()
         status = cam_bus.subscribe(cam_bus.keys.tracker_status(), TrackerStatus, capacity=1000)
         wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"))
         wait_subscribed(trk_bus, cam_bus.keys.tracker_status())
@@ -337,6 +339,7 @@ def test_the_tracker_queue_is_bounded_by_bytes_and_keeps_the_newest() -> None:
         service = TrackerService(
             trk_bus, TrackerServiceConfig(queue_bytes=100_000), lambda: Tracker(params, sensor_size=(640, 480))
         )
+        service.start()
         wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"))
         pub = cam_bus.publisher(cam_bus.keys.camera_events("cam0"))
         sizes = []
@@ -487,6 +490,7 @@ def test_a_run_of_queued_packets_on_two_threads_gives_the_updates_of_one(tmp_pat
         with Bus(BusConfig(namespace="flagtrack/two")) as bus:
             config = TrackerServiceConfig(batch_updates=1 << 30)
             service = TrackerService(bus, config, lambda: Tracker(params, sensor_size=(640, 480)))
+            service.start()
             service._lines_pub = bus.publisher(bus.keys.centrelines())
             added: list[CentrelineBatch] = []
             queue_updates = service._add
@@ -536,6 +540,7 @@ def test_a_chunk_the_core_cannot_track_is_counted_and_a_fresh_tracker_goes_on(
         service = TrackerService(
             bus, TrackerServiceConfig(batch_updates=1 << 30), lambda: _FailingTracker(params, sensor_size=(640, 480))
         )
+        service.start()
         service._lines_pub = bus.publisher(bus.keys.centrelines())
         added: list[CentrelineBatch] = []
         queue_updates = service._add

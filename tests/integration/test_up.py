@@ -122,6 +122,8 @@ from flagtrack.daemon.services.runner import run_services
 
 class Stubborn:
     name = "stubborn"
+    def start(self):
+        pass
     def run(self, stop):
         print("ready", flush=True)  # the signal handlers are installed
         stop.wait()

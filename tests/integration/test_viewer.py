@@ -26,6 +26,7 @@ def test_viewer_logs_events_and_centrelines_to_rrd(tmp_path: Path) -> None:
         Bus(BusConfig(namespace="flagtrack/view", connect=(endpoint,))) as source,
     ):
         viewer = ViewerService(bus, ViewerConfig(sink="rrd", rrd_path=rrd, geometry_rate_hz=1000.0))
+        viewer.start()
         stop = threading.Event()
         thread = threading.Thread(target=viewer.run, args=(stop,))
         thread.start()
@@ -153,6 +154,7 @@ def test_messages_the_viewer_cannot_show_are_counted_and_it_goes_on(tmp_path: Pa
         Bus(BusConfig(namespace="flagtrack/vbad", connect=(endpoint,))) as source,
     ):
         viewer = ViewerService(bus, ViewerConfig(sink="rrd", rrd_path=rrd, geometry_rate_hz=5.0))
+        viewer.start()
         stop = threading.Event()
         thread = threading.Thread(target=viewer.run, args=(stop,))
         thread.start()

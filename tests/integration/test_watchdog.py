@@ -101,6 +101,9 @@ def test_a_hung_recorder_loop_stops_the_pings_while_the_process_lives(
         class Ender:  # another service of the process, beating on; its end ends the group
             name = "test"
 
+            def start(self) -> None:
+                pass
+
             def run(self, stop: threading.Event) -> None:
                 while not stop_runner.wait(0.01):
                     beat(self.name)

@@ -12,9 +12,10 @@ from typing import Any
 import pytest
 
 from flagtrack.daemon.core.onset import OnsetParams
+from flagtrack.daemon.rig.access import role_rights
 from flagtrack.daemon.rig.build import BusSpeedSource
 from flagtrack.daemon.schema import Keys
-from flagtrack.daemon.security.acl import Rights, role_rights
+from flagtrack.daemon.security.acl import Rights
 from flagtrack.daemon.services.recorder import RecorderConfig, RecorderService
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor
 from flagtrack.daemon.services.tracker import TrackerService, TrackerServiceConfig
@@ -97,6 +98,7 @@ def test_the_trackers_keys() -> None:
     bus = RecordingBus()
     service = TrackerService(bus, TrackerServiceConfig(), lambda: None)
     service.warm_up = lambda: None  # type: ignore[method-assign]
+    service.start()
     service.run(stopped())
     covered(bus, rights(bus, "tracker"))
     assert bus.published == {bus.keys.centrelines(), bus.keys.tracker_status()}
@@ -104,14 +106,18 @@ def test_the_trackers_keys() -> None:
 
 def test_the_recorders_keys(tmp_path: Path) -> None:
     bus = RecordingBus()
-    RecorderService(bus, RecorderConfig(directory=tmp_path)).run(stopped())
+    recorder = RecorderService(bus, RecorderConfig(directory=tmp_path))
+    recorder.start()
+    recorder.run(stopped())
     covered(bus, rights(bus, "recorder"))
     assert bus.keys.recorder_command() in bus.subscribed and bus.tokens == {bus.keys.alive("recorder")}
 
 
 def test_the_viewers_keys() -> None:
     bus = RecordingBus()
-    ViewerService(bus, ViewerConfig(sink="none")).run(stopped())
+    viewer = ViewerService(bus, ViewerConfig(sink="none"))
+    viewer.start()
+    viewer.run(stopped())
     covered(bus, rights(bus, "viewer"))
     assert bus.published == set()
 
@@ -126,5 +132,5 @@ def test_the_supervisors_watch(sensor: str | None) -> None:
 
 def test_a_simulated_camera_follows_the_tunnel_state() -> None:
     bus = RecordingBus()
-    BusSpeedSource(bus)  # type: ignore[arg-type]
+    BusSpeedSource(bus)()  # type: ignore[arg-type]  # (it subscribes at its first call, in the camera's loop)
     covered(bus, rights(bus, "camera"))

@@ -10,10 +10,11 @@ from pathlib import Path
 import pytest
 
 from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.rig.access import access_control, identity_rights
 from flagtrack.daemon.rig.config import RigConfig, load_rig
 from flagtrack.daemon.schema import Keys
 from flagtrack.daemon.security import certs
-from flagtrack.daemon.security.acl import access_control, describe, identity_rights
+from flagtrack.daemon.security.acl import describe
 from flagtrack.daemon.security.config import REDACTED, SecurityConfig, TlsFiles
 from flagtrack.daemon.transport import zenoh_settings
 from flagtrack.daemon.typed_yaml import from_mapping

@@ -11,11 +11,18 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from flagtrack.daemon.services.runner import ServiceGroup, run_services
+from flagtrack.daemon.services.runner import ServiceGroup, StartError, run_services
+
+
+class Bare:
+    """Opens nothing (a service's start() opens its subscriptions, devices, files)."""
+
+    def start(self) -> None:
+        pass
 
 
 @dataclass
-class Looping:
+class Looping(Bare):
     name: str
     stopped: bool = False
     ticks: int = 0
@@ -27,7 +34,7 @@ class Looping:
 
 
 @dataclass
-class Finishing:
+class Finishing(Bare):
     name: str
     after: int = 3
     done: list = field(default_factory=list)
@@ -38,7 +45,7 @@ class Finishing:
 
 
 @dataclass
-class Failing:
+class Failing(Bare):
     name: str
 
     def run(self, stop: threading.Event) -> None:
@@ -46,7 +53,7 @@ class Failing:
 
 
 @dataclass
-class Stubborn:
+class Stubborn(Bare):
     name: str
     release: threading.Event = field(default_factory=threading.Event)
 
@@ -66,6 +73,38 @@ def test_failure_stops_everything_and_is_reported() -> None:
     report = run_services([loop, Failing("camera")], handle_signals=False)
     assert loop.stopped
     assert isinstance(report.errors["camera"], RuntimeError)
+
+
+@dataclass
+class Opening:
+    """Opens a device in start() (``fail``: cannot), closes it in close(); records what it was asked."""
+
+    name: str
+    fail: str = ""
+    calls: list[str] = field(default_factory=list)
+
+    def start(self) -> None:
+        self.calls.append("start")
+        if self.fail:
+            raise OSError(self.fail)
+
+    def close(self) -> None:
+        self.calls.append("close")
+
+    def run(self, stop: threading.Event) -> None:
+        self.calls.append("run")
+
+
+def test_a_service_that_cannot_start_stops_the_group_with_one_line_and_closes_those_started() -> None:
+    tunnel, quiet = Opening("supervisor"), Looping("recorder")
+    broken = Opening("viewer", fail="[Errno 98] Address already in use\n(the port of viewer.grpc_port)")
+    after = Opening("camera/cam0")
+    with pytest.raises(StartError) as caught:
+        run_services([tunnel, quiet, broken, after], handle_signals=False)
+    assert str(caught.value) == "the viewer service could not start: OSError: [Errno 98] Address already in use"
+    assert caught.value.service == "viewer" and isinstance(caught.value.__cause__, OSError)
+    assert tunnel.calls == ["start", "close"] and broken.calls == ["start"] and after.calls == []
+    assert quiet.ticks == 0 and not quiet.stopped  # started (it opens nothing to close), never run
 
 
 def test_shutdown_names_services_that_do_not_stop() -> None:
@@ -153,7 +192,7 @@ def test_signal_handlers_are_restored_after_the_run() -> None:
         seen: dict[int, object] = {}
 
         @dataclass
-        class Peeking:
+        class Peeking(Bare):
             name: str = "camera"
 
             def run(self, stop: threading.Event) -> None:

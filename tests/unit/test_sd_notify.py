@@ -142,6 +142,9 @@ class Beating:
     ticks: int = 0
     hanging: bool = False
 
+    def start(self) -> None:
+        pass
+
     def run(self, stop: threading.Event) -> None:
         while not stop.wait(0.002) and not self.done.is_set():
             sd_notify.beat(self.name, f"{self.ticks} ticks")

@@ -31,12 +31,13 @@ __all__ = ["FlagGeometry", "SupervisorService"]  # FlagGeometry: where the rig b
 
 
 class SupervisorService:
-    """Runs the configured mode with a tunnel opened (not started) by the caller.
+    """Runs the configured mode with the tunnel ``open_tunnel`` opens (not started) when it starts.
 
     Args:
         bus: the bus.
         cfg: the supervisor section.
-        tunnel: a :class:`~flagtrack.drivers.tunnel.safe.SafeTunnel` (or any WindTunnel with start/abort/close).
+        open_tunnel: opens the tunnel, called by :meth:`start`: a
+            :class:`~flagtrack.drivers.tunnel.safe.SafeTunnel` (or any WindTunnel with start/abort/close).
         camera_id: the camera watched.
         flag: the flag's geometry for the metrics.
         rig_snapshot: the whole rig config, stored in the run's start record.
@@ -50,21 +51,39 @@ class SupervisorService:
         self,
         bus: Bus,
         cfg: SupervisorConfig,
-        tunnel: Any,
+        open_tunnel: Callable[[], Any],
         camera_id: str,
         flag: FlagGeometry,
         rig_snapshot: dict[str, Any],
         resume_dir: Path | None = None,
         sensor: Any = None,
     ) -> None:
-        self.bus, self.cfg, self.tunnel, self.flag = bus, cfg, tunnel, flag
+        self.bus, self.cfg, self.flag = bus, cfg, flag
+        self._open_tunnel, self.camera_id = open_tunnel, camera_id
+        self.tunnel: Any = None  # opened by start()
+        self.monitor: BusMonitor
         self.rig_snapshot = rig_snapshot
         self.resume_dir = resume_dir
         self.sensor = sensor
-        self.monitor = BusMonitor(bus, camera_id, cfg.onset, cfg.required, None if sensor is None else sensor.id)
         self.session: Session | None = None
         self.procedure: SweepRunner | FeedbackLoop | Monitoring | None = None
         self._observers: list[Callable[[SupervisorState], None]] = []
+
+    def start(self) -> None:
+        """Open the tunnel (not started: ``run`` starts it) and the bus watch (rates, centrelines,
+        recorder, sensor samples, liveliness); a watch that fails closes the tunnel again."""
+        self.tunnel = self._open_tunnel()
+        try:
+            sensor_id = None if self.sensor is None else self.sensor.id
+            self.monitor = BusMonitor(self.bus, self.camera_id, self.cfg.onset, self.cfg.required, sensor_id)
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Close the tunnel, for a supervisor that will not run (``run`` ends at a safe state itself)."""
+        if self.tunnel is not None:
+            self.tunnel.close()
 
     def add_observer(self, observer: Callable[[SupervisorState], None]) -> None:
         """Call ``observer`` with every state the supervisor publishes, in its thread (a command draws

@@ -32,8 +32,13 @@ class ViewerService:
         self.updates = 0
         self.unusable = 0  # messages (or frames) that could not be logged
         self.problems = ProblemLog(log, "viewer")
-        keys = bus.keys
-        self.subs: dict[str, Any] = {
+        self.subs: dict[str, Any] = {}
+        self._rec: Any = None  # the Rerun recording, opened by start()
+
+    def start(self) -> None:
+        """Subscribe to the topics shown; open the recording (a viewer spawned, a server, an .rrd file)."""
+        keys, cfg, bus = self.bus.keys, self.cfg, self.bus
+        self.subs = {
             # a live view: when it falls behind, the oldest go (and at most this much memory waits)
             "centrelines": bus.subscribe(
                 keys.centrelines(), CentrelineMessage, capacity=100_000, ring=True, max_bytes=256 << 20
@@ -45,12 +50,21 @@ class ViewerService:
             "tunnel": bus.subscribe(keys.tunnel_state(), TunnelState, capacity=1000, ring=True),
             "supervisor": bus.subscribe(keys.supervisor_state(), SupervisorState, capacity=1000, ring=True),
         }
+        self._rec, self.description = open_recording(self.cfg)
+        log.info("viewer: %s", self.description)
+
+    def close(self) -> None:
+        """Close the recording, for a viewer that will not run (``run`` closes it itself)."""
+        rec, self._rec = self._rec, None
+        if rec is not None:
+            rec.flush()
+            close_recording(rec)
 
     def run(self, stop: threading.Event) -> None:
-        subs = self.subs
+        subs, rec = self.subs, self._rec
+        if rec is None:
+            raise RuntimeError(f"{self.name}: start() first")
         self.bus.declare_alive(self.name)
-        rec, self.description = open_recording(self.cfg)
-        log.info("viewer: %s", self.description)
         logger = RerunLogger(rec, self.cfg, self.problems)
         handlers = (
             ("centrelines", logger.centrelines),
@@ -77,8 +91,7 @@ class ViewerService:
             self._show(logger.frame, time.monotonic(), True)
         finally:
             self.problems.flush(force=True)
-            rec.flush()
-            close_recording(rec)
+            self.close()
 
     def _show(self, step: Any, *args: Any) -> Any:
         """Run one logging step; a message Rerun (or the logger) cannot take is counted, not fatal."""

@@ -1,0 +1,357 @@
+"""The service table: every service a rig can run, each described once.
+
+An entry (:class:`ServiceSpec`) says, for one service: its name (the ``services:`` entry of a rig,
+the ``flagtrack <name>`` command, the identity the access-control rules give its rights to), the
+rig sections it reads, the bus keys it publishes and subscribes to and the liveliness token it
+declares (the access-control rules are made from these, :mod:`.access`), how it is checked (before
+anything opens), prepared (slow one-off work, before anything runs) and built (constructed, opening
+nothing). The runner then starts every service in table order (``start()``) before any runs, so
+the listeners come before the camera: every subscription exists before the first packet.
+
+Adding a service: its module under ``daemon/services/`` (a class with ``start`` and ``run``, see
+:class:`~flagtrack.daemon.services.runner.Service`), its section in ``RigSections``, its keys in
+:class:`~flagtrack.daemon.schema.Keys`, and one entry here with its build function.
+
+This module imports only the standard library at load time (the command line lists the services
+without loading them): each step imports its service's module when it runs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.rig.context import Build, Preparation
+    from flagtrack.daemon.rig.sections import RigSections
+    from flagtrack.daemon.services.runner import Service
+
+
+@dataclass(frozen=True)
+class ServiceSpec:
+    """One service of the table.
+
+    Attributes:
+        name: the ``services:`` entry, the command ``flagtrack <name>``, the access-control identity.
+        help: the one line of that command's help.
+        sections: the ``RigSections`` fields it reads (its own first).
+        needs: sections that must be given for it to run (each is ``None`` when absent).
+        publishes, subscribes: the :class:`~flagtrack.daemon.schema.Keys` methods of the keys it
+            publishes and subscribes to, as ``name()``, ``name(camera)`` (one key per camera) or
+            ``name(sensor)`` (one per point sensor).
+        alive: its liveliness token's service part (``{camera}``, ``{sensor}``: one per id).
+        watches: it watches every service's liveliness.
+        build: constructs it (opening nothing) from :class:`~flagtrack.daemon.rig.context.Build`.
+        check: what it needs of the rig that a file or a setting can say, opening and creating nothing
+            (raises ``ConfigError`` naming the key and the rig file).
+        prepare: its slow one-off work before the rig runs (kernels, imports), with
+            :class:`~flagtrack.daemon.rig.context.Preparation`.
+        finishes: whether its normal end ends the rig (otherwise the rig runs until stopped).
+        stop_s: how long its stop may take at most (the rig waits that long before abandoning it).
+    """
+
+    name: str
+    help: str
+    sections: tuple[str, ...]
+    build: Callable[[Build], Service]
+    publishes: tuple[str, ...] = ()
+    subscribes: tuple[str, ...] = ()
+    alive: str = ""
+    watches: bool = False
+    needs: tuple[str, ...] = ()
+    check: Callable[[RigSections], None] | None = None
+    prepare: Callable[[Preparation], None] | None = None
+    finishes: Callable[[RigSections], bool] | None = None
+    stop_s: Callable[[RigSections], float] | None = None
+
+
+# -- supervisor ---------------------------------------------------------------------------------
+
+
+def _build_supervisor(b: Build) -> Service:
+    from flagtrack.daemon.services.supervisor.service import FlagGeometry, SupervisorService  # SciPy: here only
+    from flagtrack.drivers.tunnel.setup import open_tunnel
+
+    rig, tunnel = b.rig, b.rig.tunnel
+    assert tunnel is not None  # a needed section (RigConfig checks it)
+    tracker = rig.tracker
+    root_x, root_y = tracker.root or (0.0, 0.0)
+    flag = FlagGeometry(float(tracker.length or 1.0), (float(root_x), float(root_y)), float(tracker.direction_deg))
+    opener = lambda: open_tunnel(tunnel)  # noqa: E731
+    return SupervisorService(
+        b.bus, rig.supervisor, opener, rig.camera.id, flag, rig.snapshot(), b.resume_dir, rig.sensor
+    )
+
+
+def _check_supervisor(rig: RigSections) -> None:
+    from flagtrack.daemon.typed_yaml import require_folder
+
+    require_folder(rig.supervisor.runs_dir, key="supervisor.runs_dir", path=rig.path)
+
+
+def _prepare_supervisor(_p: Preparation) -> None:
+    from flagtrack.daemon.sweep import figures
+
+    figures.load_figure_modules()  # the summary figure would otherwise stall a twin camera at the end
+
+
+def _supervisor_finishes(rig: RigSections) -> bool:
+    return rig.supervisor.mode != "monitor" and rig.supervisor.exit_when_done
+
+
+def _supervisor_stop_s(rig: RigSections) -> float:
+    """The tunnel ramps to zero before the supervisor ends: its whole ramp and settling."""
+    if rig.tunnel is None:
+        return 0.0
+    safety = rig.tunnel.safety
+    return safety.max_speed_mps / safety.max_ramp_mps2 + safety.settle_timeout_s + 5.0
+
+
+# -- recorder ------------------------------------------------------------------------------------
+
+
+def _build_recorder(b: Build) -> Service:
+    from dataclasses import replace
+
+    from flagtrack.daemon.services.recorder import RecorderService
+
+    rig = b.rig
+    cfg = replace(  # commands may name recordings in its folder and where the sweep's points go
+        rig.recorder,
+        camera_id=rig.camera.id,
+        allowed_dirs=(*rig.recorder.allowed_dirs, rig.supervisor.runs_dir, *([b.resume_dir] if b.resume_dir else [])),
+    )
+    return RecorderService(
+        b.bus,
+        cfg,
+        rig.snapshot(),
+        centreline_attrs=b.centreline_attrs(),
+        exit_at_end_of_stream=b.exit_at_end_of_stream,
+    )
+
+
+def _check_recorder(rig: RigSections) -> None:
+    from flagtrack.daemon.services.recorder import recording_base
+    from flagtrack.daemon.typed_yaml import require_folder
+
+    _check_calibration(rig)  # its files name the calibration
+    require_folder(rig.recorder.directory, key="recorder.directory", path=rig.path)
+    if rig.recorder.path:
+        base = recording_base(rig.recorder.directory, rig.recorder.path)
+        require_folder(base.parent, key="recorder.path", path=rig.path)
+
+
+# -- tracker -------------------------------------------------------------------------------------
+
+
+def _build_tracker(b: Build) -> Service:
+    from dataclasses import replace
+
+    from flagtrack.daemon.services.tracker import TrackerService
+
+    rig, setup = b.rig, b.tracking()
+    exit_at_end = b.exit_at_end_of_stream or rig.tracker_service.exit_at_end_of_stream
+    cfg = replace(rig.tracker_service, camera_id=rig.camera.id, exit_at_end_of_stream=exit_at_end)
+    return TrackerService(b.bus, cfg, setup.factory, setup.units)
+
+
+def _check_calibration(rig: RigSections) -> None:
+    from flagtrack.daemon.typed_yaml import require_file
+
+    if rig.tracker.calibration is not None:
+        require_file(rig.tracker.calibration, key="tracker.calibration", path=rig.path)
+
+
+def _prepare_tracker(p: Preparation) -> None:
+    from flagtrack.daemon.services.tracker import warm_up_kernels
+
+    p.loading_kernels()
+    warm_up_kernels(p.tracking().factory)
+
+
+# -- viewer --------------------------------------------------------------------------------------
+
+
+def _build_viewer(b: Build) -> Service:
+    from dataclasses import replace
+
+    from flagtrack.daemon.services.viewer import ViewerService  # rerun: only where a viewer runs
+
+    cfg = replace(b.rig.viewer, camera_id=b.rig.camera.id)
+    return ViewerService(b.bus, cfg, exit_after_final=b.exit_at_end_of_stream)
+
+
+def _check_viewer(rig: RigSections) -> None:
+    from flagtrack.daemon.rig.sections import viewer_writes_file
+    from flagtrack.daemon.typed_yaml import require_output_file
+
+    if viewer_writes_file(rig.viewer):
+        require_output_file(rig.viewer.rrd_path, key="viewer.rrd_path", path=rig.path)
+
+
+# -- point sensor --------------------------------------------------------------------------------
+
+
+def _build_sensor(b: Build) -> Service:
+    from flagtrack.daemon.errors import ConfigError
+    from flagtrack.daemon.services.sensor import SensorService
+    from flagtrack.drivers.sensor.setup import open_sensor
+
+    rig, cfg = b.rig, b.rig.sensor
+    assert cfg is not None  # a needed section (RigConfig checks it)
+    camera = b.camera_adapter() if "camera" in b.names else None
+    if cfg.driver == "simulated" and not hasattr(camera, "truth"):
+        raise ConfigError(
+            "the simulated sensor reads the simulated camera's flag: run the camera (adapter "
+            "'simulated') in the same process",
+            key="sensor.driver",
+            path=rig.path,
+        )
+    return SensorService(b.bus, cfg, lambda: open_sensor(cfg, camera, rig.path))
+
+
+def _prepare_sensor(p: Preparation) -> None:
+    p.warm_up_triggers()  # a point's sensor check reads the pulses of its raw file
+
+
+# -- camera --------------------------------------------------------------------------------------
+
+
+def _build_camera(b: Build) -> Service:
+    from flagtrack.daemon.services.camera import CameraService
+
+    return CameraService(b.bus, b.rig.camera, b.camera_adapter())
+
+
+def _check_camera(rig: RigSections) -> None:
+    import importlib
+
+    from flagtrack.daemon.rig.sections import HARDWARE_ADAPTERS
+    from flagtrack.daemon.typed_yaml import require_file
+
+    camera = rig.camera
+    if camera.adapter == "replay" and camera.replay is not None:
+        require_file(camera.replay.path, key="camera.replay.path", path=rig.path)
+    if camera.adapter in HARDWARE_ADAPTERS:  # what only the device can say: when up opens it, first
+        importlib.import_module(f"flagtrack.drivers.camera.{camera.adapter}").check_config(
+            camera.hardware, path=rig.path
+        )
+
+
+def _prepare_camera(p: Preparation) -> None:
+    camera = p.rig.camera
+    if camera.adapter != "simulated":
+        return  # hardware cameras are not opened here
+    from flagtrack.drivers.camera.simulated import fast_forward
+
+    p.loading_kernels()
+    fast_forward(p.twin(), 0.05)  # the twin's kernels and the packets'
+    if camera.simulated.trigger_period_ms > 0:
+        p.warm_up_triggers()
+
+
+# -- the table -----------------------------------------------------------------------------------
+
+SERVICES: tuple[ServiceSpec, ...] = (
+    ServiceSpec(
+        "supervisor",
+        "run the supervisor alone: tunnel, flag state from event rates, sweeps or feedback",
+        sections=("supervisor", "tunnel", "tracker", "sensor"),
+        needs=("tunnel",),
+        publishes=("supervisor_state()", "tunnel_state()", "recorder_command()"),
+        subscribes=(
+            "event_rate(camera)",
+            "centrelines()",
+            "recorder_status()",
+            "tunnel_command()",
+            "sensor_samples(sensor)",
+        ),
+        alive="supervisor",
+        watches=True,
+        build=_build_supervisor,
+        check=_check_supervisor,
+        prepare=_prepare_supervisor,
+        finishes=_supervisor_finishes,
+        stop_s=_supervisor_stop_s,
+    ),
+    ServiceSpec(
+        "recorder",
+        "run the recorder alone: camera packets to .raw files on command",
+        sections=("recorder", "tracker"),
+        publishes=("recorder_status()",),
+        subscribes=("camera_events(camera)", "centrelines()", "recorder_command()"),
+        alive="recorder",
+        build=_build_recorder,
+        check=_check_recorder,
+    ),
+    ServiceSpec(
+        "tracker",
+        "run the live tracker alone: camera packets in, centrelines out",
+        sections=("tracker", "tracker_service"),
+        publishes=("centrelines()", "tracker_status()"),
+        subscribes=("camera_events(camera)",),
+        alive="tracker",
+        build=_build_tracker,
+        check=_check_calibration,
+        prepare=_prepare_tracker,
+    ),
+    ServiceSpec(
+        "viewer",
+        "run the Rerun viewer bridge alone",
+        sections=("viewer",),
+        subscribes=(
+            "centrelines()",
+            "camera_events(camera)",
+            "event_rate(camera)",
+            "tunnel_state()",
+            "supervisor_state()",
+        ),
+        alive="viewer",
+        build=_build_viewer,
+        check=_check_viewer,
+    ),
+    ServiceSpec(
+        "sensor",
+        "run the point sensor alone: publish its samples on the bus (docs/sensor.md)",
+        sections=("sensor",),
+        needs=("sensor",),
+        publishes=("sensor_samples(sensor)",),
+        alive="sensor/{sensor}",
+        build=_build_sensor,
+        prepare=_prepare_sensor,
+    ),
+    ServiceSpec(
+        "camera",
+        "run the camera adapter alone: publish its event packets on the bus",
+        sections=("camera",),
+        publishes=("camera_events(camera)", "event_rate(camera)", "camera_status(camera)"),
+        subscribes=("tunnel_state()",),  # a simulated camera follows the tunnel's speed
+        alive="camera/{camera}",
+        build=_build_camera,
+        check=_check_camera,
+        prepare=_prepare_camera,
+    ),
+)
+"""Every service, in the order they are built and started."""
+
+SERVICE_NAMES: tuple[str, ...] = tuple(spec.name for spec in SERVICES)
+"""The names of the services (``services:`` entries, commands, access-control identities)."""
+
+
+def service_spec(name: str) -> ServiceSpec:
+    """The entry of service ``name``.
+
+    Raises:
+        KeyError: no such service.
+    """
+    for spec in SERVICES:
+        if spec.name == name:
+            return spec
+    raise KeyError(f"unknown service {name!r} (known: {', '.join(SERVICE_NAMES)})")
+
+
+def in_table_order(names: Iterable[str]) -> list[ServiceSpec]:
+    """The entries of ``names``, in table order (each once)."""
+    wanted = set(names)
+    return [spec for spec in SERVICES if spec.name in wanted]
