@@ -14,7 +14,7 @@ import h5py
 import numpy as np
 import pytest
 
-from flagtrack.drivers.formats.atomic import PendingFile, atomic_open, atomic_path, atomic_write, temporary_path
+from flagtrack.drivers.atomic import PendingFile, atomic_open, atomic_path, atomic_write, temporary_path
 
 
 def names(folder: Path) -> list[str]:
@@ -50,7 +50,7 @@ def test_a_writer_that_raises_leaves_the_old_file_and_no_temporary(tmp_path: Pat
 FULL = """
 import resource, signal, sys
 from pathlib import Path
-from flagtrack.drivers.formats.atomic import atomic_write
+from flagtrack.drivers.atomic import atomic_write
 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG instead
 resource.setrlimit(resource.RLIMIT_FSIZE, (4096, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
 try:

@@ -13,7 +13,7 @@ import numpy as np
 
 from flagtrack.daemon import __version__
 from flagtrack.daemon.errors import SchemaError
-from flagtrack.drivers.formats.atomic import atomic_write
+from flagtrack.drivers.atomic import atomic_write
 from flagtrack.drivers.formats.centreline import CentrelineBatch, CentrelineShapeError, CentrelineSink
 from flagtrack.drivers.formats.recording.paths import part_base, recording_file
 from flagtrack.drivers.formats.recording.raw_part import RawPartFile
