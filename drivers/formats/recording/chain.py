@@ -5,22 +5,11 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from pathlib import Path
-from typing import Protocol
 
-import numpy as np
-
-from flagtrack.drivers.formats.recording.part import CentrelineUpdates, RecordingPart
+from flagtrack.drivers.formats.recording.inputs import TrackerUpdates
+from flagtrack.drivers.formats.recording.part import RecordingPart
 
 log = logging.getLogger(__name__)
-
-
-class TrackerUpdates(CentrelineUpdates, Protocol):
-    """Centreline updates with the camera packets they come from (the bus's ``CentrelineMessage`` is one)."""
-
-    @property
-    def source_ns(self) -> np.ndarray: ...
-    @property
-    def final(self) -> bool: ...
 
 
 class PartChain:

@@ -7,72 +7,19 @@ import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
 from flagtrack.daemon import __version__
 from flagtrack.daemon.errors import SchemaError
 from flagtrack.drivers.atomic import atomic_write
-from flagtrack.drivers.formats.centreline import CentrelineBatch, CentrelineShapeError, CentrelineSink
+from flagtrack.drivers.formats.centreline import CentrelineShapeError, CentrelineSink
+from flagtrack.drivers.formats.recording.inputs import CameraPacket, CentrelineUpdates, SyncIntervals
 from flagtrack.drivers.formats.recording.paths import part_base, recording_file
 from flagtrack.drivers.formats.recording.raw_part import RawPartFile
 
 log = logging.getLogger(__name__)
-
-
-class CameraPacket(Protocol):
-    """What a part records of a camera packet (the bus's ``EventPacket`` is one)."""
-
-    @property
-    def seq(self) -> int: ...
-    @property
-    def camera_id(self) -> str: ...
-    @property
-    def encoding(self) -> str: ...
-    @property
-    def width(self) -> int: ...
-    @property
-    def height(self) -> int: ...
-    @property
-    def t_offset_us(self) -> int: ...
-    @property
-    def t_first_us(self) -> int: ...
-    @property
-    def t_last_us(self) -> int: ...
-    @property
-    def sent_ns(self) -> int: ...
-    @property
-    def n_events(self) -> int: ...
-    @property
-    def preamble_bytes(self) -> int: ...
-    @property
-    def end_of_stream(self) -> bool: ...
-    @property
-    def data(self) -> bytes: ...
-
-
-class CentrelineUpdates(Protocol):
-    """A batch of centreline updates with its metadata (the bus's ``CentrelineMessage`` is one)."""
-
-    @property
-    def seq(self) -> int: ...
-    @property
-    def t_s(self) -> np.ndarray: ...
-    @property
-    def units(self) -> str: ...
-    @property
-    def source(self) -> str: ...
-    def batch(self) -> CentrelineBatch: ...
-
-
-class SyncIntervals(Protocol):
-    """How often a part's files are flushed to the OS and forced to disk."""
-
-    @property
-    def flush_interval_s(self) -> float: ...
-    @property
-    def fsync_interval_s(self) -> float: ...
 
 
 @dataclass
@@ -224,7 +171,7 @@ class RecordingPart:
                 self.write_sidecar()
 
     def sidecar(self, stopped: bool = False) -> dict[str, Any]:
-        """The sidecar's document (docs/formats.md)."""
+        """The sidecar's document: the part's counts, gaps and links, and the recorder's configuration."""
         return {
             "raw_file": self.raw_path.name,
             "started_unix_s": self.started_wall,
