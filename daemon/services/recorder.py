@@ -1,20 +1,12 @@
 """The recorder service: every packet of a camera to a ``.raw`` file, loss-free, plus a JSON sidecar.
 
-The files are :mod:`flagtrack.drivers.formats.recording`'s (one part per camera stream, sidecars,
-roll-over, free-space checks); this service wires the bus to them. Packets are appended by its own
-loop, never in Zenoh's callback, so the camera is never held up; the files are flushed every
-``flush_interval_s`` and fsynced every ``fsync_interval_s`` and on close, so a recording cut by a
-crash is readable up to its last flush. The queue between Zenoh and that loop holds up to
-``max_queue_bytes`` (a disk that falls that far behind loses the oldest packets, counted in the
-sidecar's ``dropped_packets``). Commands (start / stop / rotate) come on the recorder command key;
-centrelines can be recorded beside the events (docs/formats.md).
-
-**A new camera stream, a new part.** When a new stream begins while recording to ``BASE`` (the
-sequence number goes back: the camera restarted; a packet after the end of stream; or another
-encoding or geometry) the recorder goes on in ``BASE_stream2.raw``. The tracker's centrelines lag
-the packets, so the old part keeps taking those whose newest packet (``source_ns``) came before the
-new stream's first, until the tracker's first of the new stream, its final message, or
-``drain_timeout_s`` without any.
+The files are :mod:`flagtrack.drivers.formats.recording`'s (a part per camera stream, sidecars,
+roll-over, free-space checks); this service wires the bus to them and follows the camera's stream.
+Packets are appended by its own loop, never in Zenoh's callback, so the camera is never held up; the
+queue between holds up to ``max_queue_bytes`` (a disk that falls that far behind loses the oldest
+packets, counted in the sidecar's ``dropped_packets``). Commands (start / stop / rotate) come on the
+recorder command key; centrelines can be recorded beside the events
+(:class:`~flagtrack.drivers.formats.centreline.CentrelineSink`).
 
 **Nothing one message holds stops the service.** A message that does not decode, a packet whose
 encoding or time offset cannot start a file, a centreline message that does not fit the file, a
@@ -175,15 +167,13 @@ class RecorderService:
                 item = packets.recv_raw(timeout_s=0.02)
                 if item is not None:
                     self._write_raw_packet(*item)
-                    for item in packets.channel.drain():
-                        self._write_raw_packet(*item)
+                    self._write_queued_packets()
                 now = time.monotonic()
                 self._take_lines(now)
                 if self._stream_ended and self.exit_at_end_of_stream and self._lines_done(now):
                     break
                 self._keep_up(now)
-            for item in packets.channel.drain():  # what arrived before the stop
-                self._write_raw_packet(*item)
+            self._write_queued_packets()  # what arrived before the stop
             self._take_lines(time.monotonic())
         finally:
             self.stop_recording()
@@ -282,6 +272,10 @@ class RecorderService:
         log.error("recorder: %s", message)
         self._status("error", recording=part, message=message)
 
+    def _write_queued_packets(self) -> None:
+        for item in self._packets.channel.drain():
+            self._write_raw_packet(*item)
+
     def _write_raw_packet(self, key: str, payload: bytes) -> None:
         try:
             packet = decode(payload, EventPacket, key=key)
@@ -364,6 +358,8 @@ class RecorderService:
             self._lines.channel.drain()  # not recording them: no need to decode
             return
         while (msg := self._lines.recv(timeout_s=0)) is not None:
+            if self.current is not None and len(msg.source_ns) and msg.source_ns[-1] > self.current.last_sent_ns:
+                self._write_queued_packets()  # the packets it comes from first: they may begin a new part
             self._last_line_s = now
             self._final_seen |= msg.final
             try:
