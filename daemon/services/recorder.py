@@ -267,8 +267,7 @@ class RecorderService:
             self._status("idle", request_id=request_id)
 
     def _write_failed(self, part: RecordingPart, message: str) -> None:
-        """Writing ``part`` failed (a full disk): it is stopped, its .raw file cut back to its last
-        flush; one error line and an ``error`` status. The recorder goes on, idle."""
+        """Writing ``part`` failed (a full disk; it is cut back and closed): one error line, an ``error`` status."""
         log.error("recorder: %s", message)
         self._status("error", recording=part, message=message)
 
@@ -352,8 +351,7 @@ class RecorderService:
         self._began(new, message=f"new camera stream ({reason}), continued from {old.raw_path.name}")
 
     def _take_lines(self, now: float) -> None:
-        """Route the centreline messages that came to the parts (read and dropped undecoded when
-        nothing records them)."""
+        """Route the centreline messages that came to the parts (dropped undecoded if none takes them)."""
         if not self._parts.takes_centrelines:
             self._lines.channel.drain()  # not recording them: no need to decode
             return
@@ -371,30 +369,33 @@ class RecorderService:
         """At the end of a stream: whether the tracker's last centrelines are in (or will not come)."""
         if not self._parts.takes_centrelines or self._final_seen:
             return True
-        if now - self._last_line_s >= self.cfg.drain_timeout_s:
+        if timed_out := now - self._last_line_s >= self.cfg.drain_timeout_s:
             log.warning(
                 "recorder: no final centreline message within %.1f s after the end of stream; closing",
                 self.cfg.drain_timeout_s,
             )
-            return True
-        return False
+        return timed_out
 
     def _status(
         self, state: str, *, recording: RecordingPart | None = None, message: str = "", request_id: str = ""
     ) -> None:
-        rec = recording or self.current
-        if not hasattr(self, "status_pub"):
-            return
-        self.status_pub.put(
-            RecorderStatus(
-                state=state,
-                path=str(rec.raw_path) if rec else "",
-                bytes=rec.bytes if rec else 0,
-                packets=rec.packets if rec else 0,
-                missing_packets=rec.missing_packets if rec else 0,
-                request_id=request_id,
-                message=message,
-                malformed_packets=rec.malformed if rec else 0,
-                dropped_packets=self._packets.channel.dropped,
-            )
-        )
+        if hasattr(self, "status_pub"):  # not before run()
+            part, dropped = recording or self.current, self._packets.channel.dropped
+            self.status_pub.put(recorder_status(state, part, dropped, message=message, request_id=request_id))
+
+
+def recorder_status(
+    state: str, part: RecordingPart | None, dropped_packets: int, *, message: str = "", request_id: str = ""
+) -> RecorderStatus:
+    """The status message of the recorder in ``state``, about ``part`` (None: no recording)."""
+    return RecorderStatus(
+        state=state,
+        path=str(part.raw_path) if part else "",
+        bytes=part.bytes if part else 0,
+        packets=part.packets if part else 0,
+        missing_packets=part.missing_packets if part else 0,
+        request_id=request_id,
+        message=message,
+        malformed_packets=part.malformed if part else 0,
+        dropped_packets=dropped_packets,
+    )
