@@ -12,6 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from flagtrack.drivers.atomic import atomic_open
+
 CSV_NAME, JSON_NAME = "batch.csv", "batch.json"
 COLUMNS = ("input", "events", "duration", "updates", "seconds", "worker", "status", "error", "output")
 Status = Literal["done", "skipped", "failed"]
@@ -62,16 +64,12 @@ def count(rows: Sequence[Row]) -> dict[str, int]:
 
 def write_csv(rows: Sequence[Row], path: Path) -> Path:
     """Write ``rows`` as CSV with :data:`COLUMNS` (empty cells for None), atomically."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", newline="", encoding="utf-8") as handle:
+    with atomic_open(path, "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(COLUMNS)
         for row in rows:
             values = row.as_dict()
             writer.writerow(["" if values[name] is None else _cell(values[name]) for name in COLUMNS])
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
     return path
 
 
@@ -81,13 +79,9 @@ def _cell(value: object) -> object:
 
 def write_json(document: Mapping[str, Any], path: Path) -> Path:
     """Write ``document`` as JSON (non-finite numbers as null), atomically."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", encoding="utf-8") as handle:
+    with atomic_open(path, "w") as handle:
         json.dump(_finite(document), handle, indent=1, allow_nan=False)
         handle.write("\n")
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
     return path
 
 

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 from flagtrack.daemon.batch.rows import Row, Status, failed_row
 from flagtrack.daemon.batch.stamp import DIGEST, InputStat, file_digest, read_stamp, stamp_attrs, up_to_date
 from flagtrack.daemon.errors import FlagtrackError
+from flagtrack.drivers.atomic import atomic_write
 
 if TYPE_CHECKING:
     from flagtrack.daemon.tracking.setup import TrackingSetup
@@ -185,9 +186,7 @@ def validate_task(
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("default")
             result = validate_run(run_dir, sensor=sensor, centrelines_dir=centrelines_dir, window_s=window_s)
-        tmp = stamp_path.with_name(f".{RUN_STAMP}.tmp")
-        tmp.write_text(json.dumps(dict(stamp), sort_keys=True) + "\n", encoding="utf-8")
-        os.replace(tmp, stamp_path)
+        atomic_write(stamp_path, json.dumps(dict(stamp), sort_keys=True) + "\n")
         seconds = time.perf_counter() - started
         row = Row(run_dir, None, None, None, seconds, worker, "done", None, str(result.csv.resolve()))
         return TaskResult(row, tuple(f"{run_dir}: {w.message}" for w in caught))

@@ -64,11 +64,15 @@ RATE_PER_DENSITY_MEV_S = 0.305
 def make_recording(path: Path, seconds: float, seed: int = 0, rate_mev_s: float = 6.1) -> None:
     """Write ``seconds`` of a flapping line (about ``rate_mev_s`` of camera data) to ``path``,
     streaming (bounded memory)."""
+    from flagtrack.drivers.atomic import atomic_path
     from flagtrack.drivers.formats import open_writer
     from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
 
-    tmp = path.with_name(path.name + ".part" + path.suffix)
-    with open_writer(tmp, width=640, height=480, encoding="evt3" if path.suffix == ".raw" else None) as writer:
+    encoding = "evt3" if path.suffix == ".raw" else None
+    with (
+        atomic_path(path, keep_suffix=True) as tmp,
+        open_writer(tmp, width=640, height=480, encoding=encoding) as writer,
+    ):
         for chunk in line_events(
             WavyFlag(length=LENGTH, root=ROOT),
             0,
@@ -80,7 +84,6 @@ def make_recording(path: Path, seconds: float, seed: int = 0, rate_mev_s: float 
             chunk_us=50_000,
         ):
             writer.write(chunk)
-    tmp.replace(path)
 
 
 def _recording(cache: Path, seconds: float, fmt: str) -> Path:

@@ -33,6 +33,7 @@ from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.security.cert_days import CA_DAYS, LEAF_DAYS, WARN_DAYS
 from flagtrack.daemon.security.files import require_private
 from flagtrack.daemon.security.names import IDENTITY_RE, identity_problem
+from flagtrack.drivers.atomic import atomic_write
 
 DEFAULT_HOSTS = ("localhost", "127.0.0.1")
 CA_CERT = "ca.pem"
@@ -46,22 +47,11 @@ def _utc_now() -> dt.datetime:
 
 def _write_private(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` created with mode 0600 (never readable by others, even for an instant)."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    try:
-        os.fchmod(fd, 0o600)  # whatever the umask
-        os.write(fd, data)
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-    os.replace(tmp, path)
+    atomic_write(path, data, permissions=0o600)
 
 
 def _write_public(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_bytes(data)
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, path)
+    atomic_write(path, data, permissions=0o644)
 
 
 def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:

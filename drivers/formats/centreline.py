@@ -14,9 +14,7 @@ goes through one :class:`CentrelineSink`: one shape check, one batching rule and
 from __future__ import annotations
 
 import json
-import os
 import time
-import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -27,6 +25,7 @@ import numpy as np
 from flagtrack.daemon import __version__
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import FormatError
+from flagtrack.drivers.atomic import PendingFile
 
 _PER_UPDATE = ("t", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events")
 _LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost")
@@ -213,7 +212,7 @@ class CentrelineSink:
             self._s = np.asarray(s, dtype=np.float64)
             self._shape = (len(self._s), n_joints + 1)
         self._writer: CentrelineWriter | None = None
-        self._tmp: Path | None = None
+        self._tmp: PendingFile | None = None
         self._pending: list[CentrelineBatch] = []
         self.n_pending = 0
         self._last_flush = time.monotonic()
@@ -304,9 +303,7 @@ class CentrelineSink:
                 if self._writer is not None:
                     self._writer.close()
             if self._tmp is not None:
-                with open(self._tmp, "rb") as f:
-                    os.fsync(f.fileno())
-                os.replace(self._tmp, self.path)
+                self._tmp.commit()
                 self._tmp = None
         except BaseException:
             self._discard_tmp()
@@ -341,7 +338,8 @@ class CentrelineSink:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         target = self.path
         if self.atomic:  # a name of its own in the same folder (a rename within one file system)
-            target = self._tmp = self.path.with_name(f".{self.path.name}.{uuid.uuid4().hex[:12]}.tmp")
+            self._tmp = PendingFile(self.path)
+            target = self._tmp.tmp
         try:
             self._writer = CentrelineWriter(target, self._s, self._shape[1] - 1, attrs)
         except BaseException:
@@ -351,7 +349,7 @@ class CentrelineSink:
 
     def _discard_tmp(self) -> None:
         if self._tmp is not None:
-            self._tmp.unlink(missing_ok=True)
+            self._tmp.discard()
             self._tmp = None
 
 

@@ -103,6 +103,7 @@ def test_the_recorder_and_the_centreline_file_write_the_same_attributes(tmp_path
             for msg in (message(0, 4, 51), message(1, 5, 7), message(2, 3, 51, final=True)):
                 pub.put(msg)
             threads[0].join(20)
+            wait_until(lambda: recorder.current is not None, what="the recorder recording")  # its thread may lag
             sink = recorder.current.centrelines  # type: ignore[union-attr]
             wait_until(lambda: sink.n_updates + sink.n_pending == 7, what="7 updates in the sink")
         finally:

@@ -1,0 +1,212 @@
+"""A live recording's files with no bus: parts, sidecars, roll-over to a new stream, a failed write
+cut back to the last flush, the free-space guard; on real files (a real tmpfs for the full disk)."""
+
+from __future__ import annotations
+
+import errno
+import json
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flagtrack.daemon.errors import FormatError
+from flagtrack.daemon.schema import EventPacket
+from flagtrack.drivers.formats import read_events
+from flagtrack.drivers.formats.centreline import read_centrelines
+from flagtrack.drivers.formats.packets import Packetizer, PacketParams
+from flagtrack.drivers.formats.recording import FreeSpaceGuard, PartChain, RecordingPart
+from flagtrack.drivers.sim.quickline import WavyFlag, line_events
+from tests.integration.test_centreline_file_service import message
+
+
+class Intervals:
+    flush_interval_s = 0.0
+    fsync_interval_s = 0.0
+
+
+def camera(t_until_us: int = 40_000, width: int = 640, first_seq: int = 0) -> tuple[np.ndarray, list[EventPacket]]:
+    """A flapping line's events and their EVT 3.0 packets (1 ms each) as the bus carries them."""
+    events = np.concatenate(list(line_events(WavyFlag(), 0, t_until_us, width, 480)))
+    packetizer = Packetizer("evt3", width, 480, PacketParams(packet_us=1000))
+    packets = packetizer.push(events, None, t_until_us=t_until_us) + packetizer.flush()
+    return events, [
+        EventPacket(
+            "cam0",
+            first_seq + i,
+            p.t_first_us,
+            p.t_last_us,
+            p.n_events,
+            width,
+            480,
+            "evt3",
+            1000 + i,
+            p.t_offset_us,
+            data=p.data,
+        )
+        for i, p in enumerate(packets)
+    ]
+
+
+def sidecar(path: Path) -> dict:
+    return json.loads(path.read_text())
+
+
+def test_a_part_reads_back_exactly_with_its_sidecar_and_no_other_file(tmp_path: Path) -> None:
+    events, packets = camera()
+    part = RecordingPart(base=tmp_path / "run", config={"camera": "cam0"})
+    part.write_sidecar()
+    for packet in packets:
+        part.write_packet(packet)
+    part.close()
+    np.testing.assert_array_equal(read_events(tmp_path / "run.raw", strict=True).events, events)
+    doc = sidecar(tmp_path / "run.json")
+    assert doc["stopped"] and doc["packets"] == len(packets) and doc["events"] == len(events)
+    assert doc["encoding"] == "evt3" and doc["width"] == 640 and doc["config"] == {"camera": "cam0"}
+    assert doc["sequence_gaps"] == [] and doc["part"] == 1 and doc["centrelines_file"] is None
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.json", "run.raw"]
+
+
+def test_a_gap_is_in_the_sidecar_and_the_file_reads_past_it(tmp_path: Path) -> None:
+    _, packets = camera()
+    kept = packets[:10] + packets[15:]
+    part = RecordingPart(base=tmp_path / "g", config={})
+    for packet in kept:
+        part.write_packet(packet, gap_from=10 if packet.seq == 15 else None)
+    part.close()
+    doc = sidecar(tmp_path / "g.json")
+    assert doc["sequence_gaps"] == [[10, 15]] and doc["missing_packets"] == 5
+    assert doc["gaps"][0]["t_from_us"] == packets[9].t_last_us and doc["gaps"][0]["t_to_us"] == packets[15].t_first_us
+    got = read_events(tmp_path / "g.raw", strict=True).events
+    assert len(got) == sum(p.n_events for p in kept)
+
+
+def test_a_packet_that_cannot_start_a_file_creates_nothing(tmp_path: Path) -> None:
+    _, packets = camera(5_000)
+    part = RecordingPart(base=tmp_path / "bad", config={})
+    with pytest.raises(FormatError):
+        part.write_packet(EventPacket(**{**packets[0].__dict__, "encoding": "evt9"}))
+    assert not part.opened and list(tmp_path.iterdir()) == []
+
+
+def test_another_geometry_is_a_format_change(tmp_path: Path) -> None:
+    _, packets = camera(5_000)
+    _, wide = camera(5_000, width=1280)
+    part = RecordingPart(base=tmp_path / "f", config={})
+    part.write_packet(packets[0])
+    assert part.format_change(packets[1]) is None
+    assert part.format_change(wide[1]) == "packet 1 is evt3 1280x480, the file evt3 640x480"
+    part.close()
+
+
+def test_a_failed_write_is_cut_back_to_the_last_flush(tmp_path: Path) -> None:
+    events, packets = camera()
+    chain_failures: list[str] = []
+    chain = PartChain(on_failure=lambda part, message: chain_failures.append(message))
+    chain.begin(RecordingPart(base=tmp_path / "cut", config={}))
+    part = chain.current
+    assert part is not None
+    for packet in packets[:20]:
+        part.write_packet(packet)
+    part.sync(Intervals())  # flushed here
+    flushed = part.flushed_at
+    for packet in packets[20:25]:
+        part.write_packet(packet)  # buffered, then closing flushes them: cut back
+    chain.fail(OSError(errno.ENOSPC, "No space left on device"))
+    assert chain.current is None and chain.finished == [tmp_path / "cut.raw"]
+    assert chain_failures == [
+        f"recording stopped: writing {tmp_path / 'cut.raw'} failed: No space left on device; the file is kept up "
+        f"to its last flush ({flushed} bytes)"
+    ]
+    assert (tmp_path / "cut.raw").stat().st_size == flushed
+    n = sum(p.n_events for p in packets[:20])
+    np.testing.assert_array_equal(read_events(tmp_path / "cut.raw", strict=True).events, events[:n])
+    assert sidecar(tmp_path / "cut.json")["stopped"]
+
+
+def test_a_roll_over_links_the_parts_and_the_old_one_drains_its_centrelines(tmp_path: Path) -> None:
+    """A new stream goes in ``BASE_stream2``; the old part takes the centrelines of packets sent
+    before the new stream's first until the tracker's final message, which closes it."""
+    _, packets = camera(10_000)
+    chain = PartChain(on_failure=lambda part, message: pytest.fail(message))
+    chain.begin(RecordingPart(base=tmp_path / "r", config={}, want_centrelines=True, centreline_attrs={"units": "px"}))
+    assert chain.current is not None
+    chain.current.write_packet(packets[0])
+    old, new = chain.roll_over(first_sent_ns=5000)
+    assert chain.current is new and chain.draining is old and new.base == tmp_path / "r_stream2"
+    late = message(0, 4, 51)
+    late.source_ns[:] = 4000  # from packets before the new stream's
+    chain.take_centrelines(late)
+    chain.take_centrelines(message(1, 2, 51, final=True))  # the final message: the old part is closed
+    assert chain.draining is None and chain.finished == [tmp_path / "r.raw"]
+    assert len(read_centrelines(tmp_path / "r_centrelines.h5")[0]) == 4
+    new.write_packet(packets[1])
+    assert chain.stop() is new and chain.finished == [tmp_path / "r.raw", tmp_path / "r_stream2.raw"]
+    first, second = sidecar(tmp_path / "r.json"), sidecar(tmp_path / "r_stream2.json")
+    assert first["continued_in"] == "r_stream2.raw" and second["continues"] == "r.raw" and second["part"] == 2
+
+
+def test_the_free_space_guard_raises_enospc_below_its_floor_and_looks_at_most_every_interval(tmp_path: Path) -> None:
+    free_mb = shutil.disk_usage(tmp_path).free / 1e6
+    guard = FreeSpaceGuard(min_free_mb=free_mb * 2, every_s=0.25, setting="recorder.min_free_mb")
+    with pytest.raises(OSError, match=r"No space left on device: .* MB free, below recorder.min_free_mb") as info:
+        guard.check(tmp_path, now_s=10.0)
+    assert info.value.errno == errno.ENOSPC
+    guard.check(tmp_path, now_s=10.1)  # not looked at again yet
+    with pytest.raises(OSError):
+        guard.check(tmp_path, now_s=10.3)
+    FreeSpaceGuard(min_free_mb=0.0).check(tmp_path, now_s=0.0)
+
+
+FULL_DISK = """
+import errno, json, sys
+from pathlib import Path
+from flagtrack.drivers.formats.recording import PartChain, RecordingPart
+from tests.unit.test_recording_files import Intervals, camera
+
+disk = Path(sys.argv[1])
+events, packets = camera(400_000)
+failures = []
+chain = PartChain(on_failure=lambda part, message: failures.append(message))
+chain.begin(RecordingPart(base=disk / "full", config={}))
+for packet in packets:
+    try:
+        chain.current.write_packet(packet)
+        chain.current.sync(Intervals())
+    except OSError as exc:
+        chain.fail(exc)
+        break
+print(json.dumps({"failures": failures, "size": (disk / "full.raw").stat().st_size, "current": chain.current is None}))
+"""
+
+
+def test_a_part_on_a_full_disk_is_cut_back_and_reads_back_whole(tmp_path: Path) -> None:
+    """A 256 KB tmpfs in a private mount namespace fills up: the write fails, the file is cut back to
+    its last flush and reads back as a prefix of what the camera sent."""
+    if shutil.which("unshare") is None:
+        pytest.skip("no unshare(1)")
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    script = (
+        f"mount -t tmpfs -o size=256k tmpfs {disk} || exit 77; "
+        f"{sys.executable} -c {_quoted(textwrap.dedent(FULL_DISK))} {disk} && cp -a {disk}/. {tmp_path}/"
+    )
+    done = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True, timeout=120)
+    if done.returncode == 77 or "unshare failed" in done.stderr:
+        pytest.skip(f"cannot mount a tmpfs in a mount namespace: {done.stderr.strip()}")
+    assert done.returncode == 0, done.stderr[-3000:]
+    result = json.loads(done.stdout)
+    assert len(result["failures"]) == 1 and "No space left on device" in result["failures"][0], result
+    assert result["current"] and result["size"] > 0
+    events, _ = camera(400_000)
+    got = read_events(tmp_path / "full.raw", strict=True).events
+    assert 0 < len(got) < len(events)
+    np.testing.assert_array_equal(got, events[: len(got)])
+
+
+def _quoted(text: str) -> str:
+    return "'" + text.replace("'", "'\\''") + "'"
