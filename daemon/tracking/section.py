@@ -38,7 +38,7 @@ class DenoiseSection(DenoiseParams):
     enabled: bool = True
 
 
-ROBUST_DENOISE = DenoiseSection(max_neighbours=3)
+ROBUST_DENOISE = DenoiseSection(max_neighbours=3, max_window_us=50_000)
 """The robust method's filter: adaptive, 1 to 3 supporting neighbours (measured in docs/benchmark.md;
 ``max_neighbours: 1`` is the classic filter, the core's default)."""
 
@@ -145,12 +145,17 @@ class TrackingConfig:
             raise ConfigError(f"must be positive, got {self.ds}", key=f"{SECTION}.ds", path=path)
         if self.max_gap_s is not None and not self.max_gap_s > 0:
             raise ConfigError(f"must be positive, got {self.max_gap_s}", key=f"{SECTION}.max_gap_s", path=path)
-        lost = None
-        if not paper and self.lost.enabled:
-            fields = {f.name: getattr(self.lost, f.name) for f in dataclasses.fields(LostParams)}
-            lost = _build(LostParams, path, "lost", **fields)
+        fields = {f.name: getattr(self.lost, f.name) for f in dataclasses.fields(LostParams)}
+        checked = _build(LostParams, path, "lost", **fields)
+        lost = checked if not paper and self.lost.enabled else None
         return TrackerParams(
-            chain=chain, schedule=schedule, ds=self.ds, denoise=denoise, max_gap_s=self.max_gap_s, lost=lost
+            chain=chain,
+            schedule=schedule,
+            ds=self.ds,
+            denoise=denoise,
+            max_gap_s=self.max_gap_s,
+            lost=lost,
+            stale_after_s=checked.stale_after_s,
         )
 
     def attrs(self) -> dict[str, Any]:
