@@ -2,7 +2,9 @@
 
 ``/t`` (n_t,) s, ``/s`` (n_s,), ``/x`` ``/y`` (n_t, n_s), ``/joints/x`` ``/joints/y`` (n_t, N_j+1),
 ``/delta_rms`` (n_t,), ``/n_events`` (n_t,) int64, ``/lost`` (n_t,) uint8 (1: the flag was not found
-in that update, its shape is not to be trusted; a file written before it reads as zeros); root attributes hold every processing
+in that update, its shape is not to be trusted; a file written before it reads as zeros), ``/stale``
+(n_t,) uint8 (1: the shape rests on no recent evidence, remembered, not measured; a file written
+before it reads as zeros); root attributes hold every processing
 parameter, ``units``, ``input_file`` and ``flagtrack_version``. Files are written incrementally
 (resizable datasets, flushed per append) so memory is bounded and a crash keeps what was flushed.
 
@@ -29,7 +31,7 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import FormatError
 
 _PER_UPDATE = ("t", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events")
-_LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost")
+_LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost", "stale")
 
 
 class CentrelineWriter:
@@ -54,7 +56,8 @@ class CentrelineWriter:
             self._file.create_dataset(name, (0, width), maxshape=(None, width), dtype="f8", chunks=(chunk_t, width))
         self._file.create_dataset("delta_rms", (0,), maxshape=(None,), dtype="f8", chunks=(chunk_t,))
         self._file.create_dataset("n_events", (0,), maxshape=(None,), dtype="i8", chunks=(chunk_t,))
-        self._file.create_dataset("lost", (0,), maxshape=(None,), dtype="u1", chunks=(chunk_t,))
+        for name in ("lost", "stale"):
+            self._file.create_dataset(name, (0,), maxshape=(None,), dtype="u1", chunks=(chunk_t,))
         write_attrs(self._file, {"flagtrack_version": __version__, **attrs})
         self.n_updates = 0
 
@@ -72,6 +75,7 @@ class CentrelineWriter:
             "delta_rms": batch.delta_rms,
             "n_events": batch.n_events,
             "lost": batch.lost,
+            "stale": batch.stale,
         }
         start = self.n_updates
         for name, values in columns.items():
@@ -383,6 +387,7 @@ def read_centrelines(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any]]
                 delta_rms=f["delta_rms"][()],
                 n_events=f["n_events"][()],
                 lost=f["lost"][()] if "lost" in f else None,
+                stale=f["stale"][()] if "stale" in f else None,
             )
             attrs = {name: _decode_attr(value) for name, value in f.attrs.items()}
     except OSError as exc:
@@ -436,6 +441,7 @@ def read_truth(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any], tuple
             delta_rms=np.asarray(data.get("delta_rms", np.full(n_t, np.nan)), dtype=np.float64),
             n_events=np.asarray(data.get("n_events", np.zeros(n_t)), dtype=np.int64),
             lost=np.asarray(data.get("lost", np.zeros(n_t)), dtype=np.uint8),
+            stale=np.asarray(data.get("stale", np.zeros(n_t)), dtype=np.uint8),
         )
     except ValueError as exc:
         raise FormatError(f"ground truth: {exc}", path=str(path)) from exc
