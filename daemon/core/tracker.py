@@ -29,7 +29,10 @@ from flagtrack.daemon.core.windows import UpdateClock, WindowSchedule
 
 log = logging.getLogger(__name__)
 
-_BATCH_UPDATES = 4096  # updates per compiled call (bounds the output arrays)
+MAX_SAMPLES = 100_001
+"""Most samples of a smoothed centreline (``ds`` at least L / 100 000)."""
+_BATCH_UPDATES = 4096  # updates per compiled call (bounds the output arrays) ...
+_BATCH_VALUES = 1 << 22  # ... and at most about this many samples and joints in them (long centrelines)
 _DELTA_GROUP = 4  # rho buckets (of r/4) per Delta_RMS group: about one link length
 
 
@@ -62,6 +65,14 @@ class TrackerParams:
     rel_tol: float = REL_TOL
     lost: LostParams | None = None
     stale_after_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.ds is not None and not self.chain.length / (MAX_SAMPLES - 1) <= self.ds <= self.chain.length:
+            raise ValueError(f"ds must be in [L / {MAX_SAMPLES - 1}, L], got {self.ds}")
+        if self.max_gap_s is not None and not self.max_gap_s > 0:
+            raise ValueError(f"max_gap_s must be positive, got {self.max_gap_s}")
+        if self.stale_after_s is not None and not 0 < self.stale_after_s <= 3600:
+            raise ValueError(f"stale_after_s must be in (0, 3600] s, got {self.stale_after_s}")
 
     @property
     def n_s(self) -> int:
@@ -149,6 +160,7 @@ class Tracker:
         self._shortest_window_us = math.floor(min(seg.tau_s for seg in params.schedule.segments) * 1e6)
         self._finished = False
         self.s = params.s
+        self._batch_updates = max(1, min(_BATCH_UPDATES, _BATCH_VALUES // (len(self.s) + chain.n_joints + 1)))
         self.stats = TrackerStats()
 
     @property
@@ -287,7 +299,7 @@ class Tracker:
             return self._empty()
         batches = []
         while True:
-            t_us, lo_us, hi_us = clock.take(complete_before_us, started_before_us, _BATCH_UPDATES)
+            t_us, lo_us, hi_us = clock.take(complete_before_us, started_before_us, self._batch_updates)
             if len(t_us) == 0:
                 break
             batch = self._updates(t_us, lo_us, hi_us)

@@ -113,12 +113,14 @@ class TrackingConfig:
         from flagtrack.daemon.core.chain import ChainParams
         from flagtrack.daemon.core.tracker import TrackerParams
         from flagtrack.daemon.core.windows import WindowSchedule
+        from flagtrack.daemon.tracking.checks import check_tracking_config
 
         for name in ("root", "length"):
             if getattr(self, name) is None:
                 raise ConfigError(
                     "required (give it in the config or on the command line)", key=f"{SECTION}.{name}", path=path
                 )
+        check_tracking_config(self, path=path)
         paper = self.method is Method.PAPER
         chain = _build(
             ChainParams,

@@ -31,6 +31,8 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import FormatError
 
 _PER_UPDATE = ("t", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events")
+_MAX_PENDING_VALUES = 1 << 23
+"""A sink also appends once its pending updates hold this many samples and joints (long centrelines)."""
 _LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost", "stale")
 
 
@@ -185,7 +187,7 @@ class CentrelineSink:
             the file's root attributes are :func:`centreline_attrs` of them with the units.
         s: (n_s,) arc length of the samples, if known before the first batch.
         n_joints: number of chain links N_j, with ``s``.
-        max_pending: updates held before an append.
+        max_pending: updates held before an append (fewer when each holds many samples).
         flush_interval_s: append at least this often (on :meth:`add` and :meth:`flush_if_due`), or only
             by ``max_pending`` and :meth:`flush`.
         atomic: write to a temporary file, renamed onto ``path`` at a successful close.
@@ -263,7 +265,10 @@ class CentrelineSink:
             self._open()
         self._pending.append(batch)
         self.n_pending += len(batch)
-        if self.n_pending >= self.max_pending:
+        if (
+            self.n_pending >= self.max_pending
+            or self.n_pending * (self._shape[0] + self._shape[1]) > _MAX_PENDING_VALUES
+        ):
             self.flush()
         else:
             self.flush_if_due()
