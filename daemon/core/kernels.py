@@ -28,6 +28,10 @@ from flagtrack.daemon.core.smoothing import smooth_one
 _F = np.float32
 FAR = 1e18
 """Coordinate of the padding events (outside every area)."""
+STARVED = 4
+"""The tip lacks support when its two links' final arcs hold fewer than min_events and this many times
+fewer than the busiest link (a sparse still flag has few events everywhere; a missed tip has none where
+the rest has many; the tip link's own area reaches only its outer part)."""
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
@@ -414,7 +418,7 @@ def _judge(
     fitting window (whose chain replaces the update's when it fits better); (lost, total, used)."""
     lengths, reach, r2_min, r2_max, cl2, cr2, half_angle, min_events, length, rel_tol, group = geometry
     n_buckets = len(offsets) - 1
-    tip_n = counts[len(angles) - 1]
+    tip_n, busiest = counts[-2:].sum(), counts.max()
     n_region = offsets[region_end]
     noise = (offsets[n_buckets - 1] - n_region) * ring_ratio
     n_near = count_near(best, n_region, lost_cfg[3])
@@ -437,9 +441,10 @@ def _judge(
             jx[:], jy[:], sx[:], sy[:] = t_jx, t_jy, t_sx, t_sy
             total, used = t_total, t_used
             lost = verdict(n_region, noise, t_near, int(lost_cfg[1]), lost_cfg[2], False, 1)
-            tip_n = counts[len(angles) - 1]
+            tip_n, busiest = counts[-2:].sum(), counts.max()
     lost_prev[0] = lost
-    if tip_support(lost_prev, end_us, tip_n >= min_events, lost_cfg[11]):
+    starved = tip_n < min_events and STARVED * tip_n < busiest  # far fewer than the busiest link
+    if tip_support(lost_prev, end_us, not starved, lost_cfg[11]):
         lost = 1  # the tip has lacked events most of the time lately: the sensor misses its motion
     return hold(lost, lost_prev, int(lost_cfg[8])), total, used
 

@@ -84,7 +84,7 @@ def hold(lost: int, state: np.ndarray, max_hold: int) -> int:
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def tip_support(state: np.ndarray, end_us: int, supported: bool, tau_us: float) -> bool:
-    """Whether the tip link has lacked support (too few events in its arc) most of the time lately.
+    """Whether the tip has lacked support (too few events in its links' arcs) most of the time lately.
 
     ``state[3:5]``: the end of the last judged window (µs; :data:`NEVER` at first) and the share of
     windows with support, an exponential average over ``tau_us`` of time in parts per billion

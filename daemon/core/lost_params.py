@@ -37,7 +37,7 @@ class LostParams:
     hold_updates: int = 0
     stale_after_s: float = 0.1
     gather_events: int = 100
-    tip_window_s: float = 0.03
+    tip_window_s: float = 0.01
 
     def __post_init__(self) -> None:
         if self.min_events < 1:
