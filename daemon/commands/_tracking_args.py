@@ -9,8 +9,25 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from flagtrack.daemon.tracking.section import TrackingConfig
+    from flagtrack.daemon.tracking.setup import TrackingSetup
 
 log = logging.getLogger(__name__)
+
+OPTIONS = {
+    "root": ("root", "--root"),
+    "length": ("length", "--length"),
+    "direction_deg": ("direction", "--direction"),
+    "joints": ("joints", "--joints"),
+    "alpha": ("alpha", "--alpha"),
+    "tau_s": ("tau", "--tau"),
+    "dt_s": ("dt", "--dt"),
+    "schedule[0]": ("tau", "--tau"),
+    "ds": ("ds", "--ds"),
+    "t_start_s": ("t_start", "--t-start"),
+    "t_stop_s": ("t_stop", "--t-stop"),
+    "calibration": ("calibration", "--calibration"),
+}
+"""``tracker:`` key -> (argparse destination, option) of the flags that set it."""
 
 
 def add_tracking_arguments(parser: argparse.ArgumentParser) -> None:
@@ -56,3 +73,26 @@ def apply_tracking_arguments(config: TrackingConfig, args: argparse.Namespace) -
         log.warning("--tau/--dt given: the config's schedule is ignored")
         config = config.with_overrides(schedule=())
     return config
+
+
+def setup_from_arguments(config: TrackingConfig, args: argparse.Namespace, *, path: str | None) -> TrackingSetup:
+    """The checked tracking set-up of ``config`` with the flags applied; a value out of range that came
+    from a flag is named by its option (``--joints: ...``), one from the file by its key.
+
+    Raises:
+        ConfigError: a value is missing or out of range.
+    """
+    from flagtrack.daemon.errors import ConfigError
+    from flagtrack.daemon.tracking.setup import tracking_setup
+
+    try:
+        return tracking_setup(apply_tracking_arguments(config, args), path=path)
+    except ConfigError as exc:
+        key = (exc.key or "").removeprefix("tracker.")
+        if key == "t_start_s" and getattr(args, "t_stop", None) is not None and getattr(args, "t_start", None) is None:
+            key = "t_stop_s"  # the flag given is the one to name
+        dest, option = OPTIONS.get(key, (None, None))
+        if dest is None or getattr(args, dest, None) is None:
+            raise
+        message = str(exc).split(": ", 1)[1] if exc.key else str(exc)
+        raise ConfigError(f"{option}: {message}") from exc

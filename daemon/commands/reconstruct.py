@@ -6,9 +6,14 @@ import argparse
 import logging
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from flagtrack.daemon.commands._tracking_args import add_tracking_arguments, apply_tracking_arguments
+from flagtrack.daemon.commands._tracking_args import add_tracking_arguments, setup_from_arguments
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.tracking.setup import TrackingSetup
 
 COMMAND = "reconstruct"
 EXIT_AT_ONCE = True  # the process ends when the file is written (no interpreter teardown: ~0.15 s)
@@ -42,13 +47,16 @@ def run(args: argparse.Namespace) -> int:
     """Reconstruct ``args.file`` into ``args.output``."""
     from flagtrack.daemon.tracking.offline import reconstruct_file
     from flagtrack.daemon.tracking.section import TrackingConfig
-    from flagtrack.daemon.tracking.setup import load_tracking_config_file, tracking_setup
+    from flagtrack.daemon.tracking.setup import load_tracking_config_file
 
+    check_paths(args.file, args.output, args.config)
     config = load_tracking_config_file(args.config) if args.config else TrackingConfig()
-    setup = tracking_setup(apply_tracking_arguments(config, args), path=str(args.config) if args.config else None)
+    setup = setup_from_arguments(config, args, path=str(args.config) if args.config else None)
     started = time.perf_counter()
     with _ProgressBar(args.file, not args.no_progress and sys.stderr.isatty()) as bar:
-        summary = reconstruct_file(args.file, args.output, setup, progress=bar, strict=args.strict)
+        summary = reconstruct_file(
+            args.file, args.output, setup, progress=bar, strict=args.strict, check_sensor=_sensor_check(setup, args)
+        )
     elapsed = time.perf_counter() - started
     rate = summary.events_in / elapsed / 1e6 if elapsed > 0 else 0.0
     print(
@@ -63,7 +71,46 @@ def run(args: argparse.Namespace) -> int:
             "--strict refuses such a file)",
             file=sys.stderr,
         )
+    print(f"{args.output}: {summary.verdicts()}", file=sys.stderr)
+    if summary.mostly_unmeasured:
+        geometry = (
+            "the calibration, --root, --length, --direction" if setup.mapping else "--root, --length, --direction"
+        )
+        print(
+            f"warning: most updates found no flag: check the geometry first ({geometry}: where the flag is)",
+            file=sys.stderr,
+        )
     return 0
+
+
+def check_paths(events: Path, output: Path, config: Path | None) -> None:
+    """Refuse, before any work, an input or output the command cannot use (one line, exit 2)."""
+    from flagtrack.daemon.errors import ConfigError
+
+    for path in (events, config):
+        if path is not None and path.is_dir():
+            raise ConfigError(f"{path}: is a directory")
+    if output.is_dir():
+        raise ConfigError(f"-o {output}: is a directory (give the HDF5 file to write)")
+    if not output.parent.is_dir():
+        raise ConfigError(f"-o {output}: folder {output.parent} does not exist")
+    if output.exists() and events.exists() and output.resolve() == events.resolve():
+        raise ConfigError(f"-o {output}: is the event file itself (it would be overwritten)")
+
+
+def _sensor_check(setup: TrackingSetup, args: argparse.Namespace) -> Callable[[int, int], None]:
+    """Refuse a root off the recording's sensor (by the option or key that set it)."""
+    from flagtrack.daemon.errors import ConfigError
+    from flagtrack.daemon.tracking.setup import root_on_sensor
+
+    def check(width: int, height: int) -> None:
+        if not root_on_sensor(setup, width, height):
+            x, y = setup.params.chain.root
+            name = "--root" if args.root else f"file {args.config}, key 'tracker.root'"
+            plane = " (its outline mapped through the calibration)" if setup.mapping else ""
+            raise ConfigError(f"{name}: ({x:g}, {y:g}) is off the {width} x {height} sensor{plane}")
+
+    return check
 
 
 class _ProgressBar:

@@ -22,6 +22,8 @@ class CentrelineBatch:
         n_events: (n_t,) int64 events used by each update.
         lost: (n_t,) uint8, 1 where the flag was not found in the update (its shape is not to be
             trusted); ``None`` when constructed: zeros (a tracker without loss detection).
+        stale: (n_t,) uint8, 1 where the shape rests on no recent evidence (it was not measured, only
+            remembered); ``None`` when constructed: zeros.
     """
 
     t_s: np.ndarray
@@ -33,14 +35,22 @@ class CentrelineBatch:
     delta_rms: np.ndarray
     n_events: np.ndarray
     lost: np.ndarray = None  # type: ignore[assignment]  # None: zeros, set in __post_init__
+    stale: np.ndarray = None  # type: ignore[assignment]  # None: zeros, set in __post_init__
 
     def __post_init__(self) -> None:
         n_t, n_s = len(self.t_s), len(self.s)
-        if self.lost is None:
-            object.__setattr__(self, "lost", np.zeros(n_t, dtype=np.uint8))
-        else:
-            object.__setattr__(self, "lost", np.asarray(self.lost, dtype=np.uint8))
-        checks = (("x", (n_t, n_s)), ("y", (n_t, n_s)), ("delta_rms", (n_t,)), ("n_events", (n_t,)), ("lost", (n_t,)))
+        for name in ("lost", "stale"):
+            value = getattr(self, name)
+            flags = np.zeros(n_t, dtype=np.uint8) if value is None else np.asarray(value, dtype=np.uint8)
+            object.__setattr__(self, name, flags)
+        checks = (
+            ("x", (n_t, n_s)),
+            ("y", (n_t, n_s)),
+            ("delta_rms", (n_t,)),
+            ("n_events", (n_t,)),
+            ("lost", (n_t,)),
+            ("stale", (n_t,)),
+        )
         for name, want in checks:
             got = getattr(self, name).shape
             if got != want:
@@ -73,6 +83,7 @@ class CentrelineBatch:
             delta_rms=self.delta_rms[index],
             n_events=self.n_events[index],
             lost=self.lost[index],
+            stale=self.stale[index],
         )
 
     @staticmethod
@@ -91,4 +102,5 @@ class CentrelineBatch:
             delta_rms=np.concatenate([b.delta_rms for b in batches]),
             n_events=np.concatenate([b.n_events for b in batches]),
             lost=np.concatenate([b.lost for b in batches]),
+            stale=np.concatenate([b.stale for b in batches]),
         )

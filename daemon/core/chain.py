@@ -19,6 +19,11 @@ import numpy as np
 
 from flagtrack.daemon.core.kernels import LANES, bucket_sort, update_sorted
 
+MAX_JOINTS = 1000
+"""Most links of a chain (each link costs every update a pass over its area)."""
+MAX_LINK_RATIO = 1000.0
+"""Longest link over shortest (the update sorts events in buckets of a quarter of the shortest)."""
+
 
 @dataclass(frozen=True)
 class ChainParams:
@@ -49,10 +54,14 @@ class ChainParams:
     refine_deg: float | None = None
 
     def __post_init__(self) -> None:
+        if not all(math.isfinite(v) for v in self.root):
+            raise ValueError(f"root must be two finite numbers, got {self.root}")
         if not (self.length > 0 and math.isfinite(self.length)):
             raise ValueError(f"length must be positive, got {self.length}")
-        if self.n_joints < 1:
-            raise ValueError(f"n_joints must be at least 1, got {self.n_joints}")
+        if not math.isfinite(self.direction_deg):
+            raise ValueError(f"direction_deg must be finite, got {self.direction_deg}")
+        if not 1 <= self.n_joints <= MAX_JOINTS:
+            raise ValueError(f"n_joints must be 1-{MAX_JOINTS}, got {self.n_joints}")
         if not 0 < self.alpha < 1:
             raise ValueError(f"alpha must be between 0 and 1, got {self.alpha}")
         if not 0 < self.angle_limit_deg <= 180:
@@ -66,6 +75,8 @@ class ChainParams:
                 raise ValueError(f"link_lengths has {len(self.link_lengths)} values for {self.n_joints} joints")
             if min(self.link_lengths) <= 0 or abs(sum(self.link_lengths) - self.length) > 1e-9 * self.length:
                 raise ValueError(f"link_lengths must be positive and sum to length {self.length}")
+            if max(self.link_lengths) > MAX_LINK_RATIO * min(self.link_lengths):
+                raise ValueError(f"link_lengths: the longest may be at most {MAX_LINK_RATIO:g} times the shortest")
 
     def lengths(self) -> np.ndarray:
         """(N_j,) float64 link lengths r_k."""

@@ -30,18 +30,22 @@ from flagtrack.daemon.core.jit import njit
 
 __all__ = ["BackgroundActivityFilter", "DenoiseParams"]
 
+GROW_PASS = 0.25
+"""A window grows beyond ``window_us`` only while a noise event passes it with at most this share of
+``noise_pass`` (so where the fixed window already lets noise through, it stays fixed)."""
 _NEVER = np.int32(-(1 << 31) + 1)  # "never fired", in the int32 map of times relative to a base
 _REBASE_US = 1 << 30  # move the base forward when times get this far from it (~18 minutes)
 
 
 # state vector of the adaptive rule (int64): block index, isolated events in it, current k,
-# largest x and y seen so far (the sensor area, grown event by event so chunking cannot matter)
-_BLOCK, _ISOLATED, _K, _MAX_X, _MAX_Y = range(5)
+# largest x and y seen so far (the sensor area, grown event by event so chunking cannot matter),
+# current support window (µs)
+_BLOCK, _ISOLATED, _K, _MAX_X, _MAX_Y, _W = range(6)
 
 
-def initial_state(min_neighbours: int) -> np.ndarray:
-    """A fresh (5,) int64 state of the adaptive rule."""
-    return np.array([np.iinfo(np.int64).min, 0, min_neighbours, 0, 0], dtype=np.int64)
+def initial_state(min_neighbours: int, window_us: int = 0) -> np.ndarray:
+    """A fresh (6,) int64 state of the adaptive rule."""
+    return np.array([np.iinfo(np.int64).min, 0, min_neighbours, 0, 0, window_us], dtype=np.int64)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -69,23 +73,35 @@ def _support(last: np.ndarray, stride: int, x: int, y: int, t_rel: np.int32, win
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _next_k(
+def _next_rule(
     isolated: int,
     area_px: float,
     block_us: int,
     window_us: int,
+    used_us: int,
+    max_window_us: int,
     k_min: int,
     k_max: int,
     noise_pass: float,
     comb: np.ndarray,
-) -> int:
-    """Fewest neighbours for the next block, from the isolated events of the last one."""
-    p = isolated / (area_px * block_us) * window_us  # chance a given neighbour fired in the window
-    p = min(p * math.exp(min(8.0 * p, 8.0)), 1.0)  # isolated events are the noise with no neighbour
+) -> tuple[int, int]:
+    """(neighbours, window µs) for the next block, from the isolated events of the last one (seen
+    with a window of ``used_us``): the longest window up to ``max_window_us`` for which a noise event
+    passes ``k_min`` neighbours with at most ``GROW_PASS * noise_pass`` chance, else ``window_us`` and the fewest
+    neighbours for which it does."""
+    p = isolated / (area_px * block_us) * used_us  # chance a given neighbour fired in the window
+    p = p * math.exp(min(8.0 * p, 8.0))  # isolated events are the noise with no neighbour
+    if max_window_us > window_us and k_min == 1:
+        longest = GROW_PASS * noise_pass / (comb[1] * p) * used_us if p > 0.0 else math.inf
+        if longest > window_us:
+            return k_min, int(min(longest, float(max_window_us)))
+    if used_us != window_us:
+        p = p / used_us * window_us
+    p = min(p, 1.0)
     k = k_min
     while k < k_max and comb[k] * p**k > noise_pass:
         k += 1
-    return k
+    return k, window_us
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -96,13 +112,15 @@ def _required(
     y: np.int64,
     block_us: int,
     window_us: int,
+    max_window_us: int,
     k_min: int,
     k_max: int,
     noise_pass: float,
     comb: np.ndarray,
 ) -> int:
-    """Neighbours an event at (t, x, y) needs; advances the block statistics to its block."""
-    if k_max <= k_min:
+    """Neighbours an event at (t, x, y) needs (its window is then ``state[_W]``); advances the block
+    statistics to its block."""
+    if k_max <= k_min and max_window_us <= window_us:
         return k_min
     state[_MAX_X] = max(state[_MAX_X], x)
     state[_MAX_Y] = max(state[_MAX_Y], y)
@@ -110,9 +128,11 @@ def _required(
     if block != state[_BLOCK]:
         area_px = float((state[_MAX_X] + 1) * (state[_MAX_Y] + 1))
         if block == state[_BLOCK] + 1:
-            state[_K] = _next_k(state[_ISOLATED], area_px, block_us, window_us, k_min, k_max, noise_pass, comb)
+            state[_K], state[_W] = _next_rule(
+                state[_ISOLATED], area_px, block_us, window_us, state[_W], max_window_us, k_min, k_max, noise_pass, comb
+            )
         else:  # first block, or blocks without events: no evidence of noise
-            state[_K] = k_min
+            state[_K], state[_W] = k_min, window_us
         state[_BLOCK] = block
         state[_ISOLATED] = 0
     return state[_K]
@@ -127,6 +147,7 @@ def _filter_mask(
     stride: int,
     base_us: int,
     window_us: int,
+    max_window_us: int,
     state: np.ndarray,
     block_us: int,
     k_min: int,
@@ -136,10 +157,23 @@ def _filter_mask(
     keep: np.ndarray,
 ) -> None:
     """Write in ``keep`` (n,) whether each event passes; the map and state advance."""
-    window = np.int32(window_us)
+    adaptive = k_max > k_min or max_window_us > window_us
     for i in range(len(t)):
         ti = np.int64(t[i])
-        need = _required(state, ti, np.int64(x[i]), np.int64(y[i]), block_us, window_us, k_min, k_max, noise_pass, comb)
+        need = _required(
+            state,
+            ti,
+            np.int64(x[i]),
+            np.int64(y[i]),
+            block_us,
+            window_us,
+            max_window_us,
+            k_min,
+            k_max,
+            noise_pass,
+            comb,
+        )
+        window = np.int32(state[_W] if adaptive else window_us)
         n = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
         state[_ISOLATED] += 1 if n == 0 else 0
         keep[i] = n >= need
@@ -159,6 +193,7 @@ def _filter_into(
     height: int,
     base_us: int,
     window_us: int,
+    max_window_us: int,
     state: np.ndarray,
     block_us: int,
     k_min: int,
@@ -185,7 +220,7 @@ def _filter_into(
     stride = width + 2
     ordered = True
     n = len(t)
-    if k_max <= k_min:  # the classic filter: no block statistics
+    if k_max <= k_min and max_window_us <= window_us:  # the classic filter: no block statistics
         while i < n:
             ti, xi, yi = np.int64(t[i]), np.int64(x[i]), np.int64(y[i])
             if xi >= width or yi >= height or abs(ti - base_us) >= _REBASE_US:
@@ -199,8 +234,9 @@ def _filter_into(
             j += 1 if count >= k_min else 0
             i += 1
         return i, j, latest, ordered
-    block_now, k, isolated = state[_BLOCK], state[_K], state[_ISOLATED]
+    block_now, k, isolated, used = state[_BLOCK], state[_K], state[_ISOLATED], state[_W]
     max_x, max_y = state[_MAX_X], state[_MAX_Y]
+    window = np.int32(used)
     block_lo, block_hi = np.int64(1), np.int64(0)  # times of block_now: [lo, hi); empty: divide first
     while i < n:
         ti, xi, yi = np.int64(t[i]), np.int64(x[i]), np.int64(y[i])
@@ -217,12 +253,13 @@ def _filter_into(
             block = block_now
         if block != block_now:
             if block == block_now + 1:
-                k = _next_k(
-                    isolated, float((max_x + 1) * (max_y + 1)), block_us, window_us, k_min, k_max, noise_pass, comb
+                area_px = float((max_x + 1) * (max_y + 1))
+                k, used = _next_rule(
+                    isolated, area_px, block_us, window_us, used, max_window_us, k_min, k_max, noise_pass, comb
                 )
             else:  # first block, or blocks without events: no evidence of noise
-                k = k_min
-            block_now, isolated = block, 0
+                k, used = k_min, window_us
+            block_now, isolated, window = block, 0, np.int32(used)
         count = _support(last, stride, x[i], y[i], np.int32(ti - base_us), window)
         isolated += 1 if count == 0 else 0
         out_t[j] = ti
@@ -230,7 +267,9 @@ def _filter_into(
         out_y[j] = y[i]
         j += 1 if count >= k else 0
         i += 1
-    state[_BLOCK], state[_K], state[_ISOLATED], state[_MAX_X], state[_MAX_Y] = block_now, k, isolated, max_x, max_y
+    state[_BLOCK], state[_K], state[_ISOLATED], state[_MAX_X], state[_MAX_Y], state[_W] = (
+        block_now, k, isolated, max_x, max_y, used
+    )  # fmt: skip
     return i, j, latest, ordered
 
 
@@ -261,7 +300,7 @@ class BackgroundActivityFilter:
         self._width, self._height = (width, height) if params else (0, 0)
         self._last = np.full((self._height + 2) * (self._width + 2), _NEVER, dtype=np.int32)
         self._base_us: int | None = None
-        self._state = initial_state(params.min_neighbours if params else 1)
+        self._state = initial_state(params.min_neighbours if params else 1, params.window_us if params else 0)
         self._comb = params.thresholds() if params else np.ones(9)
 
     @property
@@ -283,6 +322,7 @@ class BackgroundActivityFilter:
             self._width + 2,
             base_us,
             p.window_us,
+            p.longest_window_us,
             self._state,
             p.block_us,
             p.min_neighbours,
@@ -367,6 +407,7 @@ class BackgroundActivityFilter:
                 self._height,
                 self._base_us,
                 p.window_us,
+                p.longest_window_us,
                 self._state,
                 p.block_us,
                 p.min_neighbours,

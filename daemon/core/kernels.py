@@ -20,13 +20,18 @@ import math
 import numpy as np
 
 from flagtrack.daemon.core.delta_rms import LANES, lanes_end, window_delta
+from flagtrack.daemon.core.evidence import look_back
 from flagtrack.daemon.core.jit import njit
-from flagtrack.daemon.core.lost import N_BINS, count_near, folded, hold, verdict, wide_search
+from flagtrack.daemon.core.lost import N_BINS, SUPPORTED, count_near, folded, hold, tip_support, verdict, wide_search
 from flagtrack.daemon.core.smoothing import smooth_one
 
 _F = np.float32
 FAR = 1e18
 """Coordinate of the padding events (outside every area)."""
+STARVED = 4
+"""The tip lacks support when its two links' final arcs hold fewer than min_events and this many times
+fewer than the busiest link (a sparse still flag has few events everywhere; a missed tip has none where
+the rest has many; the tip link's own area reaches only its outer part)."""
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
@@ -271,6 +276,12 @@ def run_updates(
     lost_cfg: np.ndarray,
     lost_prev: np.ndarray,
     out_lost: np.ndarray,
+    back_idx: np.ndarray,
+    end_us: np.ndarray,
+    cum_region: np.ndarray,
+    cum_ring: np.ndarray,
+    cls: np.ndarray,
+    out_stale: np.ndarray,
 ) -> None:
     """Run K consecutive updates (chain, smoothing, Delta_RMS) on a time-sorted float32 event buffer.
 
@@ -283,25 +294,27 @@ def run_updates(
         length, rel_tol: flag length and tolerance of the smoothed length (relative).
         out_jx, out_jy: (K, N_j + 1) joints (tip shortened); out_sx, out_sy: (K, n_s) centrelines;
         out_delta: (K,) Delta_RMS (NaN if no event in an area); out_n: (K,) events in an area.
-        lost_cfg: (9,) loss of track (:mod:`.lost`): enabled (0/1), min_events, min_fit, band^2
-            (squared length), region rho, re-acquire (0/1), cone and refining half-angle (radians),
-            updates held lost after a lost one; disabled: the paper's
-            update, untouched, and ``out_lost`` zeros.
-        lost_prev: (3,) int64, the previous update's verdict, the updates still to hold lost and the
-            length of the current lost stretch (:func:`.lost.hold`), carried in place.
+        lost_cfg: (13,) loss of track (:mod:`.lost`): enabled (0/1), min_events (also the evidence
+            below which an update is stale), min_fit, band^2 (squared length), region rho, re-acquire
+            (0/1), cone and refining half-angle (radians), updates held lost after a lost one, stale
+            verdict on (0/1), evidence a gathered window aims at (0: no gathering), time constant (µs)
+            of the tip link's support (:func:`.lost.tip_support`; 0: not judged), fit below which a
+            window is searched again; lost disabled: the paper's update, untouched, and ``out_lost`` zeros.
+        lost_prev: (5,) int64, the previous update's verdict, the updates still to hold lost and the
+            length of the current lost stretch (:func:`.lost.hold`), and the tip's support
+            (:func:`.lost.tip_support`), carried in place.
         out_lost: (K,) uint8 written: 1 where the flag was not found.
+        back_idx: (K,) first buffer index of the events within ``stale_after_s`` of each window's end
+            (the look-back of :mod:`.evidence`); end_us: (K,) each window's end, µs.
+        cum_region, cum_ring, cls: the buffer's prefix counts and their valid range (:func:`.evidence.classify`).
+        out_stale: (K,) uint8 written: 1 where the region held less than min_events of evidence over
+            the whole look-back (the shape was not measured); such an update is not lost.
     """
     n_links = len(angles)
     n_max = 0
     for w in range(len(lo_idx)):
         n_max = max(n_max, hi_idx[w] - lo_idx[w])
-    size = n_max + 2 * LANES
-    xs, ys = np.empty(size, dtype=np.float32), np.empty(size, dtype=np.float32)
-    bucket, inside, best = (
-        np.empty(size, dtype=np.int32),
-        np.empty(size, dtype=np.uint8),
-        np.empty(size, dtype=np.float32),
-    )
+    xs, ys, bucket, inside, best = _scratch(n_max + 2 * LANES)
     offsets = np.empty(n_buckets + 1, dtype=np.int64)
     counts = np.zeros(n_links, dtype=np.int64)
     area = np.empty((n_links, 6))
@@ -317,43 +330,123 @@ def run_updates(
     hist = np.zeros(N_BINS, dtype=np.int64)
     t_jx, t_jy = np.empty(n_links + 1), np.empty(n_links + 1)
     t_sx, t_sy = np.empty(out_sx.shape[1]), np.empty(out_sx.shape[1])
+    stale_on = lost_cfg[9] != 0.0
+    need = lost_cfg[1]
+    gathers = lost_on and lost_cfg[5] != 0.0  # a chain that may be moved by the detector gathers quiet windows
+    target = max(need, lost_cfg[10]) if gathers else need
+    geometry = (lengths, reach, r2_min, r2_max, cl2, cr2, half_angle, min_events, length, rel_tol, group)
     for w in range(len(lo_idx)):
-        bucket_sort(x, y, lo_idx[w], hi_idx[w], root_x, root_y, inv_width, xs, ys, bucket, offsets)
+        lo, hi = lo_idx[w], hi_idx[w]
+        bucket_sort(x, y, lo, hi, root_x, root_y, inv_width, xs, ys, bucket, offsets)
+        stale, start = 0, lo
+        if stale_on and offsets[region_end] - (offsets[n_buckets - 1] - offsets[region_end]) * ring_ratio < target:
+            stale, start = look_back(
+                x, y, back_idx[w], lo, hi, root_x, root_y, inv_width, region_end, n_buckets - 1, cum_region, cum_ring,
+                cls, ring_ratio, need, target, gathers,
+            )  # fmt: skip
+        if start < lo:  # a quiet window gathers its events from further back
+            if hi - start + 2 * LANES > len(xs):
+                xs, ys, bucket, inside, best = _scratch(2 * (hi - start) + 2 * LANES)
+            bucket_sort(x, y, start, hi, root_x, root_y, inv_width, xs, ys, bucket, offsets)
+        out_stale[w] = stale
         jx, jy, sx, sy = out_jx[w], out_jy[w], out_sx[w], out_sy[w]
-        geometry = (lengths, reach, r2_min, r2_max, cl2, cr2, half_angle, min_events, length, rel_tol, group)
         total, used = _update_measure(
             xs, ys, offsets, bucket_width, root_x, root_y, angles, geometry, area, jx, jy, counts, work, sx, sy, seg,
             inside, best,
         )  # fmt: skip
         lost = 0
-        if lost_on:
-            n_region = offsets[region_end]
-            noise = (offsets[n_buckets - 1] - n_region) * ring_ratio
-            n_near = count_near(best, n_region, lost_cfg[3])
-            fold = folded(angles, lost_cfg[6])
-            lost = verdict(n_region, noise, n_near, int(lost_cfg[1]), lost_cfg[2], fold, lost_prev[0])
-            if lost and lost_cfg[5] != 0.0 and n_region - noise >= lost_cfg[1]:
-                trial[:] = angles
-                wide_search(
-                    xs, ys, offsets, inv_width, root_x, root_y, trial, lengths, r2_min, r2_max, lost_cfg[6],
-                    lost_cfg[7], min_events, hist,
-                )  # fmt: skip
-                t_total, t_used = _update_measure(
-                    xs, ys, offsets, bucket_width, root_x, root_y, trial, geometry, area, t_jx, t_jy, counts, work,
-                    t_sx, t_sy, seg, inside, best,
-                )  # fmt: skip
-                t_near = count_near(best, n_region, lost_cfg[3])
-                t_fold = folded(trial, lost_cfg[6])
-                if (t_near > n_near or fold) and not t_fold:
-                    angles[:] = trial
-                    jx[:], jy[:], sx[:], sy[:] = t_jx, t_jy, t_sx, t_sy
-                    total, used = t_total, t_used
-                    lost = verdict(n_region, noise, t_near, int(lost_cfg[1]), lost_cfg[2], False, 1)
-            lost_prev[0] = lost
-            lost = hold(lost, lost_prev, int(lost_cfg[8]))
+        if lost_on and stale:
+            lost_prev[3], lost_prev[4] = end_us[w], SUPPORTED  # a quiet region: the tip's support is looked for afresh
+        elif lost_on:
+            lost, total, used = _judge(
+                xs, ys, offsets, bucket_width, root_x, root_y, angles, trial, geometry, area, jx, jy, sx, sy, t_jx,
+                t_jy, t_sx, t_sy, counts, work, seg, inside, best, hist, region_end, ring_ratio, lost_cfg, lost_prev,
+                end_us[w], total, used,
+            )  # fmt: skip
         out_lost[w] = lost
         out_n[w] = used
         out_delta[w] = math.sqrt(total / used) if used > 0 else math.nan
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _scratch(size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Work arrays of one window's sorted events: xs, ys, bucket, inside, best."""
+    return (
+        np.empty(size, dtype=np.float32),
+        np.empty(size, dtype=np.float32),
+        np.empty(size, dtype=np.int32),
+        np.empty(size, dtype=np.uint8),
+        np.empty(size, dtype=np.float32),
+    )
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _judge(
+    xs: np.ndarray,
+    ys: np.ndarray,
+    offsets: np.ndarray,
+    bucket_width: float,
+    root_x: float,
+    root_y: float,
+    angles: np.ndarray,
+    trial: np.ndarray,
+    geometry: tuple,
+    area: np.ndarray,
+    jx: np.ndarray,
+    jy: np.ndarray,
+    sx: np.ndarray,
+    sy: np.ndarray,
+    t_jx: np.ndarray,
+    t_jy: np.ndarray,
+    t_sx: np.ndarray,
+    t_sy: np.ndarray,
+    counts: np.ndarray,
+    work: np.ndarray,
+    seg: np.ndarray,
+    inside: np.ndarray,
+    best: np.ndarray,
+    hist: np.ndarray,
+    region_end: int,
+    ring_ratio: float,
+    lost_cfg: np.ndarray,
+    lost_prev: np.ndarray,
+    end_us: int,
+    total: float,
+    used: int,
+) -> tuple[int, float, int]:
+    """The verdict of one measured update (see :func:`run_updates`), after a wide search of a poorly
+    fitting window (whose chain replaces the update's when it fits better); (lost, total, used)."""
+    lengths, reach, r2_min, r2_max, cl2, cr2, half_angle, min_events, length, rel_tol, group = geometry
+    n_buckets = len(offsets) - 1
+    tip_n, busiest = counts[-2:].sum(), counts.max()
+    n_region = offsets[region_end]
+    noise = (offsets[n_buckets - 1] - n_region) * ring_ratio
+    n_near = count_near(best, n_region, lost_cfg[3])
+    fold = folded(angles, lost_cfg[6])
+    lost = verdict(n_region, noise, n_near, int(lost_cfg[1]), lost_cfg[2], fold, lost_prev[0])
+    poor = verdict(n_region, noise, n_near, int(lost_cfg[1]), max(lost_cfg[2], lost_cfg[12]), fold, lost)
+    if poor and lost_cfg[5] != 0.0 and n_region - noise >= lost_cfg[1]:
+        trial[:] = angles
+        wide_search(
+            xs, ys, offsets, 1.0 / bucket_width, root_x, root_y, trial, lengths, r2_min, r2_max, lost_cfg[6],
+            lost_cfg[7], min_events, hist,
+        )  # fmt: skip
+        t_total, t_used = _update_measure(
+            xs, ys, offsets, bucket_width, root_x, root_y, trial, geometry, area, t_jx, t_jy, counts, work, t_sx,
+            t_sy, seg, inside, best,
+        )  # fmt: skip
+        t_near = count_near(best, n_region, lost_cfg[3])
+        if (t_near > n_near or fold) and not folded(trial, lost_cfg[6]):
+            angles[:] = trial
+            jx[:], jy[:], sx[:], sy[:] = t_jx, t_jy, t_sx, t_sy
+            total, used = t_total, t_used
+            lost = verdict(n_region, noise, t_near, int(lost_cfg[1]), lost_cfg[2], False, 1)
+            tip_n, busiest = counts[-2:].sum(), counts.max()
+    lost_prev[0] = lost
+    starved = tip_n < min_events and STARVED * tip_n < busiest  # far fewer than the busiest link
+    if tip_support(lost_prev, end_us, not starved, lost_cfg[11]):
+        lost = 1  # the tip has lacked events most of the time lately: the sensor misses its motion
+    return hold(lost, lost_prev, int(lost_cfg[8])), total, used
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

@@ -21,6 +21,10 @@ N_BINS = 72
 """Direction bins of the search (5 degrees)."""
 HOLD_AFTER = 5
 """Lost stretches shorter than this many updates are not held (a blip of noise is not a loss)."""
+NEVER = np.iinfo(np.int64).min
+"""No window yet (the carried time of the tip link's last judged window)."""
+SUPPORTED = 1_000_000_000
+"""Full support of the tip (the carried share of its support, in parts per billion)."""
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
@@ -76,6 +80,26 @@ def hold(lost: int, state: np.ndarray, max_hold: int) -> int:
         state[1] -= 1
         return 1
     return 0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def tip_support(state: np.ndarray, end_us: int, supported: bool, tau_us: float) -> bool:
+    """Whether the tip has lacked support (too few events in its links' arcs) most of the time lately.
+
+    ``state[3:5]``: the end of the last judged window (µs; :data:`NEVER` at first) and the share of
+    windows with support, an exponential average over ``tau_us`` of time in parts per billion
+    (full at first), carried. The free end of a flapping flag moves most and makes the most
+    events; a sensor that sees its middle but not its tip (a slow photoreceptor, a tip out of view)
+    leaves the tip's shape remembered, not measured. ``tau_us`` 0: never.
+    """
+    if state[3] == NEVER:
+        state[3], state[4] = end_us, SUPPORTED
+    if tau_us <= 0.0:
+        return False
+    keep = math.exp(-max(end_us - state[3], 0) / tau_us)
+    share = keep * state[4] + (1.0 - keep) * (SUPPORTED if supported else 0)
+    state[3], state[4] = end_us, int(share)
+    return share < 0.5 * SUPPORTED
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

@@ -29,20 +29,32 @@ class LostParams:
     """
 
     min_events: int = 40
-    min_fit: float = 0.7
+    min_fit: float = 0.6
+    search_fit: float = 0.7
     band: float = 0.03
     reacquire: bool = True
     cone_deg: float = 90.0
     hold_updates: int = 0
+    stale_after_s: float = 0.1
+    gather_events: int = 100
+    tip_window_s: float = 0.01
 
     def __post_init__(self) -> None:
         if self.min_events < 1:
             raise ValueError(f"min_events must be at least 1, got {self.min_events}")
         if not 0 < self.min_fit < 1:
             raise ValueError(f"min_fit must be in (0, 1), got {self.min_fit}")
+        if not 0 < self.search_fit < 1:
+            raise ValueError(f"search_fit must be in (0, 1), got {self.search_fit}")
         if not 0 < self.band <= 0.04:
             raise ValueError(f"band must be in (0, 0.04], got {self.band}")
         if self.hold_updates < 0:
             raise ValueError(f"hold_updates must be at least 0, got {self.hold_updates}")
         if not 0 < self.cone_deg <= 180:
             raise ValueError(f"cone_deg must be in (0, 180], got {self.cone_deg}")
+        if not 0 < self.stale_after_s <= 3600:
+            raise ValueError(f"stale_after_s must be in (0, 3600] s, got {self.stale_after_s}")
+        if not 0 <= self.tip_window_s <= 3600:
+            raise ValueError(f"tip_window_s must be in [0, 3600] s, got {self.tip_window_s}")
+        if not 0 <= self.gather_events <= 1_000_000:
+            raise ValueError(f"gather_events must be in [0, 1000000], got {self.gather_events}")

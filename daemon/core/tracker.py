@@ -12,14 +12,16 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
+from flagtrack.daemon.core.buffer import EventBuffer
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.chain import AreaGeometry, ChainParams, ChainState
 from flagtrack.daemon.core.denoise import BackgroundActivityFilter, DenoiseParams
 from flagtrack.daemon.core.kernels import run_updates
+from flagtrack.daemon.core.lost import NEVER, SUPPORTED
 from flagtrack.daemon.core.lost_params import LostParams
 from flagtrack.daemon.core.mapping import PointMapping
 from flagtrack.daemon.core.smoothing import REL_TOL, n_samples
@@ -27,7 +29,10 @@ from flagtrack.daemon.core.windows import UpdateClock, WindowSchedule
 
 log = logging.getLogger(__name__)
 
-_BATCH_UPDATES = 4096  # updates per compiled call (bounds the output arrays)
+MAX_SAMPLES = 100_001
+"""Most samples of a smoothed centreline (``ds`` at least L / 100 000)."""
+_BATCH_UPDATES = 4096  # updates per compiled call (bounds the output arrays) ...
+_BATCH_VALUES = 1 << 22  # ... and at most about this many samples and joints in them (long centrelines)
 _DELTA_GROUP = 4  # rho buckets (of r/4) per Delta_RMS group: about one link length
 
 
@@ -46,6 +51,10 @@ class TrackerParams:
         rel_tol: tolerance of the smoothed length, relative to L.
         lost: loss-of-track detection and re-acquisition (the robust method); ``None``: the
             paper's update, every ``lost`` 0.
+        stale_after_s: an update whose flag's region held less than ``lost.min_events`` (the
+            defaults' without ``lost``) of evidence over the last this many seconds is ``stale``
+            (its shape was not measured); the robust method also gathers a quiet window's events
+            from that far back (:mod:`.evidence`); ``None``: no stale verdict, every ``stale`` 0.
     """
 
     chain: ChainParams
@@ -55,6 +64,15 @@ class TrackerParams:
     max_gap_s: float | None = 1.0
     rel_tol: float = REL_TOL
     lost: LostParams | None = None
+    stale_after_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.ds is not None and not self.chain.length / (MAX_SAMPLES - 1) <= self.ds <= self.chain.length:
+            raise ValueError(f"ds must be in [L / {MAX_SAMPLES - 1}, L], got {self.ds}")
+        if self.max_gap_s is not None and not self.max_gap_s > 0:
+            raise ValueError(f"max_gap_s must be positive, got {self.max_gap_s}")
+        if self.stale_after_s is not None and not 0 < self.stale_after_s <= 3600:
+            raise ValueError(f"stale_after_s must be in (0, 3600] s, got {self.stale_after_s}")
 
     @property
     def n_s(self) -> int:
@@ -77,38 +95,9 @@ class TrackerStats:
     updates: int = 0
     lost_updates: int = 0
     lost_stretches: int = 0
+    stale_updates: int = 0
     first_t_us: int | None = None
     last_t_us: int | None = None
-
-
-@dataclass
-class _Buffer:
-    """Time-sorted kept events (t µs, x, y) from the earliest pending window on."""
-
-    t: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.int64))
-    x: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.float32))
-    y: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.float32))
-    n: int = 0
-    last_dropped_t: int = np.iinfo(np.int64).min  # latest event dropped from the front (or the stream start)
-
-    def reserve(self, extra: int) -> None:
-        need = self.n + extra
-        if need > len(self.t):
-            cap = max(need, 2 * len(self.t), 1024)
-            for name in ("t", "x", "y"):
-                old = getattr(self, name)
-                new = np.empty(cap, dtype=old.dtype)
-                new[: self.n] = old[: self.n]
-                setattr(self, name, new)
-
-    def drop_before(self, t_us: float) -> None:
-        cut = int(np.searchsorted(self.t[: self.n], np.int64(math.ceil(t_us)), side="left"))
-        if cut:
-            self.last_dropped_t = int(self.t[cut - 1])
-            keep = self.n - cut
-            for arr in (self.t, self.x, self.y):
-                arr[:keep] = arr[cut : self.n]
-            self.n = keep
 
 
 @dataclass(frozen=True)
@@ -157,19 +146,21 @@ class Tracker:
         self._geo = AreaGeometry.of(chain)
         self._lost_cfg = _lost_config(params)
         # the last update's verdict, updates to hold lost, lost stretch (carried like the angles)
-        self._lost_prev = np.zeros(3, dtype=np.int64)
+        self._lost_prev = np.array([0, 0, 0, NEVER, SUPPORTED], dtype=np.int64)
         self._last_lost = 0  # the last update's lost flag (stretches are counted across calls)
         self._mapping = mapping
         self._filter = BackgroundActivityFilter(params.denoise, *sensor_size)
-        self._buffer = _Buffer()
+        self._buffer = EventBuffer()
         self._clock: UpdateClock | None = None
         self._t_max_us = np.iinfo(np.int64).min
         self._prepared_t_max_us = self._t_max_us  # the same, for the chunks prepare() has seen
         self._max_step_back_us = 0  # largest step back in time seen in the stream (sensor jitter)
+        self._look_back_us = 0.0 if params.stale_after_s is None else params.stale_after_s * 1e6
         # a window ending within this of the last event starts at or before it (see feed)
         self._shortest_window_us = math.floor(min(seg.tau_s for seg in params.schedule.segments) * 1e6)
         self._finished = False
         self.s = params.s
+        self._batch_updates = max(1, min(_BATCH_UPDATES, _BATCH_VALUES // (len(self.s) + chain.n_joints + 1)))
         self.stats = TrackerStats()
 
     @property
@@ -296,9 +287,11 @@ class Tracker:
             log.warning("events out of time order; sorting them in (later ones are counted, not logged)")
         self.stats.events_out_of_order += late
         buf = self._buffer
-        order = np.argsort(buf.t[: buf.n], kind="stable")
+        live = slice(buf.start, buf.n)
+        order = np.argsort(buf.t[live], kind="stable")
         for arr in (buf.t, buf.x, buf.y):
-            arr[: buf.n] = arr[: buf.n][order]
+            arr[live] = arr[live][order]
+        buf.forget_counts()
 
     def _run(self, complete_before_us: int, started_before_us: int | None) -> CentrelineBatch:
         clock = self._clock
@@ -306,20 +299,20 @@ class Tracker:
             return self._empty()
         batches = []
         while True:
-            t_us, lo_us, hi_us = clock.take(complete_before_us, started_before_us, _BATCH_UPDATES)
+            t_us, lo_us, hi_us = clock.take(complete_before_us, started_before_us, self._batch_updates)
             if len(t_us) == 0:
                 break
             batch = self._updates(t_us, lo_us, hi_us)
             if len(batch):
                 batches.append(batch)
-        self._buffer.drop_before(clock.next_window_start_us())
+        self._buffer.drop_before(clock.next_window_start_us() - self._look_back_us)
         if not batches:
             return self._empty()
         return batches[0] if len(batches) == 1 else CentrelineBatch.concatenate(batches)
 
     def _updates(self, t_us: np.ndarray, lo_us: np.ndarray, hi_us: np.ndarray) -> CentrelineBatch:
         buf, geo, chain = self._buffer, self._geo, self.params.chain
-        times = buf.t[: buf.n]
+        times = buf.times
         lo_idx = np.searchsorted(times, lo_us, side="left")
         hi_idx = np.searchsorted(times, hi_us, side="left")
         if self.params.max_gap_s is not None and bool((hi_idx == lo_idx).any()):  # gaps are empty windows
@@ -330,11 +323,14 @@ class Tracker:
             gap = (hi_idx == lo_idx) & (lo_us - previous > self.params.max_gap_s * 1e6)
             if gap.any():
                 keep = ~gap
-                t_us, lo_idx, hi_idx = t_us[keep], lo_idx[keep], hi_idx[keep]
+                t_us, lo_idx, hi_idx, hi_us = t_us[keep], lo_idx[keep], hi_idx[keep], hi_us[keep]
+        back_idx = np.minimum(np.searchsorted(times, hi_us - self._look_back_us, side="left"), lo_idx) + buf.start
+        lo_idx, hi_idx = lo_idx + buf.start, hi_idx + buf.start
         k, n_j, n_s = len(t_us), chain.n_joints, len(self.s)
         jx, jy = np.empty((k, n_j + 1)), np.empty((k, n_j + 1))
         sx, sy = np.empty((k, n_s)), np.empty((k, n_s))
         delta, used, lost = np.empty(k), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.uint8)
+        stale = np.empty(k, dtype=np.uint8)
         run_updates(
             buf.x,
             buf.y,
@@ -364,14 +360,30 @@ class Tracker:
             self._lost_cfg,
             self._lost_prev,
             lost,
+            back_idx,
+            hi_us,
+            buf.cum_region,
+            buf.cum_ring,
+            buf.cls,
+            stale,
         )
         self.stats.updates += k
         if k:
             self.stats.lost_updates += int(lost.sum())
             self.stats.lost_stretches += int(np.count_nonzero(np.diff(lost, prepend=np.uint8(self._last_lost)) == 1))
+            self.stats.stale_updates += int(stale.sum())
             self._last_lost = int(lost[-1])
         return CentrelineBatch(
-            t_s=t_us * 1e-6, s=self.s, x=sx, y=sy, joints_x=jx, joints_y=jy, delta_rms=delta, n_events=used, lost=lost
+            t_s=t_us * 1e-6,
+            s=self.s,
+            x=sx,
+            y=sy,
+            joints_x=jx,
+            joints_y=jy,
+            delta_rms=delta,
+            n_events=used,
+            lost=lost,
+            stale=stale,
         )
 
     def _empty(self) -> CentrelineBatch:
@@ -389,15 +401,14 @@ class Tracker:
 
 
 def _lost_config(params: TrackerParams) -> np.ndarray:
-    """(9,) float64 the kernel's loss-of-track settings (see :func:`.kernels.run_updates`)."""
-    lost, chain = params.lost, params.chain
-    if lost is None:
-        return np.zeros(9)
+    """(13,) float64 the kernel's loss-of-track and stale settings (see :func:`.kernels.run_updates`)."""
+    chain = params.chain
+    lost = params.lost if params.lost is not None else LostParams()
     lengths = chain.lengths()
     refine_deg = chain.refine_deg if chain.refine_deg is not None else 10.0
     return np.array(
         [
-            1.0,
+            1.0 if params.lost is not None else 0.0,
             lost.min_events,
             lost.min_fit,
             (lost.band * chain.length) ** 2,
@@ -406,6 +417,10 @@ def _lost_config(params: TrackerParams) -> np.ndarray:
             math.radians(lost.cone_deg),
             math.radians(refine_deg),
             lost.hold_updates,
+            1.0 if params.stale_after_s is not None else 0.0,
+            lost.gather_events,
+            lost.tip_window_s * 1e6,
+            lost.search_fit,
         ]
     )
 

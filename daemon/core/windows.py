@@ -17,6 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+STEP_RANGE_S = (1e-6, 3600.0)
+"""dt and tau: from 1 µs (the events' resolution) to an hour."""
+MAX_ABS_TIME_S = 1e9
+"""Largest update time in seconds (its microseconds fit in 64 bits with room)."""
 _MAX_BATCH = 1 << 16  # update times generated per step (bounds memory after a long gap)
 _SCALAR_MAX = 32  # up to this many candidate windows, take() tests them one by one (no array passes)
 _NONE = (np.empty(0), np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64))  # what take() returns for no update
@@ -33,10 +37,13 @@ class WindowSegment:
     tau_s: float
 
     def __post_init__(self) -> None:
-        if not (self.dt_s > 0 and math.isfinite(self.dt_s)):
-            raise ValueError(f"dt_s must be positive, got {self.dt_s}")
-        if not (self.tau_s > 0 and math.isfinite(self.tau_s)):
-            raise ValueError(f"tau_s must be positive, got {self.tau_s}")
+        lo, hi = STEP_RANGE_S
+        if not (lo <= self.dt_s <= hi):
+            raise ValueError(f"dt_s must be in [{lo:g}, {hi:g}] s, got {self.dt_s}")
+        if not (lo <= self.tau_s <= hi):
+            raise ValueError(f"tau_s must be in [{lo:g}, {hi:g}] s, got {self.tau_s}")
+        if not abs(self.t_from_s) <= MAX_ABS_TIME_S:
+            raise ValueError(f"t_from_s must be a finite time within +-{MAX_ABS_TIME_S:g} s, got {self.t_from_s}")
 
 
 @dataclass(frozen=True)
@@ -57,6 +64,12 @@ class WindowSchedule:
     def __post_init__(self) -> None:
         if not self.segments:
             raise ValueError("a window schedule needs at least one segment")
+        for name in ("t_start_s", "t_stop_s"):
+            value = getattr(self, name)
+            if value is not None and not abs(value) <= MAX_ABS_TIME_S:
+                raise ValueError(f"{name} must be a finite time within +-{MAX_ABS_TIME_S:g} s, got {value}")
+        if self.t_start_s is not None and self.t_stop_s is not None and not self.t_start_s < self.t_stop_s:
+            raise ValueError(f"t_start_s must be before t_stop_s, got {self.t_start_s} >= {self.t_stop_s}")
         starts = [seg.t_from_s for seg in self.segments]
         if any(b <= a for a, b in zip(starts, starts[1:])):
             raise ValueError(f"schedule segments must have increasing t_from_s, got {starts}")

@@ -170,7 +170,9 @@ class CentrelineMessage:
     ``stream`` numbers the camera streams the tracker has tracked (0 for the first; one more after
     each end of stream or camera restart), so a recorder knows which stream's file the updates go to.
     ``lost`` (n_t,) uint8: 1 where the flag was not found in the update (optional: a message without
-    it, from an older tracker, decodes as all found).
+    it, from an older tracker, decodes as all found). ``stale`` (n_t,) uint8: 1 where the shape rests
+    on no recent evidence (remembered, not measured; optional: a message without it, from an older
+    tracker, decodes as all 0).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.CENTRELINES
@@ -192,10 +194,12 @@ class CentrelineMessage:
     published_ns: int = 0
     stream: int = 0
     lost: np.ndarray = field(default_factory=_not_said)
+    stale: np.ndarray = field(default_factory=_not_said)
 
     def __post_init__(self) -> None:
-        if len(self.lost) == 0 and len(self.t_s) > 0:  # not said (an older tracker): all found
-            object.__setattr__(self, "lost", np.zeros(len(self.t_s), dtype=np.uint8))
+        for name in ("lost", "stale"):  # not said (an older tracker): all 0
+            if len(getattr(self, name)) == 0 and len(self.t_s) > 0:
+                object.__setattr__(self, name, np.zeros(len(self.t_s), dtype=np.uint8))
 
     @classmethod
     def from_batch(
@@ -230,6 +234,7 @@ class CentrelineMessage:
             n_events=batch.n_events,
             source_ns=np.asarray(source_ns, np.int64),
             lost=batch.lost,
+            stale=batch.stale,
         )
 
     def batch(self) -> CentrelineBatch:
@@ -244,6 +249,7 @@ class CentrelineMessage:
             delta_rms=self.delta_rms,
             n_events=self.n_events,
             lost=self.lost,
+            stale=self.stale,
         )
 
 

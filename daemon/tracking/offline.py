@@ -32,6 +32,8 @@ class ReconstructSummary:
     last_t_us: int | None
     skipped_bytes: tuple[tuple[int, int], ...] = ()
     events_lost_at_most: int = 0
+    lost_updates: int = 0
+    stale_updates: int = 0
 
     def as_dict(self) -> dict[str, int | None]:
         """The summary as plain values (``--json`` outputs, batch rows)."""
@@ -41,7 +43,24 @@ class ReconstructSummary:
             "events_kept": self.events_kept,
             "first_t_us": self.first_t_us,
             "last_t_us": self.last_t_us,
+            "lost_updates": self.lost_updates,
+            "stale_updates": self.stale_updates,
         }
+
+    def verdicts(self) -> str:
+        """The shares of found, lost and stale updates, as one line's words."""
+        if not self.updates:
+            return "no updates"
+        found = self.updates - self.lost_updates - self.stale_updates
+        shares = (f"{100 * n / self.updates:.1f} % {name}" for n, name in (
+            (found, "found"), (self.lost_updates, "lost"), (self.stale_updates, "stale")
+        ))  # fmt: skip
+        return f"{', '.join(shares)} of {self.updates} updates"
+
+    @property
+    def mostly_unmeasured(self) -> bool:
+        """Whether most updates are lost or stale (no flag where the geometry says it is)."""
+        return self.updates == 0 or 2 * (self.lost_updates + self.stale_updates) > self.updates
 
 
 def reconstruct_file(
@@ -52,6 +71,7 @@ def reconstruct_file(
     progress: Callable[[int], None] | None = None,
     atomic: bool = False,
     strict: bool = False,
+    check_sensor: Callable[[int, int], None] | None = None,
 ) -> ReconstructSummary:
     """Stream the recording ``path`` through a fresh tracker of ``setup`` into ``output``.
 
@@ -68,12 +88,16 @@ def reconstruct_file(
         strict: refuse a damaged recording; by default a corrupt stretch is skipped (see
             :mod:`~flagtrack.drivers.formats.reader`) and the file's attributes ``input_skipped_bytes``
             ((n, 2) byte ranges) and ``input_events_lost_at_most`` say what was lost.
+        check_sensor: called with the recording's sensor width and height (pixels) when its header
+            gives them, before any event is read (it raises to refuse the set-up).
 
     Raises:
         FormatError: the recording cannot be read.
     """
     with open_events(path, chunk_bytes=CHUNK_BYTES, strict=strict) as reader:
         info = reader.info
+        if check_sensor is not None and info.width and info.height:
+            check_sensor(info.width, info.height)
         tracker = setup.new_tracker((info.width or 0, info.height or 0))
         attrs = {**setup.attrs, "input_file": str(Path(path).resolve()), "input_format": info.format}
         with CentrelineSink(output, attrs, s=tracker.s, n_joints=setup.params.chain.n_joints, atomic=atomic) as sink:
@@ -107,4 +131,6 @@ def reconstruct_file(
         stats.last_t_us,
         skipped,
         reader.events_lost_at_most,
+        stats.lost_updates,
+        stats.stale_updates,
     )

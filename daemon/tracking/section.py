@@ -38,7 +38,7 @@ class DenoiseSection(DenoiseParams):
     enabled: bool = True
 
 
-ROBUST_DENOISE = DenoiseSection(max_neighbours=3)
+ROBUST_DENOISE = DenoiseSection(max_neighbours=3, max_window_us=50_000)
 """The robust method's filter: adaptive, 1 to 3 supporting neighbours (measured in docs/benchmark.md;
 ``max_neighbours: 1`` is the classic filter, the core's default)."""
 
@@ -113,12 +113,14 @@ class TrackingConfig:
         from flagtrack.daemon.core.chain import ChainParams
         from flagtrack.daemon.core.tracker import TrackerParams
         from flagtrack.daemon.core.windows import WindowSchedule
+        from flagtrack.daemon.tracking.checks import check_tracking_config
 
         for name in ("root", "length"):
             if getattr(self, name) is None:
                 raise ConfigError(
                     "required (give it in the config or on the command line)", key=f"{SECTION}.{name}", path=path
                 )
+        check_tracking_config(self, path=path)
         paper = self.method is Method.PAPER
         chain = _build(
             ChainParams,
@@ -145,12 +147,17 @@ class TrackingConfig:
             raise ConfigError(f"must be positive, got {self.ds}", key=f"{SECTION}.ds", path=path)
         if self.max_gap_s is not None and not self.max_gap_s > 0:
             raise ConfigError(f"must be positive, got {self.max_gap_s}", key=f"{SECTION}.max_gap_s", path=path)
-        lost = None
-        if not paper and self.lost.enabled:
-            fields = {f.name: getattr(self.lost, f.name) for f in dataclasses.fields(LostParams)}
-            lost = _build(LostParams, path, "lost", **fields)
+        fields = {f.name: getattr(self.lost, f.name) for f in dataclasses.fields(LostParams)}
+        checked = _build(LostParams, path, "lost", **fields)
+        lost = checked if not paper and self.lost.enabled else None
         return TrackerParams(
-            chain=chain, schedule=schedule, ds=self.ds, denoise=denoise, max_gap_s=self.max_gap_s, lost=lost
+            chain=chain,
+            schedule=schedule,
+            ds=self.ds,
+            denoise=denoise,
+            max_gap_s=self.max_gap_s,
+            lost=lost,
+            stale_after_s=checked.stale_after_s,
         )
 
     def attrs(self) -> dict[str, Any]:

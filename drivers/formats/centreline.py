@@ -2,7 +2,9 @@
 
 ``/t`` (n_t,) s, ``/s`` (n_s,), ``/x`` ``/y`` (n_t, n_s), ``/joints/x`` ``/joints/y`` (n_t, N_j+1),
 ``/delta_rms`` (n_t,), ``/n_events`` (n_t,) int64, ``/lost`` (n_t,) uint8 (1: the flag was not found
-in that update, its shape is not to be trusted; a file written before it reads as zeros); root attributes hold every processing
+in that update, its shape is not to be trusted; a file written before it reads as zeros), ``/stale``
+(n_t,) uint8 (1: the shape rests on no recent evidence, remembered, not measured; a file written
+before it reads as zeros); root attributes hold every processing
 parameter, ``units``, ``input_file`` and ``flagtrack_version``. Files are written incrementally
 (resizable datasets, flushed per append) so memory is bounded and a crash keeps what was flushed.
 
@@ -28,7 +30,9 @@ from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.atomic import PendingFile
 
 _PER_UPDATE = ("t", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events")
-_LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost")
+_MAX_PENDING_VALUES = 1 << 23
+"""A sink also appends once its pending updates hold this many samples and joints (long centrelines)."""
+_LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost", "stale")
 
 
 class CentrelineWriter:
@@ -53,7 +57,8 @@ class CentrelineWriter:
             self._file.create_dataset(name, (0, width), maxshape=(None, width), dtype="f8", chunks=(chunk_t, width))
         self._file.create_dataset("delta_rms", (0,), maxshape=(None,), dtype="f8", chunks=(chunk_t,))
         self._file.create_dataset("n_events", (0,), maxshape=(None,), dtype="i8", chunks=(chunk_t,))
-        self._file.create_dataset("lost", (0,), maxshape=(None,), dtype="u1", chunks=(chunk_t,))
+        for name in ("lost", "stale"):
+            self._file.create_dataset(name, (0,), maxshape=(None,), dtype="u1", chunks=(chunk_t,))
         write_attrs(self._file, {"flagtrack_version": __version__, **attrs})
         self.n_updates = 0
 
@@ -71,6 +76,7 @@ class CentrelineWriter:
             "delta_rms": batch.delta_rms,
             "n_events": batch.n_events,
             "lost": batch.lost,
+            "stale": batch.stale,
         }
         start = self.n_updates
         for name, values in columns.items():
@@ -180,7 +186,7 @@ class CentrelineSink:
             the file's root attributes are :func:`centreline_attrs` of them with the units.
         s: (n_s,) arc length of the samples, if known before the first batch.
         n_joints: number of chain links N_j, with ``s``.
-        max_pending: updates held before an append.
+        max_pending: updates held before an append (fewer when each holds many samples).
         flush_interval_s: append at least this often (on :meth:`add` and :meth:`flush_if_due`), or only
             by ``max_pending`` and :meth:`flush`.
         atomic: write to a temporary file, renamed onto ``path`` at a successful close.
@@ -258,7 +264,10 @@ class CentrelineSink:
             self._open()
         self._pending.append(batch)
         self.n_pending += len(batch)
-        if self.n_pending >= self.max_pending:
+        if (
+            self.n_pending >= self.max_pending
+            or self.n_pending * (self._shape[0] + self._shape[1]) > _MAX_PENDING_VALUES
+        ):
             self.flush()
         else:
             self.flush_if_due()
@@ -381,6 +390,7 @@ def read_centrelines(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any]]
                 delta_rms=f["delta_rms"][()],
                 n_events=f["n_events"][()],
                 lost=f["lost"][()] if "lost" in f else None,
+                stale=f["stale"][()] if "stale" in f else None,
             )
             attrs = {name: _decode_attr(value) for name, value in f.attrs.items()}
     except OSError as exc:
@@ -434,6 +444,7 @@ def read_truth(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any], tuple
             delta_rms=np.asarray(data.get("delta_rms", np.full(n_t, np.nan)), dtype=np.float64),
             n_events=np.asarray(data.get("n_events", np.zeros(n_t)), dtype=np.int64),
             lost=np.asarray(data.get("lost", np.zeros(n_t)), dtype=np.uint8),
+            stale=np.asarray(data.get("stale", np.zeros(n_t)), dtype=np.uint8),
         )
     except ValueError as exc:
         raise FormatError(f"ground truth: {exc}", path=str(path)) from exc

@@ -98,7 +98,7 @@ def test_replay_through_the_bus_equals_offline_reconstruct(tmp_path: Path, metho
     want = offline(path, config)
     got, statuses, service = live(path, config)
     assert len(want) > 500 and len(got) == len(want)
-    for name in ("t_s", "x", "y", "joints_x", "joints_y", "delta_rms", "n_events"):
+    for name in ("t_s", "x", "y", "joints_x", "joints_y", "delta_rms", "n_events", "lost", "stale"):
         np.testing.assert_allclose(getattr(got, name), getattr(want, name), rtol=0, atol=1e-9, err_msg=name)
     assert service.missing_packets == 0 and service.malformed_packets == 0
     assert statuses[-1].state == "stopped" and statuses[-1].packets == service.packets

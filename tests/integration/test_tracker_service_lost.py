@@ -1,5 +1,5 @@
-"""Loss of track live (issue 19): the tracker service publishes ``lost`` with each update, as offline,
-and counts lost stretches in its status."""
+"""Loss of track live (issues 19 and 30): the tracker service publishes ``lost`` and ``stale`` with each
+update, as offline, and counts lost stretches in its status."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 
 from flagtrack.daemon.core.tracker import Tracker
 from flagtrack.drivers.formats import write_events
-from flagtrack.drivers.sim.disruptions import disrupted
+from flagtrack.drivers.sim.disruptions import disrupted, occlusion
 from flagtrack.drivers.sim.quickline import QuickLineParams, line_events
 from tests.integration.test_tracker_service import CONFIG, FLAG, live, offline
 
@@ -32,3 +32,19 @@ def test_live_lost_equals_offline_and_stretches_are_counted(tmp_path: Path) -> N
     tracker = Tracker(config.tracker_params(), sensor_size=(640, 480))
     tracker.feed(events)
     assert tracker.stats.lost_stretches >= 1
+
+
+def test_live_stale_equals_offline(tmp_path: Path) -> None:
+    """The laser blocked for 300 ms: the updates after 0.1 s of it say stale, live as offline."""
+    events = np.concatenate(list(line_events(FLAG, 0, 500_000, 640, 480, QuickLineParams(events_per_px2=20.0))))
+    events = occlusion(events, 100_000, 400_000)
+    path = tmp_path / "blocked.raw"
+    write_events(path, events, width=640, height=480, encoding="evt3")
+    want = offline(path, CONFIG)
+    got, _, _ = live(path, CONFIG)
+    t = want.t_s
+    assert want.stale[(t > 0.21) & (t < 0.39)].all() and not want.stale[(t > 0.02) & (t < 0.09)].any()
+    assert not want.lost[want.stale == 1].any()  # a stale update is not lost
+    np.testing.assert_array_equal(got.stale, want.stale)
+    np.testing.assert_array_equal(got.lost, want.lost)
+    np.testing.assert_allclose(got.x, want.x, rtol=0, atol=1e-9)

@@ -1,15 +1,19 @@
-"""Schema versions: version 1 messages (older peers) still decode, fields of a later version are ignored."""
+"""Schema versions: version 1 and 2 messages (older peers) still decode, scalar fields of a later version are
+ignored."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import struct
 
+import numpy as np
 import pytest
 
 from flagtrack.daemon import schema
+from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import SchemaError
-from flagtrack.daemon.schema import EventPacket, TrackerStatus, decode, encode
+from flagtrack.daemon.schema import CentrelineMessage, EventPacket, TrackerStatus, decode, encode
 
 _HEADER = struct.Struct("<2sBBI")
 
@@ -28,14 +32,51 @@ def _rewrite(data: bytes, version: int | None = None, edit=None) -> bytes:
     )
 
 
-def test_this_build_writes_version_2_and_reads_1_and_2() -> None:
+def test_this_build_writes_version_3_and_reads_1_to_3() -> None:
     packet = EventPacket("cam0", 3, 10, 999, 5, 640, 480, "evt3", 123, stream_id=77, data=b"\x00\x80" * 4)
     data = encode(packet)
-    assert data[2] == schema.VERSION == 2
+    assert data[2] == schema.VERSION == 3
     assert decode(data, EventPacket) == packet
     assert decode(_rewrite(data, version=1), EventPacket) == packet
-    with pytest.raises(SchemaError, match="unsupported schema version 3"):
-        decode(_rewrite(data, version=3), EventPacket)
+    assert decode(_rewrite(data, version=2), EventPacket) == packet
+    with pytest.raises(SchemaError, match="unsupported schema version 4"):
+        decode(_rewrite(data, version=4), EventPacket)
+
+
+def _lines(n: int = 3) -> CentrelineMessage:
+    batch = CentrelineBatch(
+        t_s=np.arange(n) * 1e-3,
+        s=np.linspace(0, 1, 4),
+        x=np.zeros((n, 4)),
+        y=np.zeros((n, 4)),
+        joints_x=np.zeros((n, 3)),
+        joints_y=np.zeros((n, 3)),
+        delta_rms=np.zeros(n),
+        n_events=np.zeros(n, dtype=np.int64),
+        lost=np.array([0, 1, 0][:n], dtype=np.uint8),
+        stale=np.array([1, 0, 0][:n], dtype=np.uint8),
+    )
+    return CentrelineMessage.from_batch(batch, source="tracker", seq=1, units="px", source_ns=np.zeros(n))
+
+
+def test_stale_travels_and_a_message_of_before_it_decodes_as_all_0() -> None:
+    message = _lines()
+    back = decode(encode(message), CentrelineMessage)
+    np.testing.assert_array_equal(back.stale, [1, 0, 0])
+    np.testing.assert_array_equal(back.batch().stale, [1, 0, 0])
+    np.testing.assert_array_equal(back.lost, [0, 1, 0])
+    without = dataclasses.replace(message, stale=np.zeros(0, dtype=np.uint8))
+    data = encode(without)
+    for version in (1, 2):  # what an older tracker sends: no stale array
+        old = decode(_rewrite(data, version=version), CentrelineMessage)
+        assert old.stale.dtype == np.uint8 and old.stale.tolist() == [0, 0, 0]
+        assert old.batch().stale.tolist() == [0, 0, 0]
+
+
+def test_a_stale_array_of_another_length_is_refused_by_name() -> None:
+    bad = dataclasses.replace(_lines(), stale=np.zeros(5, dtype=np.uint8))
+    with pytest.raises(SchemaError, match="stale"):
+        decode(encode(bad), CentrelineMessage)
 
 
 def test_a_version_1_packet_without_stream_id_decodes_with_its_default() -> None:

@@ -85,7 +85,7 @@ tracker:
         ("tracker: {root: [0, 0], length: 100, alpah: 1}", "tracker.alpah", "unknown key"),
         ("tracker: {root: [0, 0], length: 100, joints: ten}", "tracker.joints", "expected int"),
         ("tracker: {root: [0, 0], length: 100, method: fast}", "tracker.method", "must be one of"),
-        ("tracker: {root: [0, 0], length: 100, alpha: 1.5}", "tracker", "alpha"),
+        ("tracker: {root: [0, 0], length: 100, alpha: 1.5}", "tracker.alpha", "alpha"),
         ("tracker: {root: [0, 0], length: 100, denoise: {window_us: 0}}", "tracker.denoise", "window_us"),
         (
             "tracker: {root: [0, 0], length: 100, schedule: [{t_from_s: 0, dt_s: 0, tau_s: 1}]}",

@@ -1,0 +1,84 @@
+"""The tracker's event buffer: time-sorted kept events of the pending windows and their look-back."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+def _empty(dtype: type) -> np.ndarray:
+    return np.empty(0, dtype=dtype)
+
+
+@dataclass
+class EventBuffer:
+    """Time-sorted kept events (t µs, x, y) in ``[start, n)`` of growable arrays.
+
+    Events before ``start`` are dropped; the arrays are compacted only when they need room (each
+    event is moved about once however often the front is dropped). ``cum_region``, ``cum_ring`` and
+    ``cls`` are the prefix counts of :mod:`.evidence` (valid over the absolute indices ``cls[0]..cls[1]``).
+    """
+
+    t: np.ndarray = field(default_factory=lambda: _empty(np.int64))
+    x: np.ndarray = field(default_factory=lambda: _empty(np.float32))
+    y: np.ndarray = field(default_factory=lambda: _empty(np.float32))
+    cum_region: np.ndarray = field(default_factory=lambda: np.zeros(1, dtype=np.int64))
+    cum_ring: np.ndarray = field(default_factory=lambda: np.zeros(1, dtype=np.int64))
+    cls: np.ndarray = field(default_factory=lambda: np.zeros(2, dtype=np.int64))
+    start: int = 0
+    n: int = 0
+    last_dropped_t: int = np.iinfo(np.int64).min  # latest event dropped from the front (or the stream start)
+
+    @property
+    def times(self) -> np.ndarray:
+        """(n - start,) the live events' times."""
+        return self.t[self.start : self.n]
+
+    def reserve(self, extra: int) -> None:
+        """Make room for ``extra`` more events after ``n`` (compacting, then growing)."""
+        if self.n + extra <= len(self.t):
+            return
+        live = self.n - self.start
+        if self.start:
+            self._compact()
+        if live + extra > len(self.t):
+            cap = max(live + extra, 2 * len(self.t), 1024)
+            for name in ("t", "x", "y"):
+                old = getattr(self, name)
+                new = np.empty(cap, dtype=old.dtype)
+                new[:live] = old[:live]
+                setattr(self, name, new)
+            for name in ("cum_region", "cum_ring"):
+                old = getattr(self, name)
+                new = np.empty(cap + 1, dtype=np.int64)
+                new[: len(old)] = old
+                setattr(self, name, new)
+
+    def _compact(self) -> None:
+        cut, live = self.start, self.n - self.start
+        for arr in (self.t, self.x, self.y):
+            arr[:live] = arr[cut : self.n]
+        lo, hi = int(self.cls[0]), int(self.cls[1])
+        if hi >= cut and hi > lo:
+            lo = max(lo, cut)
+            self.cum_region[lo - cut : hi - cut + 1] = self.cum_region[lo : hi + 1].copy()
+            self.cum_ring[lo - cut : hi - cut + 1] = self.cum_ring[lo : hi + 1].copy()
+            self.cls[:] = (lo - cut, hi - cut)
+        else:
+            self.cls[:] = 0
+            self.cum_region[0] = self.cum_ring[0] = 0
+        self.start, self.n = 0, live
+
+    def drop_before(self, t_us: float) -> None:
+        """Drop the events before ``t_us`` (they stay in the arrays until a compaction)."""
+        cut = int(np.searchsorted(self.times, np.int64(math.ceil(t_us)), side="left"))
+        if cut:
+            self.last_dropped_t = int(self.t[self.start + cut - 1])
+            self.start += cut
+
+    def forget_counts(self) -> None:
+        """The events were reordered: the prefix counts are computed again when next needed."""
+        self.cls[:] = self.start
+        self.cum_region[self.start] = self.cum_ring[self.start] = 0

@@ -1,0 +1,101 @@
+"""``flagtrack reconstruct`` says what it found (issue 30): the shares of found / lost / stale updates, a
+warning naming the geometry when most found no flag, and one line with exit 2, before any work, for
+paths and parameters it cannot use."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from flagtrack.daemon.cli import main
+from flagtrack.drivers.formats import write_events
+from flagtrack.drivers.formats.centreline import read_centrelines
+from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
+
+FLAG = WavyFlag(root=(120.0, 250.0), length=180.0)
+GEOMETRY = ["--length", "180", "--tau", "0.0003", "--no-progress"]
+
+
+@pytest.fixture(scope="module")
+def raw_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    params = QuickLineParams(events_per_px2=10, noise_rate_hz=1e5)
+    events = np.concatenate(list(line_events(FLAG, 0, 80_000, 640, 480, params, seed=11)))
+    path = tmp_path_factory.mktemp("rec") / "flag.raw"
+    write_events(path, events, width=640, height=480, encoding="evt3")
+    return path
+
+
+def _run(capsys: pytest.CaptureFixture, *argv: str | Path) -> tuple[int, list[str]]:
+    status = main(["reconstruct", *map(str, argv)])
+    return status, capsys.readouterr().err.strip().splitlines()
+
+
+def test_the_run_ends_with_the_shares_of_verdicts(raw_file: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "out.h5"
+    status, lines = _run(capsys, raw_file, "-o", out, "--root", "120", "250", *GEOMETRY)
+    batch, _ = read_centrelines(out)
+    assert status == 0 and lines[-1].startswith(f"{out}: ") and lines[-1].endswith(f"of {len(batch)} updates")
+    found = 100 * np.mean((batch.lost == 0) & (batch.stale == 0))
+    assert f"{found:.1f} % found" in lines[-1] and "lost" in lines[-1] and "stale" in lines[-1]
+    assert found > 90 and not any("warning" in line for line in lines)
+
+
+def test_a_recording_with_no_flag_where_the_geometry_says_is_said_out_loud(
+    raw_file: Path, tmp_path: Path, capsys
+) -> None:
+    out = tmp_path / "out.h5"
+    status, lines = _run(capsys, raw_file, "-o", out, "--root", "250", "120", *GEOMETRY)  # x and y swapped
+    assert status == 0
+    assert lines[-1].startswith("warning: most updates found no flag") and "--root, --length, --direction" in lines[-1]
+    batch, _ = read_centrelines(out)
+    assert np.mean(batch.lost | batch.stale) > 0.5
+
+
+@pytest.mark.parametrize(
+    ("root", "words"),
+    [(["1e9", "1e9"], "--root: (1e+09, 1e+09) is off the 640 x 480 sensor"), (["nan", "nan"], "--root: must be two")],
+)
+def test_a_root_off_the_sensor_is_refused_before_any_work(raw_file: Path, tmp_path: Path, capsys, root, words) -> None:
+    out = tmp_path / "out.h5"
+    status, lines = _run(capsys, raw_file, "-o", out, "--root", *root, *GEOMETRY)
+    assert status == 2 and len(lines) == 1 and lines[0].startswith(f"flagtrack reconstruct: error: {words}")
+    assert not out.exists()
+
+
+def test_a_root_off_the_sensor_from_the_config_names_its_key(raw_file: Path, tmp_path: Path, capsys) -> None:
+    config = tmp_path / "rig.yaml"
+    config.write_text("tracker: {root: [-50, 240], length: 180}\n")
+    status, lines = _run(capsys, raw_file, "-o", tmp_path / "o.h5", "-c", config, "--no-progress")
+    assert status == 2 and len(lines) == 1 and f"file {config}, key 'tracker.root'" in lines[0]
+
+
+@pytest.mark.parametrize("case", ["input is a directory", "output is a directory", "missing folder", "same file"])
+def test_paths_it_cannot_use_are_refused_in_one_line(raw_file: Path, tmp_path: Path, capsys, case: str) -> None:
+    events, out, words = raw_file, tmp_path / "out.h5", ""
+    if case == "input is a directory":
+        events, words = tmp_path, f"{tmp_path}: is a directory"
+    elif case == "output is a directory":
+        out, words = tmp_path, f"-o {tmp_path}: is a directory"
+    elif case == "missing folder":
+        out, words = tmp_path / "nope" / "out.h5", f"folder {tmp_path / 'nope'} does not exist"
+    else:
+        copy = tmp_path / "copy.raw"
+        copy.write_bytes(raw_file.read_bytes())
+        events, out, words = copy, copy, "is the event file itself"
+    before = events.read_bytes() if events.is_file() else None
+    status, lines = _run(capsys, events, "-o", out, "--root", "120", "250", *GEOMETRY)
+    assert status == 2 and len(lines) == 1 and words in lines[0], lines
+    assert before is None or events.read_bytes() == before  # nothing recorded is lost
+
+
+def test_the_file_holds_stale_and_an_old_file_reads_as_0(raw_file: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "out.h5"
+    _run(capsys, raw_file, "-o", out, "--root", "120", "250", *GEOMETRY)
+    with h5py.File(out, "a") as f:
+        assert f["stale"].dtype == np.uint8 and f["stale"].shape == f["t"].shape
+        del f["stale"]  # a file written before /stale
+    old, _ = read_centrelines(out)
+    assert old.stale.dtype == np.uint8 and not old.stale.any()
