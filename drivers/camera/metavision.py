@@ -10,7 +10,9 @@ events, published as EVT 2.0 (:mod:`.metavision_stream`); ``raw_log_dir`` has th
 device's own bytes to a file (``log_raw_data``). Biases, ROI, event rate controller (ERC)
 and trigger input come from ``camera.hardware`` and are read back from the device where the
 bindings can (``get_all_biases``, ``get_cd_event_rate``, ``is_enabled``); facilities or methods a
-binding lacks are skipped in read-back.
+binding lacks are skipped in read-back. Drops: the HAL's Python bindings report none (no counter, no
+callback; what the ERC drops by design is not counted); corrupt EVT 2.1 words flagtrack's decoder
+skips (OpenEB 4) are reported as drops (``CameraData.drops``).
 """
 
 from __future__ import annotations
