@@ -3,11 +3,14 @@ a simulated camera whose loop is held up longer than its ``max_lag_s`` (as by an
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import threading
 import time
 from pathlib import Path
 from typing import Any
+
+import pytest
 
 from flagtrack.daemon.schema import CameraStatus, RecorderCommand, RecorderStatus
 from flagtrack.daemon.services.camera import CameraService, CameraStreamConfig
@@ -106,3 +109,39 @@ def test_a_camera_skipping_ahead_puts_its_drops_in_the_sidecar_and_the_point_is_
     assert SKIP_REASON in reason and stopped.device_drop_reason in reason
     said = [s for s in seen if s is not None and s.device_drops]
     assert said and SKIP_REASON in said[0].message and said[0].drop_reason == SKIP_REASON
+
+
+@pytest.mark.slow
+def test_a_sweep_point_the_camera_dropped_data_in_is_lossy_with_the_reason(tmp_path: Path) -> None:
+    """A one-point sweep on the simulated rig: while the point records, the camera's loop is held up
+    past the twin's max_lag_s once; the point is ``lossy`` with the twin's reason, measured again."""
+    from flagtrack.daemon.sweep.runlog import read_run
+    from tests.integration.test_supervisor import rig, run
+
+    sweep = {"speeds": [4.0], "branches": ["up"], "settle_s": 0.5, "record_s": 2.0}
+    config = rig(tmp_path, sweep=sweep)
+    twin = dataclasses.replace(config.camera.simulated, max_lag_s=0.3)
+    config = dataclasses.replace(config, camera=dataclasses.replace(config.camera, simulated=twin))
+    point = "000-up-4.00"
+
+    def hold_once(services: list, group: object) -> None:
+        supervisor = services[0]
+        camera = next(s for s in services if s.name.startswith("camera/")).camera
+        wait_until(lambda: supervisor.recording_point == point, 60, "the point recording")
+        read, held = camera.read, threading.Event()
+
+        def held_up(timeout_s: float) -> Any:
+            if not held.is_set():
+                held.set()
+                time.sleep(0.8)  # the fault injected: a host too busy to read the camera
+            return read(timeout_s)
+
+        camera.read = held_up
+
+    run(config, during=hold_once)
+    run_dir = tmp_path / "runs" / "run"
+    attempts = [p for p in read_run(run_dir).points if p.point_id == point]
+    assert [p.status for p in attempts] == ["lossy", "done"]
+    assert attempts[0].reason.startswith("the camera dropped data 1 time(s) while recording: " + SKIP_REASON)
+    sidecar = json.loads((run_dir / attempts[0].raw_file).with_suffix(".json").read_text())
+    assert [d["reason"] for d in sidecar["device_drops"]] == [SKIP_REASON] and sidecar["device_drops"][0]["count"] > 0
