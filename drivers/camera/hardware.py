@@ -43,12 +43,15 @@ class Roi:
     Attributes:
         x, y: top-left pixel (column, row) of the region.
         width, height: size of the region, pixels.
+        clip: cut the region at the sensor's edges instead of refusing it (``roi: auto``, worked out
+            before the sensor's size is known).
     """
 
     x: int
     y: int
     width: int
     height: int
+    clip: bool = False
 
     def __post_init__(self) -> None:
         if self.x < 0 or self.y < 0:
@@ -60,6 +63,19 @@ class Roi:
         """Raise ConfigError unless the region fits a ``width`` x ``height`` sensor."""
         if self.x + self.width > width or self.y + self.height > height:
             raise ConfigError(f"region {self.as_dict()} does not fit the {width}x{height} sensor", key=f"{KEY}.roi")
+
+    def on_sensor(self, width: int, height: int) -> Roi:
+        """The region on a ``width`` x ``height`` sensor: cut at its edges (``clip``), else checked.
+
+        Raises:
+            ConfigError: the region does not fit the sensor (nothing of it is on it, with ``clip``).
+        """
+        if not self.clip:
+            self.check_inside(width, height)
+            return self
+        if self.x >= width or self.y >= height:
+            raise ConfigError(f"region {self.as_dict()} lies off the {width}x{height} sensor", key=f"{KEY}.roi")
+        return Roi(self.x, self.y, min(self.width, width - self.x), min(self.height, height - self.y))
 
     def as_dict(self) -> dict[str, int]:
         return {"x": self.x, "y": self.y, "width": self.width, "height": self.height}

@@ -219,8 +219,7 @@ class InivationCamera:
         """Apply the configured settings; return them as read back from the camera."""
         cfg, out = self.cfg, {}
         if cfg.roi is not None:
-            cfg.roi.check_inside(width, height)
-            r = cfg.roi
+            r = cfg.roi.on_sensor(width, height)
             _set(camera, "setCropArea", "roi", (r.x, r.y, r.width, r.height))
         area = call_or_none(camera, "getCropArea")
         out["roi"] = dict(zip(("x", "y", "width", "height"), map(int, area))) if area is not None else None

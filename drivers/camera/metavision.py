@@ -290,11 +290,10 @@ class MetavisionCamera:
     def _apply_roi(self, hal: Any, device: Any, width: int, height: int) -> dict[str, Any] | None:
         if self.cfg.roi is None:
             return None
-        self.cfg.roi.check_inside(width, height)
+        r = self.cfg.roi.on_sensor(width, height)
         facility = call_or_none(device, "get_i_roi")
         if facility is None:
             raise ConfigError("this camera has no ROI", key=f"{KEY}.roi")
-        r = self.cfg.roi
         try:
             facility.set_window(hal.I_ROI.Window(r.x, r.y, r.width, r.height))
             facility.enable(True)

@@ -257,7 +257,8 @@ class PropheseeCamera:
     def _settings(
         self, nd: Any, device: Any, listed: Any, configuration: Any, bounds: Any, clamped: list[str]
     ) -> dict[str, Any]:
-        roi = self.cfg.roi.as_dict() if self.cfg.roi is not None else None
+        properties = device.properties()
+        roi = self.cfg.roi.on_sensor(properties.width, properties.height).as_dict() if self.cfg.roi else None
         settings: dict[str, Any] = {
             "driver": "neuromorphic-drivers",
             "driver_version": sdk_version("neuromorphic-drivers", nd),
@@ -330,10 +331,10 @@ def build_configuration(module: Any, cfg: PropheseeConfig, bounds: Any, model: s
         if not {"x_mask", "y_mask"} <= fields:
             raise ConfigError(f"{model} has no ROI masks", key=f"{KEY}.roi")
         properties = module.Properties()
-        cfg.roi.check_inside(int(properties.width), int(properties.height))
+        roi = cfg.roi.on_sensor(int(properties.width), int(properties.height))
         defaults = module.Configuration()
-        kwargs["x_mask"] = _mask_words(cfg.roi.x, cfg.roi.width, int(properties.width), len(defaults.x_mask))
-        kwargs["y_mask"] = _mask_words(cfg.roi.y, cfg.roi.height, int(properties.height), len(defaults.y_mask))
+        kwargs["x_mask"] = _mask_words(roi.x, roi.width, int(properties.width), len(defaults.x_mask))
+        kwargs["y_mask"] = _mask_words(roi.y, roi.height, int(properties.height), len(defaults.y_mask))
         if "mask_intersection_only" in fields:
             kwargs["mask_intersection_only"] = False
     if cfg.rate_limiter is not None:
