@@ -3,11 +3,13 @@ of everything else (what only the device can refuse stops the rig with one line 
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Callable
 from typing import Any
 
 from flagtrack.daemon.errors import ConfigError, DriverError, FlagtrackError
+from flagtrack.daemon.rig.camera_auto import resolve_auto
 from flagtrack.daemon.rig.sections import HARDWARE_ADAPTERS, CameraConfig, RigSections
 from flagtrack.daemon.transport import Bus, Subscription
 from flagtrack.daemon.typed_yaml import with_path
@@ -72,7 +74,9 @@ def open_hardware_camera(rig: RigSections) -> OpenedCamera | None:
 
     What only the device can check (a bias its model lacks, a value it refuses, an ROI that does
     not fit its sensor) then stops the rig with one error naming the key and the rig file, before
-    anything else has opened; the camera service takes the open device as it is.
+    anything else has opened; the camera service takes the open device as it is. ``roi: auto`` and
+    the rate limiter's ``auto`` are worked out first (:mod:`.camera_auto`); what they set, and why,
+    is logged and goes in the camera's settings under ``auto``.
 
     Raises:
         ConfigError: a setting the device refuses (key and rig file named).
@@ -80,7 +84,8 @@ def open_hardware_camera(rig: RigSections) -> OpenedCamera | None:
     """
     if rig.camera.adapter not in HARDWARE_ADAPTERS:
         return None
-    camera = open_camera(rig.camera, rig_path=rig.path)
+    auto = resolve_auto(rig)  # roi: auto and the rate limiter's auto, from the tracker section
+    camera = open_camera(dataclasses.replace(rig.camera, hardware=auto.hardware), rig_path=rig.path)
     try:
         info = camera.open()
     except ConfigError as exc:
@@ -91,6 +96,10 @@ def open_hardware_camera(rig: RigSections) -> OpenedCamera | None:
         raise DriverError(
             f"cannot open the camera ({type(exc).__name__}: {exc})", device=f"camera adapter '{rig.camera.adapter}'"
         ) from exc
+    for key, why in auto.why.items():
+        log.info("camera %s: %s.%s auto: %s", rig.camera.id, "camera.hardware", key, why)
+    if auto.why:  # the status message says what was set and why
+        info = dataclasses.replace(info, settings={**info.settings, "auto": dict(auto.why)})
     return OpenedCamera(camera, info)
 
 

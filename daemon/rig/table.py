@@ -234,8 +234,10 @@ def _check_camera(rig: RigSections) -> None:
     if camera.adapter == "replay" and camera.replay is not None:
         require_file(camera.replay.path, key="camera.replay.path", path=rig.path)
     if camera.adapter in HARDWARE_ADAPTERS:  # what only the device can say: when up opens it, first
+        from flagtrack.daemon.rig.camera_auto import resolve_auto
+
         importlib.import_module(f"flagtrack.drivers.camera.{camera.adapter}").check_config(
-            camera.hardware, path=rig.path
+            resolve_auto(rig).hardware, path=rig.path
         )
 
 

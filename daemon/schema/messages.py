@@ -101,6 +101,10 @@ class EventPacket:
     another id are a restarted camera, a lower ``seq`` with the same id a duplicate or late packet.
     ``native``: ``data`` is the camera's own words (cut, not re-encoded), after ``preamble_bytes`` of
     state words that make the packet decode alone (a recorder leaves them out; older peers: 0, False).
+    ``device_drops`` counts the drops the camera or its driver reported in this stream so far (a
+    full host ring, a cleared backlog, a simulated camera's skip ahead), this packet's included;
+    the packet right after a drop says what was lost just before it: ``drop_count`` of ``drop_unit``
+    (``usb_packets``, ``us``, ``words``; 0: unknown) and why (``drop_reason``). Older peers: 0, "".
     """
 
     TYPE: ClassVar[MessageType] = MessageType.EVENT_PACKET
@@ -120,11 +124,17 @@ class EventPacket:
     preamble_bytes: int = 0
     native: bool = False
     data: bytes = b""
+    device_drops: int = 0
+    drop_count: int = 0
+    drop_unit: str = ""
+    drop_reason: str = ""
 
 
 @dataclass(frozen=True)
 class CameraStatus:
-    """State of a camera adapter and its settings as read back from the device."""
+    """State of a camera adapter and its settings as read back from the device; ``device_drops``
+    the drops the device reported so far (:class:`EventPacket`), ``drop_reason`` the latest's
+    reason (added later: older peers decode as 0, "")."""
 
     TYPE: ClassVar[MessageType] = MessageType.CAMERA_STATUS
     camera_id: str
@@ -137,6 +147,8 @@ class CameraStatus:
     message: str = ""
     packets: int = 0
     events: int = 0
+    device_drops: int = 0
+    drop_reason: str = ""
 
 
 @dataclass(frozen=True)
@@ -362,7 +374,9 @@ class RecorderCommand:
 @dataclass(frozen=True)
 class RecorderStatus:
     """What the recorder is writing (counts of the recording ``path``; ``dropped_packets``: turned
-    away by the recorder's full queue since it started, whatever file was open)."""
+    away by the recorder's full queue since it started, whatever file was open; ``device_drops``:
+    drops the camera reported during the recording, ``device_drop_reason`` what they were, in one
+    line; added later: older peers decode as 0, "")."""
 
     TYPE: ClassVar[MessageType] = MessageType.RECORDER_STATUS
     state: str  # idle | recording | error
@@ -374,6 +388,8 @@ class RecorderStatus:
     message: str = ""
     malformed_packets: int = 0
     dropped_packets: int = 0
+    device_drops: int = 0
+    device_drop_reason: str = ""
 
 
 def _no_pulses() -> np.ndarray:

@@ -6,6 +6,12 @@ boundaries, untouched (:class:`~flagtrack.drivers.formats.native.NativeCutter`);
 simulated camera, .dat/.npy/.aedat4 replays, iniVation) are encoded by the packetizer. It also
 publishes event-rate statistics every ``rate_interval_s`` of camera time, and the camera status
 (with settings read back); declares its liveliness as ``camera/<id>``.
+
+What the device or its driver reports lost (``CameraData.drops``: a full host ring, a cleared
+backlog, a simulated camera's skip ahead) goes on the next packet published (``EventPacket``'s
+``device_drops``, ``drop_count``, ``drop_unit``, ``drop_reason``), into the log (counted, rarely) and
+into a status message (at most one per ``DROP_STATUS_INTERVAL_S``), so a recording made meanwhile is
+marked lossy with the reason.
 """
 
 from __future__ import annotations
@@ -19,14 +25,18 @@ from typing import Any
 import numpy as np
 
 from flagtrack.daemon.core.events import make_events
+from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CameraStatus, EventPacket, EventRate
 from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.transport import Bus, Publisher
-from flagtrack.drivers.camera.base import Camera, CameraInfo, EndOfStream
+from flagtrack.drivers.camera.base import Camera, CameraInfo, DeviceDrop, EndOfStream
 from flagtrack.drivers.formats.native import NATIVE_ENCODINGS, NativeCutter
 from flagtrack.drivers.formats.packets import Packet, Packetizer, PacketParams
 
 log = logging.getLogger(__name__)
+
+DROP_STATUS_INTERVAL_S = 1.0
+"""At most one status message per this many seconds says the device dropped data."""
 
 
 @dataclass(frozen=True)
@@ -94,6 +104,11 @@ class CameraService:
         self.stream_id = 0  # drawn when the stream starts (EventPacket.stream_id)
         self.reached_eof = False
         self.ended = threading.Event()
+        self.device_drops = 0  # drops the adapter reported (each CameraData.drops entry)
+        self.drop_reason = ""  # the latest's
+        self._pending_drops: list[DeviceDrop] = []  # reported, not yet on a packet
+        self._drop_status_s = -DROP_STATUS_INTERVAL_S
+        self._problems = ProblemLog(log, f"camera {cfg.id}")
         self._publishers: tuple[Publisher, Publisher, Publisher] | None = None  # events, status, rate
 
     def start(self) -> None:
@@ -130,6 +145,7 @@ class CameraService:
             raise
         finally:
             self.camera.close()
+            self._problems.flush(force=True)
             if info is not None:
                 status_pub.put(self._status(info, state, message))
             self.ended.set()
@@ -162,6 +178,8 @@ class CameraService:
                 return
             if data is None:
                 continue
+            if data.drops:
+                self._note_drops(data.drops, info)
             if data.packets and cutter is None and self._fits(data.packets):  # cut by the adapter
                 precut_horizon = max(precut_horizon, *(p.t_last_us for p in data.packets))
                 self._publish(data.packets, data.arrival_ns, info, events_pub, rate_pub, rates, native=True)
@@ -200,6 +218,7 @@ class CameraService:
         end_of_stream: bool = False,
         native: bool = False,
     ) -> None:
+        drop = self._drop_fields() if packets and self._pending_drops else {}
         for i, packet in enumerate(packets):
             events_pub.put(
                 EventPacket(
@@ -219,8 +238,11 @@ class CameraService:
                     preamble_bytes=packet.preamble_bytes,
                     native=native,
                     data=packet.data,
+                    device_drops=self.device_drops,
+                    **(drop if i == 0 else {}),
                 )
             )
+            self._pending_drops.clear()
             self.packets += 1
             self.events += packet.n_events
             for t_end_us, n, n_on, n_bytes in rates.add(packet):
@@ -228,6 +250,31 @@ class CameraService:
                 rate_pub.put(
                     EventRate(self.cfg.id, t_end_us, interval_s, n, n / interval_s, n_on / n if n else 0.0, n_bytes)
                 )
+
+    def _note_drops(self, drops: tuple[DeviceDrop, ...], info: CameraInfo) -> None:
+        """Count what the adapter reports lost, log it (rarely) and say so in a status (at most one
+        per ``DROP_STATUS_INTERVAL_S``); the next packet carries it."""
+        self._pending_drops.extend(drops)
+        self.device_drops += len(drops)
+        self.drop_reason = drops[-1].reason
+        for drop in drops:
+            self._problems.add("device drops", drop_text(drop))
+        now = time.monotonic()
+        if now - self._drop_status_s >= DROP_STATUS_INTERVAL_S and self._publishers is not None:
+            self._drop_status_s = now
+            self._publishers[1].put(self._status(info, "streaming", f"the camera dropped data: {drop_text(drops[-1])}"))
+
+    def _drop_fields(self) -> dict[str, Any]:
+        """The drop fields of the packet that follows the drops reported since the last packet."""
+        drops = self._pending_drops
+        units = {d.unit for d in drops}
+        same = len(units) == 1
+        reasons = list(dict.fromkeys(d.reason if same else drop_text(d) for d in drops))
+        return {
+            "drop_count": sum(d.count for d in drops) if same else 0,
+            "drop_unit": units.pop() if same else "",
+            "drop_reason": "; ".join(reasons),
+        }
 
     def _status(self, info: CameraInfo, state: str, message: str = "") -> CameraStatus:
         return CameraStatus(
@@ -241,4 +288,14 @@ class CameraService:
             message,
             self.packets,
             self.events,
+            self.device_drops,
+            self.drop_reason,
         )
+
+
+def drop_text(drop: DeviceDrop) -> str:
+    """A drop in one line: its reason and how much was lost."""
+    if not drop.count:
+        return drop.reason
+    amount = f"{drop.count * 1e-6:g} s" if drop.unit == "us" else f"{drop.count} {drop.unit.replace('_', ' ')}"
+    return f"{drop.reason} ({amount})"

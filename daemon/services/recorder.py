@@ -45,6 +45,7 @@ from flagtrack.drivers.formats.recording import (
     PartChain,
     RecordingPart,
     confined_base,
+    drop_summary,
     recording_base,
 )
 
@@ -400,4 +401,6 @@ def recorder_status(
         message=message,
         malformed_packets=part.malformed if part else 0,
         dropped_packets=dropped_packets,
+        device_drops=part.device_drop_reports if part else 0,
+        device_drop_reason=drop_summary(part.device_drops) if part else "",
     )

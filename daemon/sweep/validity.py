@@ -111,7 +111,9 @@ def recording_problem(started: RecorderStatus | None, stopped: RecorderStatus | 
     """Why a recording is lossy from the recorder's replies to start and stop, or None.
 
     Counts packets missing in the camera's sequence (those the recorder's full queue dropped are
-    among them, and said apart) and packets turned away as malformed.
+    among them, and said apart), packets turned away as malformed, and what the camera itself
+    reported lost while it recorded (a full host ring, a cleared backlog, a simulated camera's skip
+    ahead), with the reason.
     """
     if stopped is None:
         return None
@@ -123,7 +125,11 @@ def recording_problem(started: RecorderStatus | None, stopped: RecorderStatus | 
         parts.append(f"{missing} missing in sequence{queue}")
     if stopped.malformed_packets:
         parts.append(f"{stopped.malformed_packets} malformed")
-    return f"recording lost packets ({'; '.join(parts)})" if parts else None
+    reasons = [f"recording lost packets ({'; '.join(parts)})"] if parts else []
+    if stopped.device_drops:
+        what = stopped.device_drop_reason or "no reason given"
+        reasons.append(f"the camera dropped data {stopped.device_drops} time(s) while recording: {what}")
+    return "; ".join(reasons) or None
 
 
 def expected_point_bytes(

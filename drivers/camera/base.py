@@ -34,6 +34,26 @@ class CameraInfo:
 
 
 @dataclass(frozen=True)
+class DeviceDrop:
+    """Data the camera or its driver says it lost before the data it comes with.
+
+    Attributes:
+        reason: one line naming who dropped what and why (``neuromorphic-drivers dropped USB
+            packets: the host's ring was full``).
+        count: how many ``unit`` were lost (0: the device cannot say).
+        unit: what ``count`` counts: ``usb_packets``, ``us`` (camera time skipped), ``words``, ``events``.
+        t_from_us, t_to_us: the camera time lost, when the adapter knows it (None: the recorder
+            takes the span between the packets around the drop).
+    """
+
+    reason: str
+    count: int = 0
+    unit: str = ""
+    t_from_us: int | None = None
+    t_to_us: int | None = None
+
+
+@dataclass(frozen=True)
 class CameraData:
     """A piece of the camera's stream: the device's own bytes (``raw``) or decoded events.
 
@@ -50,6 +70,8 @@ class CameraData:
             ``slice_us`` of camera time to pace itself): the service publishes them as they are if
             they are no longer than its own packets, rather than scanning the bytes a second time,
             and otherwise cuts their bytes again.
+        drops: what the device or its driver lost before this data (the camera service puts them
+            on the next packet it publishes; the recorder writes them in the sidecar).
     """
 
     events: np.ndarray
@@ -58,6 +80,7 @@ class CameraData:
     t_until_us: int | None = None
     raw: bytes | None = None
     packets: list[Packet] | None = None
+    drops: tuple[DeviceDrop, ...] = ()
 
 
 class EndOfStream(Exception):

@@ -22,7 +22,7 @@ import numpy as np
 
 from flagtrack.daemon.core.events import empty_events, empty_triggers
 from flagtrack.daemon.errors import ConfigError, DriverError
-from flagtrack.drivers.camera.base import CameraData
+from flagtrack.drivers.camera.base import CameraData, DeviceDrop
 from flagtrack.drivers.formats import make_decoder
 
 log = logging.getLogger(__name__)
@@ -31,8 +31,9 @@ KEY = "camera.hardware"
 """Dotted prefix of the hardware settings in a rig config (errors name ``camera.hardware.<key>``)."""
 
 PUBLISHED_ENCODING = {"evt3": "evt3", "evt2": "evt2", "evt21": "evt2"}
-_NO_EVENTS, _NO_TRIGGERS = empty_events(), empty_triggers()
 """Encoding of our packets for a device encoding: the packetizer writes EVT 2.0 or EVT 3.0 only."""
+_NO_EVENTS, _NO_TRIGGERS = empty_events(), empty_triggers()
+CORRUPT_WORDS = "corrupt words in the camera's EVT 2.1 stream skipped (their events lost)"
 
 
 @dataclass(frozen=True)
@@ -42,12 +43,15 @@ class Roi:
     Attributes:
         x, y: top-left pixel (column, row) of the region.
         width, height: size of the region, pixels.
+        clip: cut the region at the sensor's edges instead of refusing it (``roi: auto``, worked out
+            before the sensor's size is known).
     """
 
     x: int
     y: int
     width: int
     height: int
+    clip: bool = False
 
     def __post_init__(self) -> None:
         if self.x < 0 or self.y < 0:
@@ -59,6 +63,19 @@ class Roi:
         """Raise ConfigError unless the region fits a ``width`` x ``height`` sensor."""
         if self.x + self.width > width or self.y + self.height > height:
             raise ConfigError(f"region {self.as_dict()} does not fit the {width}x{height} sensor", key=f"{KEY}.roi")
+
+    def on_sensor(self, width: int, height: int) -> Roi:
+        """The region on a ``width`` x ``height`` sensor: cut at its edges (``clip``), else checked.
+
+        Raises:
+            ConfigError: the region does not fit the sensor (nothing of it is on it, with ``clip``).
+        """
+        if not self.clip:
+            self.check_inside(width, height)
+            return self
+        if self.x >= width or self.y >= height:
+            raise ConfigError(f"region {self.as_dict()} lies off the {width}x{height} sensor", key=f"{KEY}.roi")
+        return Roi(self.x, self.y, min(self.width, width - self.x), min(self.height, height - self.y))
 
     def as_dict(self) -> dict[str, int]:
         return {"x": self.x, "y": self.y, "width": self.width, "height": self.height}
@@ -110,7 +127,8 @@ def sdk_version(distribution: str, module: ModuleType) -> str:
 
 class RawStream:
     """A device's raw EVT byte stream, cut anywhere, as :class:`CameraData`: the bytes themselves
-    (EVT 3.0/2.0) or, for EVT 2.1, decoded (corrupt words skipped and counted in ``faults``).
+    (EVT 3.0/2.0) or, for EVT 2.1, decoded (corrupt words skipped, counted in ``faults`` and
+    reported as drops).
 
     Args:
         encoding: the device's encoding (``evt3``, ``evt2`` or ``evt21``).
@@ -141,8 +159,11 @@ class RawStream:
         self.bytes += len(data)
         if self.published == self.encoding:
             return CameraData(_NO_EVENTS, _NO_TRIGGERS, arrival_ns, raw=bytes(data))
+        faults = self.decoder.faults
         events, triggers = self.decoder.decode(data)
-        return CameraData(events, triggers, arrival_ns)
+        skipped = self.decoder.faults - faults
+        drops = (DeviceDrop(CORRUPT_WORDS, skipped, "words"),) if skipped else ()
+        return CameraData(events, triggers, arrival_ns, drops=drops)
 
 
 class StallWatch:

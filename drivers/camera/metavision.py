@@ -10,7 +10,9 @@ events, published as EVT 2.0 (:mod:`.metavision_stream`); ``raw_log_dir`` has th
 device's own bytes to a file (``log_raw_data``). Biases, ROI, event rate controller (ERC)
 and trigger input come from ``camera.hardware`` and are read back from the device where the
 bindings can (``get_all_biases``, ``get_cd_event_rate``, ``is_enabled``); facilities or methods a
-binding lacks are skipped in read-back.
+binding lacks are skipped in read-back. Drops: the HAL's Python bindings report none (no counter, no
+callback; what the ERC drops by design is not counted); corrupt EVT 2.1 words flagtrack's decoder
+skips (OpenEB 4) are reported as drops (``CameraData.drops``).
 """
 
 from __future__ import annotations
@@ -288,11 +290,10 @@ class MetavisionCamera:
     def _apply_roi(self, hal: Any, device: Any, width: int, height: int) -> dict[str, Any] | None:
         if self.cfg.roi is None:
             return None
-        self.cfg.roi.check_inside(width, height)
+        r = self.cfg.roi.on_sensor(width, height)
         facility = call_or_none(device, "get_i_roi")
         if facility is None:
             raise ConfigError("this camera has no ROI", key=f"{KEY}.roi")
-        r = self.cfg.roi
         try:
             facility.set_window(hal.I_ROI.Window(r.x, r.y, r.width, r.height))
             facility.enable(True)

@@ -7,6 +7,11 @@ input come from ``camera.hardware`` of the rig config and are applied with
 ``update_configuration``; the library cannot read registers back, so the settings reported in
 :class:`CameraInfo` are the ones applied, after clamping each bias to the bounds the device
 reports (``biases_bounds()``), as the device does.
+
+What the library drops is reported with the data (``CameraData.drops``): USB packets its host ring
+had no room for (``RawRingStatus.dropped_packets`` rising, or ``overflow_indices`` marking holes),
+and the backlog this adapter clears (``clear_backlog``) when the host falls more than
+``max_backlog_packets`` behind.
 """
 
 from __future__ import annotations
@@ -14,14 +19,14 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
 
 from flagtrack.daemon.errors import ConfigError, DriverError
 from flagtrack.daemon.typed_yaml import from_mapping
-from flagtrack.drivers.camera.base import CameraData, CameraInfo
+from flagtrack.drivers.camera.base import CameraData, CameraInfo, DeviceDrop
 from flagtrack.drivers.camera.hardware import (
     KEY,
     RawStream,
@@ -40,6 +45,8 @@ log = logging.getLogger(__name__)
 INSTALL_HINT = "pip install 'flagtrack[prophesee]' (installs neuromorphic-drivers from PyPI)"
 ITERATOR_TIMEOUT_S = 0.02
 """How long one step of the device iterator waits for data (reads loop over steps until their timeout)."""
+RING_FULL = "neuromorphic-drivers dropped USB packets: the host's ring was full (the host fell behind)"
+BACKLOG_CLEARED = "backlog cleared: the host fell more than camera.hardware.max_backlog_packets USB packets behind"
 
 
 @dataclass(frozen=True)
@@ -71,6 +78,8 @@ class PropheseeConfig:
         encoding: the raw stream's encoding; ``auto`` is EVT 3.0, which neuromorphic-drivers
             configures on every Prophesee-sensor camera.
         stall_timeout_s: raise "camera stopped delivering data" after this long without any byte (0: never).
+        max_backlog_packets: when more USB packets than this wait in the host's ring, drop them all
+            (``clear_backlog``) to catch up with the camera, reported as a drop (None: never).
     """
 
     serial: str | int | None = None
@@ -80,11 +89,14 @@ class PropheseeConfig:
     trigger_in: bool | None = None
     encoding: Literal["auto", "evt3", "evt2", "evt21"] = "auto"
     stall_timeout_s: float = 5.0
+    max_backlog_packets: int | None = None
 
     def __post_init__(self) -> None:
         check_serial(self.serial)
         if self.stall_timeout_s < 0:
             raise ConfigError("must be >= 0 (0: never)", key=f"{KEY}.stall_timeout_s")
+        if self.max_backlog_packets is not None and self.max_backlog_packets < 1:
+            raise ConfigError("must be >= 1 (omit it: never clear)", key=f"{KEY}.max_backlog_packets")
 
 
 MODEL_BIASES = {
@@ -148,7 +160,8 @@ class PropheseeCamera:
         self._device: Any = None
         self._stream: RawStream | None = None
         self._stall = StallWatch(cfg.stall_timeout_s, self.label)
-        self.dropped_packets = 0
+        self.dropped_packets = 0  # the library's count, as last reported
+        self._drops: list[DeviceDrop] = []  # not yet handed over with data
 
     def open(self) -> CameraInfo:
         nd = import_sdk("neuromorphic_drivers", "prophesee", INSTALL_HINT)
@@ -201,7 +214,10 @@ class PropheseeCamera:
             self._note_drops(status)
             if packet:
                 self._stall.fed()
-                return self._stream.take(packet)
+                data = self._stream.take(packet)
+                drops, self._drops = tuple(self._drops), []
+                self._clear_backlog(status)  # reported with the next data
+                return replace(data, drops=drops + data.drops) if drops else data
             if time.monotonic() >= deadline:
                 self._stall.check()
                 return None
@@ -241,7 +257,8 @@ class PropheseeCamera:
     def _settings(
         self, nd: Any, device: Any, listed: Any, configuration: Any, bounds: Any, clamped: list[str]
     ) -> dict[str, Any]:
-        roi = self.cfg.roi.as_dict() if self.cfg.roi is not None else None
+        properties = device.properties()
+        roi = self.cfg.roi.on_sensor(properties.width, properties.height).as_dict() if self.cfg.roi else None
         settings: dict[str, Any] = {
             "driver": "neuromorphic-drivers",
             "driver_version": sdk_version("neuromorphic-drivers", nd),
@@ -254,6 +271,7 @@ class PropheseeCamera:
             "roi": roi,
             "rate_limiter": plain(getattr(configuration, "rate_limiter", None)),
             "trigger_in": plain(getattr(configuration, "enable_external_trigger", None)),
+            "max_backlog_packets": self.cfg.max_backlog_packets,
         }
         if bounds is not None:
             settings["biases_bounds"] = {k: [v["minimum"], v["maximum"]] for k, v in plain(bounds).items()}
@@ -263,11 +281,35 @@ class PropheseeCamera:
         return settings
 
     def _note_drops(self, status: Any) -> None:
+        """The USB packets the library dropped since the last status (its count rising; an
+        ``overflow_indices`` hole where the count did not move: a drop of unknown size)."""
         ring = getattr(status, "ring", None)
-        dropped = getattr(ring, "dropped_packets", None) if ring is not None else None
-        if isinstance(dropped, int) and dropped > self.dropped_packets:
-            log.warning("%s: %d USB packets dropped by the host so far (ring full)", self.label, dropped)
+        if ring is None:
+            return
+        dropped = getattr(ring, "dropped_packets", None)
+        new = 0
+        if isinstance(dropped, int):
+            new = dropped - self.dropped_packets if dropped >= self.dropped_packets else dropped
             self.dropped_packets = dropped
+        if new > 0:
+            log.warning("%s: %d USB packets dropped by the host (%d so far; ring full)", self.label, new, dropped)
+            self._drops.append(DeviceDrop(RING_FULL, new, "usb_packets"))
+        elif getattr(ring, "overflow_indices", None):
+            log.warning("%s: the host's ring overflowed (USB packets dropped)", self.label)
+            self._drops.append(DeviceDrop(RING_FULL, 0, "usb_packets"))
+
+    def _clear_backlog(self, status: Any) -> None:
+        """Drop every USB packet waiting in the host's ring when more than ``max_backlog_packets`` wait."""
+        ring, limit = getattr(status, "ring", None), self.cfg.max_backlog_packets
+        backlog = getattr(ring, "backlog", 0) if ring is not None else 0
+        if limit is None or backlog <= limit:
+            return
+        try:
+            self._device.clear_backlog(until=0)
+        except Exception as exc:
+            raise DriverError(f"camera failed or was unplugged: {exc}", device=self.label) from exc
+        log.warning("%s: %d USB packets waited in the host's ring: cleared them to catch up", self.label, backlog)
+        self._drops.append(DeviceDrop(BACKLOG_CLEARED, int(backlog), "usb_packets"))
 
 
 def build_configuration(module: Any, cfg: PropheseeConfig, bounds: Any, model: str) -> tuple[Any, list[str]]:
@@ -289,10 +331,10 @@ def build_configuration(module: Any, cfg: PropheseeConfig, bounds: Any, model: s
         if not {"x_mask", "y_mask"} <= fields:
             raise ConfigError(f"{model} has no ROI masks", key=f"{KEY}.roi")
         properties = module.Properties()
-        cfg.roi.check_inside(int(properties.width), int(properties.height))
+        roi = cfg.roi.on_sensor(int(properties.width), int(properties.height))
         defaults = module.Configuration()
-        kwargs["x_mask"] = _mask_words(cfg.roi.x, cfg.roi.width, int(properties.width), len(defaults.x_mask))
-        kwargs["y_mask"] = _mask_words(cfg.roi.y, cfg.roi.height, int(properties.height), len(defaults.y_mask))
+        kwargs["x_mask"] = _mask_words(roi.x, roi.width, int(properties.width), len(defaults.x_mask))
+        kwargs["y_mask"] = _mask_words(roi.y, roi.height, int(properties.height), len(defaults.y_mask))
         if "mask_intersection_only" in fields:
             kwargs["mask_intersection_only"] = False
     if cfg.rate_limiter is not None:

@@ -25,7 +25,7 @@ import numpy as np
 
 from flagtrack.daemon.core.events import TRIGGER_DTYPE, empty_triggers
 from flagtrack.daemon.errors import DriverError
-from flagtrack.drivers.camera.base import CameraData, CameraInfo
+from flagtrack.drivers.camera.base import CameraData, CameraInfo, DeviceDrop
 from flagtrack.drivers.sim.flutter import FlutterModel, FlutterParams, FlutterState
 from flagtrack.drivers.sim.kinematics import FlagKinematics, with_peak_to_peak
 from flagtrack.drivers.sim.quickline import QuickLineParams, line_events
@@ -33,6 +33,8 @@ from flagtrack.drivers.sim.quickline import QuickLineParams, line_events
 log = logging.getLogger(__name__)
 
 _REFERENCE_AMP_OVER_L = 0.3  # the base kinematics is solved for this A/L; others scale its angle wave
+SKIP_REASON = "simulated camera: cannot keep up with real time; skipped ahead (events dropped)"
+"""What a skip ahead is reported as (a :class:`DeviceDrop` of the skipped camera time, µs)."""
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,8 @@ class SimulatedCameraConfig:
         max_lag_s: when the machine cannot generate events in real time and falls this far behind,
             the twin skips ahead (the flag moves on, no events for the skipped time), as a real
             camera's event-rate controller drops events, so the flag stays in step with the tunnel.
+            Each skip is reported with the next data (``CameraData.drops``), so a recording made
+            meanwhile is marked lossy.
         trigger_period_ms: sync generator period on the camera's trigger input (0: no pulses).
         trigger_pulse_us: width of each pulse.
         trigger_channel: trigger input channel of the pulses.
@@ -209,6 +213,7 @@ class SimulatedCamera:
         self._wall0: float | None = None
         self._slice = 0
         self.skipped_us = 0
+        self._drops: list[DeviceDrop] = []  # skips not yet handed over with data
         self.truth = TwinTruth(cfg.truth_keep_s)
         self._pending_triggers = empty_triggers()
 
@@ -274,7 +279,8 @@ class SimulatedCamera:
         triggers = trigger_edges(self.cfg, t0_us, t1_us)
         if len(self._pending_triggers):  # pulses of skipped time: a camera keeps its trigger events
             triggers, self._pending_triggers = np.concatenate([self._pending_triggers, triggers]), empty_triggers()
-        return CameraData(events, triggers, time.time_ns(), t_until_us=t1_us)
+        drops, self._drops = tuple(self._drops), []
+        return CameraData(events, triggers, time.time_ns(), t_until_us=t1_us, drops=drops)
 
     def close(self) -> None:
         self._wall0 = None
@@ -285,6 +291,7 @@ class SimulatedCamera:
             return
         if self.skipped_us == 0:
             log.warning("simulated camera: cannot keep up with real time; skipping ahead (events dropped)")
+        self._drops.append(DeviceDrop(SKIP_REASON, skip_us, "us", t_from_us=self._t_us, t_to_us=self._t_us + skip_us))
         start = self.flutter.state
         end = self.flutter.advance(float(self.speed_source()), skip_us * 1e-6)
         self.truth.add(

@@ -10,7 +10,8 @@ import pytest
 import yaml
 
 from flagtrack.daemon.errors import ConfigError, DriverError
-from flagtrack.drivers.camera import metavision
+from flagtrack.drivers.camera import hardware, metavision
+from flagtrack.drivers.formats import FormatWarning
 from tests.fakes.helpers import read_until
 
 DOC_YAML = """
@@ -55,6 +56,24 @@ def test_events_decode_exactly_in_every_format(
     assert reads > 5 and len(cam.sent_events) > 1000
     np.testing.assert_array_equal(events, cam.sent_events)
     np.testing.assert_array_equal(triggers, cam.sent_triggers)
+
+
+def test_corrupt_words_of_the_cameras_evt21_stream_are_reported_as_drops(fake_hal) -> None:
+    fake_hal._fake.use_api("4.6")  # the device's bytes, decoded by flagtrack
+    corrupt = (100, 2000, 2001, 5000)
+    fake_hal._fake.plug(
+        fake_hal.FakeHalCamera(format="EVT21", format_options="endianness=little", corrupt_words=corrupt)
+    )
+    camera = metavision.open_from_config({})
+    camera.open()
+    drops, data = [], None
+    with pytest.warns(FormatWarning, match="corrupt EVT 2.1 word"):
+        while not camera._events_stream._feed.exhausted or data is not None:
+            data = camera.read(0.01)
+            drops += data.drops if data is not None else ()
+    camera.close()
+    assert {d.reason for d in drops} == {hardware.CORRUPT_WORDS} and {d.unit for d in drops} == {"words"}
+    assert sum(d.count for d in drops) == len(corrupt)
 
 
 def test_the_hal_decodes_opaque_buffers_and_says_how_far_the_stream_is_complete(fake_hal) -> None:

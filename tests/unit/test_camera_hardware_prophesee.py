@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 
@@ -182,3 +183,57 @@ def test_a_stalled_camera_reads_none_then_raises(fake_nd) -> None:
             results.append(camera.read(0.05))
     assert results[0] is not None and results[-1] is None
     camera.close()
+
+
+def read_all(camera, cam) -> tuple[list, bytes]:
+    """Read until the fake's stream is exhausted: every drop reported and every byte received."""
+    drops, received = [], []
+    while not (cam.feed is not None and cam.feed.exhausted):
+        data = camera.read(0.01)
+        if data is not None:
+            drops += data.drops
+            received.append(data.raw)
+    return drops, b"".join(received)
+
+
+def test_usb_packets_the_host_ring_drops_are_reported_with_the_data_after_them(fake_nd) -> None:
+    cam = fake_nd._fake.plug(fake_nd.FakeCamera(ring_drops={5: 3, 12: 2}))
+    camera = prophesee.open_from_config({})
+    camera.open()
+    drops, received = read_all(camera, cam)
+    camera.close()
+    full = prophesee.DeviceDrop(prophesee.RING_FULL, 3, "usb_packets")
+    assert drops == [full, dataclasses.replace(full, count=2)]
+    assert cam.dropped_packets == 5 and camera.dropped_packets == 5  # the library's count, which only grows
+    lost = sum(b - a for a, b in cam.lost)
+    assert lost > 0 and received == bytes(np.delete(np.frombuffer(cam.feed.data, np.uint8), _ranges(cam.lost)))
+
+
+def test_a_backlog_over_the_limit_is_cleared_and_reported(fake_nd) -> None:
+    cam = fake_nd._fake.plug(fake_nd.FakeCamera(backlog_at={4: 2, 10: 6}))
+    camera = prophesee.open_from_config({"max_backlog_packets": 3})
+    info = camera.open()
+    assert info.settings["max_backlog_packets"] == 3
+    drops, received = read_all(camera, cam)
+    camera.close()
+    assert cam.cleared == [6]  # 2 waiting is within the limit: only the 6 are cleared (clear_backlog(until=0))
+    assert drops == [prophesee.DeviceDrop(prophesee.BACKLOG_CLEARED, 6, "usb_packets")]
+    assert received == bytes(np.delete(np.frombuffer(cam.feed.data, np.uint8), _ranges(cam.lost)))
+
+
+def test_an_overflow_the_count_does_not_show_is_a_drop_of_unknown_size(fake_nd) -> None:
+    camera = prophesee.open_from_config({})
+    ring = fake_nd.RawRingStatus(0.0, 0, 1, False, [0], 0)  # a hole in the bytes, the count unchanged
+    camera._note_drops(fake_nd.RawStatus(0.0, ring))
+    camera._note_drops(fake_nd.RawStatus(0.0, fake_nd.RawRingStatus(0.0, 0, 1, False, None, 0)))
+    assert camera._drops == [prophesee.DeviceDrop(prophesee.RING_FULL, 0, "usb_packets")]
+
+
+@pytest.mark.parametrize("value", [0, -2])
+def test_max_backlog_packets_must_be_positive(value: int) -> None:
+    with pytest.raises(ConfigError, match="max_backlog_packets"):
+        prophesee.open_from_config({"max_backlog_packets": value})
+
+
+def _ranges(spans: list[tuple[int, int]]) -> np.ndarray:
+    return np.concatenate([np.arange(a, b) for a, b in spans]) if spans else np.zeros(0, dtype=np.int64)

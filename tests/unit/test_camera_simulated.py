@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flagtrack.drivers.camera.simulated import SimulatedCamera, SimulatedCameraConfig, fast_forward
+from flagtrack.drivers.camera.simulated import SKIP_REASON, SimulatedCamera, SimulatedCameraConfig, fast_forward
 from flagtrack.drivers.sim.flutter import FlutterParams
 
 FLUTTER = FlutterParams(onset_speed_mps=5.0, decay_speed_mps=4.5, tau_amp_s=0.05)
@@ -61,6 +61,12 @@ def test_a_camera_that_falls_behind_skips_ahead_and_stays_in_step_with_the_wall_
     assert data is not None and camera.skipped_us >= 300_000
     assert abs(data.t_until_us * 1e-6 - 0.5) < 0.15  # camera time caught up with the wall clock
     assert camera.state.t_s == pytest.approx(data.t_until_us * 1e-6)  # the flag moved on with it
+    # the skip is reported with the data after it: the camera time skipped, where it lies
+    (drop,) = data.drops
+    assert (drop.reason, drop.count, drop.unit) == (SKIP_REASON, camera.skipped_us, "us")
+    assert drop.t_to_us - drop.t_from_us == camera.skipped_us and drop.t_to_us <= data.events["t"].min()
+    later = camera.read(0.05)  # a skip is reported once (a later one, on a loaded machine, lies after it)
+    assert later is None or all(d.t_from_us >= drop.t_to_us for d in later.drops)
 
 
 def test_bench_twin_reports_the_demo_twins_rate_and_its_scaling() -> None:

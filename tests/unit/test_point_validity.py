@@ -59,6 +59,19 @@ def test_recording_problem_counts_every_kind_of_loss() -> None:
     )
 
 
+def test_drops_the_camera_reported_make_a_recording_lossy_with_their_reason() -> None:
+    skipped = "simulated camera: cannot keep up with real time; skipped ahead (events dropped) (0.5 s, 2 times)"
+    stopped = RecorderStatus("idle", packets=100, device_drops=2, device_drop_reason=skipped)
+    assert recording_problem(RecorderStatus("recording"), stopped) == (
+        f"the camera dropped data 2 time(s) while recording: {skipped}"
+    )
+    both = recording_problem(None, RecorderStatus("idle", missing_packets=1, device_drops=1))
+    assert both == (
+        "recording lost packets (1 missing in sequence); the camera dropped data 1 time(s) while recording: "
+        "no reason given"
+    )
+
+
 def test_free_space_uses_the_larger_of_the_configured_and_the_measured_rate() -> None:
     assert expected_point_bytes(20.0, 5.0, 2.0) == 200e6
     assert expected_point_bytes(20.0, 5.0, 2.0, measured_bytes_per_s=30e6) == 600e6

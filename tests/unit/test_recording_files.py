@@ -3,6 +3,7 @@ cut back to the last flush, the free-space guard; on real files (a real tmpfs fo
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import json
 import shutil
@@ -19,7 +20,7 @@ from flagtrack.daemon.schema import EventPacket
 from flagtrack.drivers.formats import read_events
 from flagtrack.drivers.formats.centreline import read_centrelines
 from flagtrack.drivers.formats.packets import Packetizer, PacketParams
-from flagtrack.drivers.formats.recording import FreeSpaceGuard, PartChain, RecordingPart
+from flagtrack.drivers.formats.recording import FreeSpaceGuard, PartChain, RecordingPart, drop_summary
 from flagtrack.drivers.sim.quickline import WavyFlag, line_events
 from tests.integration.test_centreline_file_service import message
 
@@ -210,3 +211,30 @@ def test_a_part_on_a_full_disk_is_cut_back_and_reads_back_whole(tmp_path: Path) 
 
 def _quoted(text: str) -> str:
     return "'" + text.replace("'", "'\\''") + "'"
+
+
+def test_the_drops_a_camera_reports_while_a_part_records_are_in_its_sidecar(tmp_path: Path) -> None:
+    """The stream's running count of drops: what it was at the part's first packet is not the part's;
+    each rise is an entry, with the packet's reason, or a plain one when the packet that said it was lost."""
+    _, packets = camera()
+    with_drops = lambda p, n, **drop: dataclasses.replace(p, device_drops=n, **drop)  # noqa: E731
+    stream = [with_drops(p, 3) for p in packets[:10]]  # 3 drops before the recording began
+    stream[0] = with_drops(packets[0], 3, drop_count=7, drop_unit="usb_packets", drop_reason="ring full")
+    stream += [with_drops(packets[10], 4, drop_count=250_000, drop_unit="us", drop_reason="skipped ahead")]
+    stream += [with_drops(p, 4) for p in packets[11:20]] + [with_drops(p, 6) for p in packets[22:30]]
+    part = RecordingPart(base=tmp_path / "r", config={})
+    for packet in stream:
+        part.write_packet(packet, gap_from=20 if packet.seq == 22 else None)
+    part.close()
+    doc = sidecar(tmp_path / "r.json")
+    assert doc["device_drop_reports"] == 3 and doc["missing_packets"] == 2
+    first, second = doc["device_drops"]
+    assert (first["seq"], first["reports"], first["count"], first["unit"], first["reason"]) == (
+        10, 1, 250_000, "us", "skipped ahead"
+    )  # fmt: skip
+    assert (first["t_from_us"], first["t_to_us"]) == (packets[9].t_last_us, packets[10].t_first_us)
+    assert (second["seq"], second["reports"], second["count"]) == (22, 2, 0)
+    assert second["reason"].startswith("reported on packets missing from the recording")
+    assert drop_summary(doc["device_drops"]) == (
+        "skipped ahead (0.25 s); reported on packets missing from the recording (see its gaps) (2 times)"
+    )

@@ -106,3 +106,20 @@ def test_native_packets_carry_their_preamble_and_older_packets_decode_as_re_enco
     older = _rewrite(encode(packet), edit=lambda meta: [meta.pop("preamble_bytes"), meta.pop("native")])
     got = decode(older, EventPacket)  # a peer of before native packets: every byte is the packet's own
     assert (got.preamble_bytes, got.native, got.data) == (0, False, packet.data)
+
+
+def test_drop_fields_travel_and_messages_of_older_peers_decode_as_no_drops() -> None:
+    packet = EventPacket(
+        "cam0", 3, 10, 999, 5, 640, 480, "evt3", 123, device_drops=2, drop_count=250_000, drop_unit="us",
+        drop_reason="simulated camera: skipped ahead",
+    )  # fmt: skip
+    assert decode(encode(packet), EventPacket) == packet
+    drop_fields = ("device_drops", "drop_count", "drop_unit", "drop_reason")
+    old = _rewrite(encode(packet), edit=lambda meta: [meta.pop(name) for name in drop_fields])
+    assert decode(old, EventPacket) == EventPacket("cam0", 3, 10, 999, 5, 640, 480, "evt3", 123)
+    status = schema.RecorderStatus("idle", device_drops=1, device_drop_reason="backlog cleared")
+    older = _rewrite(encode(status), edit=lambda meta: [meta.pop("device_drops"), meta.pop("device_drop_reason")])
+    assert decode(older, schema.RecorderStatus) == schema.RecorderStatus("idle")
+    camera = schema.CameraStatus("cam0", "streaming", "simulated", 640, 480, "evt3", device_drops=4, drop_reason="x")
+    oldest = _rewrite(encode(camera), version=1, edit=lambda meta: [meta.pop("device_drops"), meta.pop("drop_reason")])
+    assert decode(oldest, schema.CameraStatus).device_drops == 0

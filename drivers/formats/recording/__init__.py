@@ -2,10 +2,10 @@
 
 A recording ``BASE`` is ``BASE.raw`` (a valid RAW stream in the camera's native encoding: header,
 a time-base preamble, the packets' bytes as they came), its JSON sidecar ``BASE.json`` (counts,
-sequence gaps with their times, the configuration; rewritten atomically at each fsync) and,
-optionally, ``BASE_centrelines.h5``. The ``.raw`` file is flushed every ``flush_interval_s`` and
-fsynced every ``fsync_interval_s`` and at its close, so a recording cut by a crash reads back up to
-its last flush; a write that fails (a full disk) cuts it back to its last flush, so it reads back
+sequence gaps with their times, what the camera reported lost, the configuration; rewritten
+atomically at each fsync) and, optionally, ``BASE_centrelines.h5``. The ``.raw`` file is flushed
+every ``flush_interval_s`` and fsynced every ``fsync_interval_s`` and at its close, so a recording
+cut by a crash reads back up to its last flush; a write that fails (a full disk) cuts it back to its last flush, so it reads back
 whole. :class:`FreeSpaceGuard` stops a recording before the disk is full.
 
 The packets of two camera streams do not make one valid stream (the second one's times start
@@ -19,7 +19,7 @@ caller's time-out).
 from flagtrack.drivers.formats.recording.chain import PartChain
 from flagtrack.drivers.formats.recording.free_space import FreeSpaceGuard
 from flagtrack.drivers.formats.recording.inputs import CameraPacket, CentrelineUpdates, SyncIntervals, TrackerUpdates
-from flagtrack.drivers.formats.recording.part import RecordingPart, gap_span, gap_times_s
+from flagtrack.drivers.formats.recording.part import RecordingPart, device_drop, drop_summary, gap_span, gap_times_s
 from flagtrack.drivers.formats.recording.paths import (
     RECORDING_SUFFIXES,
     confined_base,
@@ -40,6 +40,8 @@ __all__ = [
     "SyncIntervals",
     "TrackerUpdates",
     "confined_base",
+    "device_drop",
+    "drop_summary",
     "gap_span",
     "gap_times_s",
     "part_base",

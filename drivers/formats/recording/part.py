@@ -29,7 +29,8 @@ class RecordingPart:
     ``part`` numbers the files of one recording (one per camera stream); ``first_base`` is the base
     path of part 1. ``centreline_attrs`` (processing parameters and calibration) go in the centreline
     file's attributes with the units, the source and the .raw file. ``dropped`` (packets a queue
-    before the part dropped) is set by the caller.
+    before the part dropped) is set by the caller. ``device_drops`` lists what the camera reported
+    lost while the part recorded (:func:`device_drop`), ``device_drop_reports`` how many reports.
     """
 
     base: Path
@@ -46,6 +47,9 @@ class RecordingPart:
     malformed: int = 0
     late: int = 0  # duplicates and late packets of the stream, dropped
     dropped: int = 0
+    device_drops: list[dict[str, Any]] = field(default_factory=list)  # sidecar "device_drops"
+    device_drop_reports: int = 0
+    device_drops_seen: int | None = None  # the stream's drop count at the last packet written
     started_wall: float = field(default_factory=time.time)
     first_t_us: int | None = None
     last_t_us: int | None = None
@@ -127,6 +131,7 @@ class RecordingPart:
             self.gap_spans.append(gap_span(gap_from, packet, self.last_t_us, self.last_sent_ns))
             if self.centrelines is not None:  # the centreline file says where its updates have a hole
                 self.centrelines.set_attrs({"gaps_t_s": gap_times_s(self.gap_spans)})
+        self._note_device_drops(packet)
         self.last_sent_ns = packet.sent_ns
         data: bytes | memoryview = packet.data
         if packet.preamble_bytes and self.packets and gap_from is None:
@@ -141,6 +146,16 @@ class RecordingPart:
         self.first_sent_ns = packet.sent_ns if self.first_sent_ns is None else self.first_sent_ns
         self.last_t_us = packet.t_last_us
         self.ended = packet.end_of_stream
+
+    def _note_device_drops(self, packet: CameraPacket) -> None:
+        """Record the drops the camera reported since the last packet written (its stream's count
+        rose); the part's first packet sets where the count starts (drops before it are not its)."""
+        seen, self.device_drops_seen = self.device_drops_seen, packet.device_drops
+        if seen is None or packet.device_drops <= seen:
+            return
+        reports = packet.device_drops - seen
+        self.device_drop_reports += reports
+        self.device_drops.append(device_drop(packet, reports, self.last_t_us, self.last_sent_ns))
 
     def write_centrelines(self, msg: CentrelineUpdates) -> None:
         """Queue a batch of centrelines (written to HDF5 at the next sync, in one append).
@@ -191,6 +206,8 @@ class RecordingPart:
             "malformed_packets": self.malformed,
             "late_packets": self.late,
             "dropped_packets": self.dropped,
+            "device_drops": self.device_drops,
+            "device_drop_reports": self.device_drop_reports,
             "part": self.part,
             "continues": self.continues,
             "continued_in": self.continued_in,
@@ -256,6 +273,43 @@ def gap_span(expected: int, packet: CameraPacket, last_t_us: int | None, last_se
         "sent_from_ns": last_sent_ns,
         "sent_to_ns": packet.sent_ns,
     }
+
+
+def device_drop(packet: CameraPacket, reports: int, last_t_us: int | None, last_sent_ns: int) -> dict[str, Any]:
+    """The sidecar's entry for drops the camera reported before ``packet`` (``reports`` of them): what
+    was lost (``count`` of ``unit``, 0: unknown), why, and the camera time (from the horizon of the
+    last packet written to this one's first time) and wall time (``sent_*_ns``) it spans."""
+    reason = packet.drop_reason or "reported on packets missing from the recording (see its gaps)"
+    return {
+        "seq": packet.seq,
+        "reports": reports,
+        "count": packet.drop_count,
+        "unit": packet.drop_unit,
+        "reason": reason,
+        "t_from_us": last_t_us if last_t_us is not None else packet.t_first_us,
+        "t_to_us": packet.t_first_us,
+        "sent_from_ns": last_sent_ns,
+        "sent_to_ns": packet.sent_ns,
+    }
+
+
+def drop_summary(drops: list[dict[str, Any]]) -> str:
+    """The device drops of a sidecar in one line: each reason once, with how often and how much."""
+    by_reason: dict[str, list[dict[str, Any]]] = {}
+    for drop in drops:
+        by_reason.setdefault(drop["reason"], []).append(drop)
+    parts = []
+    for reason, same in by_reason.items():
+        reports = sum(d["reports"] for d in same)
+        units = {d["unit"] for d in same}
+        total = sum(d["count"] for d in same)
+        amount = ""
+        if len(units) == 1 and total:
+            unit = units.pop()
+            amount = f"{total * 1e-6:g} s" if unit == "us" else f"{total} {unit.replace('_', ' ')}"
+        counted = ", ".join(x for x in (amount, f"{reports} times" if reports > 1 else "") if x)
+        parts.append(f"{reason} ({counted})" if counted else reason)
+    return "; ".join(parts)
 
 
 def gap_times_s(spans: list[dict[str, int]]) -> np.ndarray:

@@ -105,6 +105,8 @@ class FakeHalCamera:
         duration_us, seed: the flapping-line source and buffer sizes.
         unplug_after_bytes: poll_buffer returns -1 after this many bytes.
         stall_after_bytes: no more buffers after this many bytes.
+        corrupt_words: (OpenEB 4.x bindings, EVT 2.1) indices of 64-bit words of the stream the camera
+            garbles into a reserved type (a corrupt transfer); their events are lost.
     """
 
     serial: str = "00ca0009"
@@ -115,6 +117,7 @@ class FakeHalCamera:
     seed: int = 0
     unplug_after_bytes: int | None = None
     stall_after_bytes: int | None = None
+    corrupt_words: tuple[int, ...] = ()
     events: np.ndarray | None = None
     triggers: np.ndarray | None = None
     sent_events: np.ndarray | None = None
@@ -447,6 +450,10 @@ class Device:
             encoding == "evt21" and "endianness" not in camera.format_options and sensor.system_id < 0x37
         )
         data = _fake_streams.encode(encoding, events, triggers, sensor.width, sensor.height, legacy=legacy)
+        if camera.corrupt_words:
+            words = np.frombuffer(data, dtype="<u8").copy()
+            words[list(camera.corrupt_words)] = 0x3 << 60 if not legacy else 0x3 << 28  # reserved type 0x3
+            data = words.tobytes()
         self._decoder.words = make_decoder(
             encoding, width=sensor.width, height=sensor.height, strict=True, endianness="legacy" if legacy else "little"
         )

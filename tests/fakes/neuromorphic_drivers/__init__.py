@@ -4,7 +4,8 @@ Real API mirrored: ``list_devices() -> [ListedDevice(name, connection, address, 
 ``open(configuration=None, iterator_timeout=None, raw=False, serial=None, ...)`` returning a device with
 ``__next__ -> (RawStatus, bytes | None)`` (None when ``iterator_timeout`` passes without data),
 ``properties()``, ``serial()``, ``name()``, ``connection()``, ``biases_bounds()``,
-``update_configuration(configuration)``, ``close()``, ``temperature_celsius()`` (EVK4), and the model
+``update_configuration(configuration)``, ``close()``, ``temperature_celsius()`` (EVK4), ``backlog()``,
+``clear_backlog(until)``, ``overflow()``, and the model
 modules ``prophesee_evk4`` and ``centuryarks_vga`` with ``Biases``, ``RateLimiter``, ``Configuration``,
 ``Properties``, ``BiasesBounds``.
 
@@ -12,7 +13,11 @@ Device behaviour: streams real EVT 3.0 bytes of a flapping line (``_fake_streams
 sizes; applies the configuration as a sensor would (row/column masks drop events, the rate limiter keeps at
 most N events per period, the trigger input on/off, biases clamped to the bounds it reports); can be absent,
 refuse to open (``error``), be unplugged (the iterator raises) or stall (no data). The stream is encoded from
-the configuration in force at the first read (the adapter configures before reading).
+the configuration in force at the first read (the adapter configures before reading). The host's ring can
+overflow (``ring_drops``: USB packets lost before a given one, counted in ``RawRingStatus.dropped_packets``,
+which only grows, and marked by ``overflow_indices``) or fill up (``backlog_at``: packets waiting, which
+``clear_backlog(until)`` consumes as the library does: one at a time until fewer than ``until`` wait or
+none is left).
 
 Tests drive it through ``_fake``: ``_fake.plug(FakeCamera(...))``, ``_fake.cameras``, ``_fake.reset()``.
 """
@@ -86,6 +91,8 @@ class FakeCamera:
         unplug_after_bytes: the iterator raises after this many bytes.
         stall_after_bytes: stops delivering after this many bytes.
         events, triggers: the source (made from duration_us and seed when None).
+        ring_drops: USB packet number -> how many packets the host's ring dropped just before it.
+        backlog_at: USB packet number -> how many packets wait in the ring when it is delivered.
     """
 
     name: Name = Name.PROPHESEE_EVK4
@@ -103,6 +110,13 @@ class FakeCamera:
     sent_events: np.ndarray | None = None  # what the sensor produced under that configuration
     sent_triggers: np.ndarray | None = None
     feed: _fake_streams.ByteFeed | None = None
+    ring_drops: dict[int, int] = dataclasses.field(default_factory=dict)
+    backlog_at: dict[int, int] = dataclasses.field(default_factory=dict)
+    delivered_packets: int = 0  # USB packets handed to the host (dropped ones included)
+    dropped_packets: int = 0
+    lost: list[tuple[int, int]] = dataclasses.field(default_factory=list)  # byte ranges that never arrived
+    cleared: list[int] = dataclasses.field(default_factory=list)  # packets each clear_backlog consumed
+    backlog: int = 0
 
     def __post_init__(self) -> None:
         model = MODELS.get(self.name)
@@ -194,14 +208,55 @@ class Device:
         feed = camera.feed
         if camera.unplug_after_bytes is not None and feed.delivered >= camera.unplug_after_bytes:
             raise RuntimeError("LIBUSB_ERROR_NO_DEVICE: the device was disconnected")
-        chunk = feed.next()
+        overflow = self._overflow(feed)
+        camera.backlog = camera.backlog_at.get(camera.delivered_packets, max(camera.backlog - 1, 0))
+        chunk = self._next_packet(feed)
         if chunk is None:
             if self.iterator_timeout is None:
                 raise AssertionError("fake: a blocking iterator with no data would hang")
             time.sleep(self.iterator_timeout)
             return RawStatus(time.time(), None), None
-        ring = RawRingStatus(time.time(), 0, 1, False, None, 0)
+        ring = RawRingStatus(time.time(), camera.backlog, 1, False, [0] if overflow else None, camera.dropped_packets)
         return RawStatus(time.time(), ring), chunk
+
+    def _next_packet(self, feed: _fake_streams.ByteFeed) -> bytes | None:
+        chunk = feed.next()
+        if chunk is not None:
+            self.camera.delivered_packets += 1
+        return chunk
+
+    def _overflow(self, feed: _fake_streams.ByteFeed) -> bool:
+        """Lose the packets the ring drops before this one (counted); whether any were."""
+        camera = self.camera
+        n = camera.ring_drops.get(camera.delivered_packets, 0)
+        start = feed.delivered
+        for _ in range(n):
+            if self._next_packet(feed) is None:
+                break
+            camera.dropped_packets += 1
+        if feed.delivered > start:
+            camera.lost.append((start, feed.delivered))
+        return n > 0
+
+    def backlog(self) -> int:
+        return self.camera.backlog
+
+    def clear_backlog(self, until: int) -> None:
+        if self._closed:
+            raise RuntimeError("__next__ called after __exit__")
+        camera, feed = self.camera, self.camera.feed
+        start, consumed = (feed.delivered if feed else 0), 0
+        while feed is not None and camera.backlog > 0 and self._next_packet(feed) is not None:
+            consumed += 1  # one of the packets waiting, taken and dropped
+            camera.backlog -= 1
+            if camera.backlog < until:
+                break
+        if consumed:
+            camera.lost.append((start, feed.delivered))
+        camera.cleared.append(consumed)
+
+    def overflow(self) -> bool:
+        return self.camera.dropped_packets > 0
 
     def name(self) -> Name:
         return self.camera.name
