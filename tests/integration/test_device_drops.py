@@ -96,9 +96,12 @@ def test_a_camera_skipping_ahead_puts_its_drops_in_the_sidecar_and_the_point_is_
     assert sidecar["device_drop_reports"] == stopped.device_drops == sum(d["reports"] for d in drops) >= 3
     assert camera.device_drops >= stopped.device_drops  # some came before the recording began
     assert sidecar["sequence_gaps"] == [] and stopped.missing_packets == 0  # no packet lost on the bus
+    # a hold skips the time held up, in whole slices, less the twin's lead on the clock (up to a slice) and the
+    # rounding down; a loaded host may make the twin skip shorter spans besides
+    assert max(d["count"] for d in drops) >= HOLD_S * 1e6 - 2 * TWIN.slice_us
     for drop in drops:
         assert (drop["reason"], drop["unit"]) == (SKIP_REASON, "us")
-        assert drop["count"] >= HOLD_S * 1e6 - TWIN.slice_us  # the time held up, in whole slices
+        assert drop["count"] > 0 and drop["count"] % TWIN.slice_us == 0
         assert drop["t_to_us"] - drop["t_from_us"] >= drop["count"]  # the span covers the skipped time
         assert drop["sent_to_ns"] >= drop["sent_from_ns"] > 0
     events = read_events(tmp_path / "point.raw").events["t"]
