@@ -236,6 +236,8 @@ class RecordingPart:
             self.raw = open(self.raw_path, "wb")  # noqa: SIM115 - closed in close()
             self.geometry = {"width": packet.width, "height": packet.height, "encoding": packet.encoding}
             self._stream_key = (packet.encoding, packet.width, packet.height)
+            if self.centrelines is not None:  # the centreline file says the sensor's size
+                self.centrelines.set_attrs({"sensor_width_px": packet.width, "sensor_height_px": packet.height})
             self.raw.write(start)
             self.raw.flush()
             self.flushed_at = self.raw.tell()

@@ -75,7 +75,8 @@ def reconstruct_file(
     with open_events(path, chunk_bytes=CHUNK_BYTES, strict=strict) as reader:
         info = reader.info
         tracker = setup.new_tracker((info.width or 0, info.height or 0))
-        attrs = {**setup.attrs, "input_file": str(Path(path).resolve()), "input_format": info.format}
+        attrs = {**setup.attrs, "input_file": str(Path(path).resolve()), "input_format": info.format,
+                 "sensor_width_px": info.width, "sensor_height_px": info.height}  # fmt: skip
         with CentrelineSink(output, attrs, s=tracker.s, n_joints=setup.params.chain.n_joints, atomic=atomic) as sink:
             # this thread reads, decodes, denoises and maps; the pipeline's worker updates the chain
             # and writes the updates (the same results as tracker.feed on each chunk)
