@@ -116,8 +116,6 @@ def run(args: argparse.Namespace) -> int:
     from flagtrack.daemon.commands._progress import SweepProgressView
     from flagtrack.daemon.rig.config import RigConfig
     from flagtrack.daemon.rig.run import prepare_services, run_rig
-    from flagtrack.daemon.sweep.runlog import read_run
-    from flagtrack.daemon.sweep.summary import summary_points, transition_speeds
     from flagtrack.daemon.typed_yaml import from_mapping
 
     def say(text: str) -> None:
@@ -228,8 +226,8 @@ def sensor_check(points: list[Any], run_dir: Path) -> dict[str, Any]:
         "worst": worst.sensor_error_rms_over_l,
         "figure": str(figure) if figure is not None and figure.exists() else None,
         "text": (
-            f"worst e/L RMS {worst.sensor_error_rms_over_l:.2%} of L over {len(checked)} flapping points "
-            f"({worst.point_id}; {within} the paper's 0-{PAPER_ERROR_OVER_L:.1%}), clocks trigger-synchronised "
-            f"at {synced} of {len(points)} points"
+            f"worst {show('sensor_error_rms_over_l', worst.sensor_error_rms_over_l)} of L over {len(checked)} "
+            f"flapping points ({worst.point_id}; {within} the paper's 0-{100 * PAPER_ERROR_OVER_L:.1f} %), clocks "
+            f"trigger-synchronised at {synced} of {len(points)} points"
         ),
     }

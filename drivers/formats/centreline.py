@@ -51,7 +51,7 @@ class CentrelineWriter:
         self._file = h5py.File(self.path, "w")
         n_s = len(s)
         self._file.create_dataset("s", data=np.asarray(s, dtype=np.float64))
-        chunk_t = 1024
+        chunk_t = 256  # rows per chunk; the last chunk's unused rows take disk (1024: a 2 s point's file +40 %)
         self._file.create_dataset("t", (0,), maxshape=(None,), dtype="f8", chunks=(chunk_t,))
         for name, width in (("x", n_s), ("y", n_s), ("joints/x", n_joints + 1), ("joints/y", n_joints + 1)):
             self._file.create_dataset(name, (0, width), maxshape=(None, width), dtype="f8", chunks=(chunk_t, width))
