@@ -102,7 +102,7 @@ def test_the_sweep_figures_say_what_which_run_and_in_what_unit(run: tuple[Path, 
     amplitude_title, sweep_title = figure_titles(record, points)
     amplitude = amplitude_figure(points, amplitude_title, transition_speeds(points))
     sweep = sweep_figure(points, sweep_title)
-    check_sweep_figures(points, json.loads((run_dir / "run.json").read_text()), amplitude, sweep)
+    check_sweep_figures(json.loads((run_dir / "run.json").read_text()), amplitude, sweep)
     texts = figure_texts(sweep)
     assert any("no sensor comparison (1 points)" in t for t in texts)  # a marker where there is no number
     assert (run_dir / "validation.png").stat().st_size > 5000 and (run_dir / "amplitude.png").stat().st_size > 5000
