@@ -126,3 +126,16 @@ def test_attribute_values_are_what_matlab_reads(tmp_path: Path, value: object) -
             assert "v" not in f.attrs
         else:
             assert plain_type(f, "v")
+
+
+def test_docs_formats_lists_every_dataset_with_its_unit() -> None:
+    text = (Path(__file__).resolve().parents[2] / "docs" / "formats.md").read_text()
+    section = text.split("## Centreline files (HDF5)", 1)[1].split("\n## ", 1)[0]
+    rows = {
+        line.split("|")[1].strip(): line.split("|")[4].strip()
+        for line in section.splitlines()
+        if line.startswith("| `/")
+    }
+    for spec in DATASETS:
+        row = next((unit for names, unit in rows.items() if f"`/{spec.name}`" in names), None)
+        assert row == ("length" if spec.units == LENGTH else spec.units), spec.name
