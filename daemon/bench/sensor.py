@@ -148,7 +148,7 @@ def _accuracy(args: argparse.Namespace) -> list[dict[str, Any]]:
             )
             check_s = time.perf_counter() - started
             f = v.fields()
-            d_mean, _ = v.delta_rms_over_l
+            d_mean, _ = v.cloud_distance_over_l
             rows.append(
                 {
                     "speed_mps": speed,

@@ -38,22 +38,25 @@ def _number(value: float, fmt: str, width: int) -> str:
 
 def point_line(state: SupervisorState) -> str:
     """The line of the last finished point of ``state``, e.g.
-    ``point  3/17  4.50 m/s up    flapping  A/L 0.231  f  12.4 Hz  lost -  e/L 0.43 %  [0:42, ETA 1:38]``.
+    ``point  3/17  4.50 m/s up    flapping  A/L 0.231  f  12.4 Hz  lost 0.0 %  e/L RMS 0.43 %  [0:42, ETA 1:38]``.
 
-    ``lost`` is the fraction of the point's updates the tracker flagged lost: ``-`` until point
-    records carry one (``daemon/sweep/progress.py``'s ``lost_fraction``); ``e/L`` (RMS error against
-    the point sensor, % of L) is shown when the point has one.
+    Labels, units and digits are those of ``daemon/sweep/quantities.py`` (as README.txt shows them):
+    ``lost`` is the % of the point's updates the tracker flagged lost (``-`` when the record has none),
+    ``e/L RMS`` the RMS error against the point sensor in % of L, shown when the point has one.
     """
+    from flagtrack.daemon.sweep.quantities import show
+
     width = len(str(state.points_total))
     head = f"point {state.last_index:>{width}}/{state.points_total}  {state.last_speed_mps:5.2f} m/s {state.last_branch:<4}"
     times = f"[{clock(state.elapsed_s)}, ETA {clock(state.eta_s)}]"
     if state.last_status in ("failed", "lossy"):
         return f"{head}  {state.last_status.upper()} (the run log says why)  {times}"
-    lost = f"{state.lost_fraction:.1%}" if state.lost_fraction >= 0 else "-"
-    sensor = f"  e/L {state.sensor_error_rms_over_l:.2%}" if state.sensor_error_rms_over_l >= 0 else ""
+    lost = show("lost_fraction", state.lost_fraction if state.lost_fraction >= 0 else None)
+    error = state.sensor_error_rms_over_l
+    sensor = f"  {show('sensor_error_rms_over_l', error)}" if error >= 0 else ""
     return (
         f"{head}  {state.last_state:<8}  A/L {_number(state.amplitude_over_l, '5.3f', 5)}  "
-        f"f {_number(state.frequency_hz, '5.1f', 5)} Hz  lost {lost}{sensor}  {times}"
+        f"f {_number(state.frequency_hz, '5.1f', 5)} Hz  {lost}{sensor}  {times}"
     )
 
 

@@ -50,7 +50,15 @@ def demo_rig(out: Path, headless: bool, quick: bool = False) -> dict[str, Any]:
         "tracker": {"root": [150, 240], "length": 300, "direction_deg": 0, "tau_s": 0.001},
         "tracker_service": {"batch_updates": 128, "max_batch_delay_s": 0.01},
         "recorder": {"directory": str(out / "recordings")},
-        "viewer": {"sink": "rrd" if headless else "auto", "rrd_path": str(out / "demo.rrd"), "geometry_rate_hz": 10},
+        # the view, not the record (the .raw and centreline files keep every event and update): 10 frames a
+        # second of at most 1 000 events, 200 tracker updates a second (README.md states the sizes)
+        "viewer": {
+            "sink": "rrd" if headless else "auto",
+            "rrd_path": str(out / "demo.rrd"),
+            "geometry_rate_hz": 10,
+            "max_points": 1000,
+            "update_rate_hz": 200,
+        },  # fmt: skip
         "tunnel": {
             "driver": "simulated",
             "safety": {
@@ -108,8 +116,6 @@ def run(args: argparse.Namespace) -> int:
     from flagtrack.daemon.commands._progress import SweepProgressView
     from flagtrack.daemon.rig.config import RigConfig
     from flagtrack.daemon.rig.run import prepare_services, run_rig
-    from flagtrack.daemon.sweep.runlog import read_run
-    from flagtrack.daemon.sweep.summary import summary_points, transition_speeds
     from flagtrack.daemon.typed_yaml import from_mapping
 
     def say(text: str) -> None:
@@ -139,10 +145,27 @@ def run(args: argparse.Namespace) -> int:
         )
     supervisor = result.service("supervisor")
     viewer = result.service("viewer")
-    run_dir = out / "sweep"
+    rrd = Path(viewer.cfg.rrd_path).resolve() if viewer is not None and "recording to" in viewer.description else None
+    reason = supervisor.stop_reason if supervisor is not None else "not run"
+    summary, text = demo_report(out / "sweep", rrd, step_mps)
+    print(
+        f"flagtrack demo: {reason} after {time.monotonic() - started:.0f} s, {summary['points']} points",
+        file=sys.stderr,
+    )
+    print(text, file=sys.stderr)
+    if args.json:
+        print(json.dumps(summary))
+    return result.code or (0 if reason == "finished" else 1)
+
+
+def demo_report(run_dir: Path, rrd: Path | None, step_mps: float) -> tuple[dict[str, Any], str]:
+    """The demo's results from its run folder: the ``--json`` object and the lines printed (onset and
+    decay found or ``not detected``, the sensor check, where the files are)."""
+    from flagtrack.daemon.sweep.runlog import read_run
+    from flagtrack.daemon.sweep.summary import summary_points, transition_speeds
+
     points = summary_points(read_run(run_dir)) if (run_dir / "run.jsonl").exists() else []
     onset, decay = transition_speeds(points)
-    rrd = Path(viewer.cfg.rrd_path).resolve() if viewer is not None and "recording to" in viewer.description else None
     sensor = sensor_check(points, run_dir)
     summary = {
         "onset_mps_simulated": ONSET_MPS,
@@ -158,13 +181,11 @@ def run(args: argparse.Namespace) -> int:
         "sensor_figure": sensor["figure"],
         "run_json": str(run_dir / "run.json"),
     }
-    reason = supervisor.stop_reason if supervisor is not None else "not run"
-    print(f"flagtrack demo: {reason} after {time.monotonic() - started:.0f} s, {len(points)} points", file=sys.stderr)
-    print(
-        f"  onset  detected {onset} m/s (simulated {ONSET_MPS})\n  decay  detected {decay} m/s (simulated {DECAY_MPS})\n"
+    found = [
+        f"  onset  {_detected(onset)} (simulated {ONSET_MPS} m/s)",
+        f"  decay  {_detected(decay)} (simulated {DECAY_MPS} m/s)",
         f"  sensor {sensor['text']}",
-        file=sys.stderr,
-    )
+    ]
     lines = [
         ("summary", f"{summary['summary_csv']}"),
         ("figure", f"{run_dir / 'amplitude.png'} (A/L against the speed: the paper's figure 5h)"),
@@ -172,20 +193,25 @@ def run(args: argparse.Namespace) -> int:
     if sensor["figure"]:
         lines.append(("point", f"{sensor['figure']} (sensor and camera at the worst point: the paper's 5c-e)"))
     if (run_dir / "validation.png").exists():
-        lines.append(("sensor", f"{run_dir / 'validation.png'} (|e|/L and Delta_RMS/L against the speed: 5g)"))
+        lines.append(("sensor", f"{run_dir / 'validation.png'} (e/L and Delta_RMS/L against the speed: 5g)"))
     lines.append(("log", summary["log"]))
     lines.append(("about", f"{run_dir / 'README.txt'} (what each file is; run.json for programs)"))
     if rrd:
-        lines.append(("view", f"{rrd} (open with: rerun {rrd})"))
-    print("\n".join(f"  {label:<7} {text}" for label, text in lines), file=sys.stderr)
-    if args.json:
-        print(json.dumps(summary))
-    return result.code or (0 if reason == "finished" else 1)
+        size = f"; {rrd.stat().st_size / 1e6:.1f} MB" if rrd.exists() else ""
+        lines.append(("view", f"{rrd} (open with: rerun {rrd}{size})"))
+    return summary, "\n".join([*found, *(f"  {label:<7} {text}" for label, text in lines)])
+
+
+def _detected(speed_mps: float | None) -> str:
+    """``detected 5.0 m/s``, or ``not detected`` (a sweep stopped before the transition)."""
+    return "not detected" if speed_mps is None else f"detected {speed_mps:g} m/s"
 
 
 def sensor_check(points: list[Any], run_dir: Path) -> dict[str, Any]:
     """The worst e/L RMS of the flapping points (``worst``, None if none has one), the figure of that
     point (``figure``, absolute path or None) and a line saying it (``text``)."""
+    from flagtrack.daemon.sweep.quantities import show
+
     flapping = [p for p in points if p.state == "flapping" and p.status == "done"]
     checked = [p for p in flapping if math.isfinite(p.sensor_error_rms_over_l)]
     if not checked:
@@ -200,8 +226,8 @@ def sensor_check(points: list[Any], run_dir: Path) -> dict[str, Any]:
         "worst": worst.sensor_error_rms_over_l,
         "figure": str(figure) if figure is not None and figure.exists() else None,
         "text": (
-            f"worst e/L RMS {worst.sensor_error_rms_over_l:.2%} of L over {len(checked)} flapping points "
-            f"({worst.point_id}; {within} the paper's 0-{PAPER_ERROR_OVER_L:.1%}), clocks trigger-synchronised "
-            f"at {synced} of {len(points)} points"
+            f"worst {show('sensor_error_rms_over_l', worst.sensor_error_rms_over_l)} of L over {len(checked)} "
+            f"flapping points ({worst.point_id}; {within} the paper's 0-{100 * PAPER_ERROR_OVER_L:.1f} %), clocks "
+            f"trigger-synchronised at {synced} of {len(points)} points"
         ),
     }

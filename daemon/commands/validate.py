@@ -110,29 +110,32 @@ _COLUMNS = (
     "sensor_error_max_over_l",
     "sensor_error_mean_over_l",
     "sensor_error_std_over_l",
-    "delta_rms_over_l",
-    "delta_rms_std_over_l",
+    "cloud_distance_mean_over_l",
+    "cloud_distance_std_over_l",
     "sensor_samples",
     "sensor_missing",
 )
 
 
 def _row(point) -> dict[str, object]:  # noqa: ANN001
+    from flagtrack.daemon.sweep.quantities import POINT_ALIASES
+
     values = {name: getattr(point, name) for name in _COLUMNS}
+    values.update({old: values[new] for old, new in POINT_ALIASES.items()})  # the keys before, same values
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in values.items()}
 
 
 def _print_table(rows: list[dict[str, object]]) -> None:
     print(
         f"{'point':<16} {'U m/s':>6} {'state':<9} {'sync':<8} {'offset ms':>10} {'± us':>7} {'xcorr ms':>9} "
-        f"{'e RMS %':>8} {'e max %':>8} {'dRMS %':>7} {'missing':>8}  status"
+        f"{'e/L RMS %':>9} {'|e|/L max %':>11} {'Delta_RMS/L mean %':>18} {'missing':>8}  status"
     )
     for r in rows:
         print(
             f"{r['point_id']:<16} {r['speed_mps']:>6.2f} {r['state']:<9} {r['sensor_sync'] or '-':<8} "
             f"{_fmt(r['sensor_offset_us'], 1e-3, 3):>10} {_fmt(r['sensor_offset_unc_us'], 1, 1):>7} "
-            f"{_fmt(r['sensor_xcorr_offset_us'], 1e-3, 3):>9} {_fmt(r['sensor_error_rms_over_l'], 100, 2):>8} "
-            f"{_fmt(r['sensor_error_max_over_l'], 100, 2):>8} {_fmt(r['delta_rms_over_l'], 100, 2):>7} "
+            f"{_fmt(r['sensor_xcorr_offset_us'], 1e-3, 3):>9} {_fmt(r['sensor_error_rms_over_l'], 100, 2):>9} "
+            f"{_fmt(r['sensor_error_max_over_l'], 100, 2):>11} {_fmt(r['cloud_distance_mean_over_l'], 100, 2):>18} "
             f"{r['sensor_missing']:>8}  {r['sensor_status']}"
         )
 

@@ -87,6 +87,11 @@ def run_rig(
             if centrelines is not None:
                 made_by = setup.attrs if setup is not None else processing_attrs(rig.tracker)
                 attrs = {**made_by, "input_file": str(rig.camera.replay.path) if rig.camera.replay else ""}
+                if rig.camera.replay:  # the sensor's size, as the replayed file's header gives it
+                    from flagtrack.drivers.formats import open_events
+
+                    with open_events(rig.camera.replay.path) as reader:
+                        attrs.update(sensor_width_px=reader.info.width, sensor_height_px=reader.info.height)
                 services.insert(
                     0, CentrelineFileService(bus, centrelines, attrs, exit_after_final=exit_at_end_of_stream)
                 )

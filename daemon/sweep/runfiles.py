@@ -18,7 +18,6 @@ figure of the summary's columns, ``null`` for a missing number) and ``files`` (`
 
 from __future__ import annotations
 
-import dataclasses
 import fnmatch
 import json
 import math
@@ -33,7 +32,8 @@ from typing import Any
 
 from flagtrack.daemon import __file__ as _daemon_init
 from flagtrack.daemon import __version__
-from flagtrack.daemon.sweep.runlog import RUN_LOG, PointResult, RunRecord
+from flagtrack.daemon.sweep.quantities import QUANTITIES
+from flagtrack.daemon.sweep.runlog import RUN_LOG, PointResult, RunRecord, point_record
 
 RUN_JSON = "run.json"
 README = "README.txt"
@@ -52,13 +52,29 @@ FILE_KINDS: tuple[tuple[str, str], ...] = (
     ),
     (RUN_JSON, "the run as one JSON object for programs: plan, points and their figures, onset and decay, files"),
     ("summary.csv", "one row per point (its latest record): speed, branch, flag state, A/L, f, ...; NaN: no number"),
-    ("amplitude.png", "tip amplitude A/L (mean and std) against the wind speed, onset and decay marked (paper 5h)"),
-    ("validation.png", "point sensor: |e|/L and Delta_RMS/L (mean and std) against the wind speed (paper 5g)"),
+    (
+        "amplitude.png",
+        "tip amplitude A/L (bars: its std cycle by cycle) and the event rate against the wind speed, "
+        "onset and decay marked (paper 5h)",
+    ),
+    (
+        "validation.png",
+        "point-sensor error (|e|/L mean and std over time, e/L RMS) and event-cloud distance "
+        "(Delta_RMS/L mean and std over time), in % of L, against the wind speed (paper 5g)",
+    ),
     ("validation/*", "flagtrack validate's recomputed point-sensor comparison"),
     ("points/*.raw", "the point's events (EVT 3.0 .raw; flagtrack events info FILE)"),
-    ("points/*_centrelines.h5", "the point's centrelines (HDF5: /t, /s, /x, /y, joints, Delta_RMS, parameters)"),
+    (
+        "points/*_centrelines.h5",
+        "the point's centrelines (HDF5: /t, /s, /x, /y, joints, the event-cloud distance "
+        "/delta_rms, each with its units and description; parameters at the root; docs/formats.md)",
+    ),
     ("points/*_sensor.h5", "the point sensor's samples and trigger pulses, on the sensor's clock (docs/sensor.md)"),
-    ("points/*_sensor.png", "the point sensor against the reconstruction at the beam, e/L, Delta_RMS/L (paper 5c-e)"),
+    (
+        "points/*_sensor.png",
+        "the point sensor against the reconstruction at the beam, e/L and Delta_RMS/L over an "
+        "excerpt of the point (its statistics in the panels, the whole point's in the title) (paper 5c-e)",
+    ),
     ("points/*.action*.log", "what the point's actions printed"),
     ("points/*.json", "the recording's sidecar: camera, counts, sequence gaps, the rig config"),
 )
@@ -125,7 +141,7 @@ def describe_run(
         },
         "plan": {"sweep": config.pop("sweep", None), "points": start.get("plan", [])},
         "rig": config,
-        "points": [_json_point(p) for p in points],
+        "points": [point_record(p) for p in points],
         "files": [{"path": path, "what": what, "bytes": size} for path, what, size in _files(record.run_dir)],
     }
 
@@ -173,9 +189,14 @@ def readme_text(run: dict[str, Any]) -> str:
         shown = matching[0] if len(matching) == 1 else f"{pattern}  ({len(matching)} files)"
         lines.append(f"  {shown}")
         lines += textwrap.wrap(what, 100, initial_indent="      ", subsequent_indent="      ")
-    lines += ["", "Points (latest record of each; A/L tip amplitude over length, f flapping frequency, "
-              "e/L RMS error against the point sensor)", _point_header()]  # fmt: skip
+    lines += ["", "Points (the latest record of each; the numbers are below)", _point_header()]
     lines += [_point_row(p) for p in run["points"]]
+    lines += ["", "Numbers: each column, its key in run.json and summary.csv (there a fraction where the column "
+              "says %: 0.0036 for 0.36 %), what it is"]  # fmt: skip
+    for key in README_COLUMNS:
+        q = QUANTITIES[key]
+        lines += textwrap.wrap(f"{q.heading:<21} {key}: {q.meaning}", 100, initial_indent="  ",
+                               subsequent_indent=" " * 24)  # fmt: skip
     lines += [
         "",
         "Resume an interrupted run with: flagtrack sweep --resume RUN_DIR",
@@ -199,30 +220,30 @@ def _plan_text(sweep: Any) -> str:
     )
 
 
+#: The numbers of a point README.txt shows, in its columns' order (their labels and units: ``quantities``).
+README_COLUMNS = (
+    "speed_mps", "amplitude_over_l", "frequency_hz", "lost_fraction", "sensor_error_rms_over_l",
+    "cloud_distance_mean_over_l",
+)  # fmt: skip
+_WIDTHS = {"speed_mps": 8, "amplitude_over_l": 6, "frequency_hz": 6, "lost_fraction": 8}
+
+
 def _point_header() -> str:
-    return f"  {'point':<16} {'speed':>6} {'branch':<6} {'state':<9} {'status':<7} {'A/L':>6} {'f (Hz)':>7} {'e/L':>7}"
+    numbers = [QUANTITIES[key].heading.rjust(_WIDTHS.get(key, len(QUANTITIES[key].heading))) for key in README_COLUMNS]
+    return f"  {'point':<16} {'branch':<6} {'state':<9} {'status':<7} " + " ".join(numbers)
 
 
 def _point_row(point: dict[str, Any]) -> str:
-    def number(value: Any, fmt: str) -> str:
-        width = int(fmt.split(".")[0])
-        return "-".rjust(width) if value is None else format(value, fmt)
-
-    return (
-        f"  {point['point_id']:<16} {number(point['speed_mps'], '6.2f')} {point['branch']:<6} {point['state']:<9} "
-        f"{point['status']:<7} {number(point['amplitude_over_l'], '6.3f')} {number(point['frequency_hz'], '7.2f')} "
-        f"{number(point['sensor_error_rms_over_l'], '7.4f')}"
-    )
+    numbers = [
+        QUANTITIES[key].number(point.get(key)).rjust(_WIDTHS.get(key, len(QUANTITIES[key].heading)))
+        for key in README_COLUMNS
+    ]
+    head = f"  {point['point_id']:<16} {point['branch']:<6} {point['state']:<9} {point['status']:<7} "
+    return head + " ".join(numbers)
 
 
 def _speed(value: float | None) -> str:
     return "not observed" if value is None else f"{value:g} m/s"
-
-
-def _json_point(point: PointResult) -> dict[str, Any]:
-    return {
-        k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in dataclasses.asdict(point).items()
-    }
 
 
 def _kind(path: str) -> str | None:

@@ -1,8 +1,13 @@
 """One owner per run: an exclusive ``flock`` on ``RUN_DIR/.lock``, holding who owns it.
 
-The lock lives as long as the holder's open file (a killed holder releases it at once: no stale
-lock to clean up). The file says who holds it (pid, host, command line, since when), so a second
-supervisor is refused with one line naming the holder.
+The lock lives as long as the holder's open file (a killed holder releases it at once: the file
+left behind locks nothing and the next owner takes it over). The file says who holds it (pid, host,
+command line, since when), so a second supervisor is refused with one line naming the holder. An
+orderly end (:meth:`RunLock.release`) removes the file, so a finished run folder holds none.
+
+Removing a lock file races with a process that opened it just before: that process would lock the
+removed file while a third makes a new one. So an owner checks, once it holds the ``flock``, that
+the path still names the file it locked, and starts again if not.
 """
 
 from __future__ import annotations
@@ -38,18 +43,11 @@ class RunLock:
         """
         run_dir = Path(run_dir)
         path = run_dir / LOCK_FILE
-        try:
-            run_dir.mkdir(parents=True, exist_ok=True)
-            handle = open(path, "a+", encoding="utf-8")  # noqa: SIM115 - closed by release()
-        except OSError as exc:
-            raise ConfigError(f"cannot lock the run folder: {exc.strerror or exc}", path=str(path)) from exc
-        try:
-            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            handle.seek(0)
-            holder = describe_holder(handle.read())
+        while True:  # again when the file was removed (an orderly end) between open and flock
+            handle = _open_locked(run_dir, path)
+            if _names(path, handle):
+                break
             handle.close()
-            raise ConfigError(f"the run is in use by {holder}; not started", path=str(run_dir)) from None
         handle.seek(0)
         handle.truncate()
         holder = {"pid": os.getpid(), "host": socket.gethostname(), "command": command, "since_unix": time.time()}
@@ -58,8 +56,11 @@ class RunLock:
         return cls(run_dir, handle)
 
     def release(self) -> None:
-        """Unlock (idempotent); the file stays, saying who held it last."""
+        """Remove the lock file and unlock (idempotent): the run is free, its folder holds no lock."""
         if not self._handle.closed:
+            path = self.run_dir / LOCK_FILE
+            if _names(path, self._handle):
+                path.unlink(missing_ok=True)  # still locked: whoever opens it now finds it removed
             self._handle.close()
 
     def __enter__(self) -> RunLock:
@@ -69,6 +70,32 @@ class RunLock:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.release()
+
+
+def _open_locked(run_dir: Path, path: Path) -> IO[str]:
+    """``path`` opened (made if missing) and ``flock``-ed, or ConfigError naming its holder."""
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        handle = open(path, "a+", encoding="utf-8")  # noqa: SIM115 - closed by release()
+    except OSError as exc:
+        raise ConfigError(f"cannot lock the run folder: {exc.strerror or exc}", path=str(path)) from exc
+    try:
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.seek(0)
+        holder = describe_holder(handle.read())
+        handle.close()
+        raise ConfigError(f"the run is in use by {holder}; not started", path=str(run_dir)) from None
+    return handle
+
+
+def _names(path: Path, handle: IO[str]) -> bool:
+    """Whether ``path`` is still the file ``handle`` has open (not removed or replaced)."""
+    try:
+        here, there = os.stat(path), os.fstat(handle.fileno())
+    except FileNotFoundError:
+        return False
+    return (here.st_dev, here.st_ino) == (there.st_dev, there.st_ino)
 
 
 def describe_holder(text: str) -> str:

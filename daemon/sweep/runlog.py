@@ -36,6 +36,7 @@ from flagtrack.daemon import __version__
 from flagtrack.daemon.errors import ConfigError, FormatError
 from flagtrack.daemon.security.names import identifier_problem
 from flagtrack.daemon.sweep.plan import Point, SweepConfig, plan_points
+from flagtrack.daemon.sweep.quantities import POINT_ALIASES
 from flagtrack.daemon.typed_yaml import from_mapping, to_mapping
 
 log = logging.getLogger(__name__)
@@ -60,16 +61,20 @@ class PointResult:
             or left its tolerance, or an action failed) or ``lossy`` (the recording lost packets).
         state: flag state over the recording (``still``, ``flapping``, ``unknown``).
         speed_readback_mps: mean tunnel readback during the recording, m/s.
-        amplitude_over_l, amplitude_std_over_l: tip amplitude A/L, time mean and std.
+        amplitude_over_l: tip amplitude A/L, half the peak-to-peak of the tip's lateral displacement
+            over the recording, over L; amplitude_std_over_l: its standard deviation cycle by cycle.
         frequency_hz: flapping frequency, Hz.
         twi: travelling-wave index.
-        delta_rms_over_l: mean cloud distance Delta_RMS / L.
+        cloud_distance_mean_over_l: time mean of the event-cloud distance Delta_RMS / L over the
+            point's updates (``delta_rms_over_l`` in records written before; the paper's Delta_RMS,
+            not the tip error).
         event_rate_mev_s: mean event rate, millions of events per second.
         raw_bytes: size of the raw event file, bytes.
         raw_file, centreline_file: paths relative to the run folder, or ``None``.
         t_start_unix, t_stop_unix: recording start and stop, Unix time s.
         error: what went wrong, for a failed point.
-        delta_rms_std_over_l: standard deviation of Delta_RMS / L over the updates.
+        cloud_distance_std_over_l: standard deviation of Delta_RMS / L over the updates
+            (``delta_rms_std_over_l`` before).
         sensor_status: the point-sensor comparison: ``ok``, or why there is none (``None``: no sensor).
         sensor_error_rms_over_l, sensor_error_max_over_l: RMS and maximum of |e| / L, e = camera - sensor
             lateral displacement at the sensor's x.
@@ -100,7 +105,7 @@ class PointResult:
     amplitude_std_over_l: float = math.nan
     frequency_hz: float = math.nan
     twi: float = math.nan
-    delta_rms_over_l: float = math.nan
+    cloud_distance_mean_over_l: float = math.nan
     event_rate_mev_s: float = math.nan
     raw_bytes: int = 0
     raw_file: str | None = None
@@ -108,7 +113,7 @@ class PointResult:
     t_start_unix: float = math.nan
     t_stop_unix: float = math.nan
     error: str | None = None
-    delta_rms_std_over_l: float = math.nan
+    cloud_distance_std_over_l: float = math.nan
     sensor_status: str | None = None
     sensor_error_rms_over_l: float = math.nan
     sensor_error_max_over_l: float = math.nan
@@ -137,6 +142,15 @@ class PointResult:
 
 
 _FLOAT_FIELDS = {f.name for f in dataclasses.fields(PointResult) if f.type in ("float", float)}
+
+
+def point_record(result: PointResult) -> dict[str, Any]:
+    """A point as JSON: its fields (``None`` for a NaN), then the old keys of
+    :data:`~flagtrack.daemon.sweep.quantities.POINT_ALIASES` with the same values."""
+    record = {
+        k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in dataclasses.asdict(result).items()
+    }
+    return {**record, **{old: record[new] for old, new in POINT_ALIASES.items()}}
 
 
 def point_paths(point_id: str) -> tuple[str, str]:
@@ -244,6 +258,7 @@ def _assemble(
 
 def _point_from_json(record: dict[str, Any], path: Path, offset: int) -> PointResult:
     names = {f.name for f in dataclasses.fields(PointResult)}
+    record = {**{new: record[old] for old, new in POINT_ALIASES.items() if old in record}, **record}
     values = {k: (math.nan if v is None and k in _FLOAT_FIELDS else v) for k, v in record.items() if k in names}
     problem = identifier_problem(values.get("point_id"), "point_id")  # it names files (validate, resume)
     for name in ("raw_file", "centreline_file"):  # paths inside the run folder
@@ -348,10 +363,8 @@ class RunLog:
         return runlog, record
 
     def point(self, result: PointResult) -> None:
-        """Append one point record."""
-        record = {
-            k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in dataclasses.asdict(result).items()
-        }
+        """Append one point record (with the old keys of :data:`~.quantities.POINT_ALIASES` too)."""
+        record = point_record(result)
         self._append({"type": "point", **record})
 
     def stop(self, reason: str, *, error: str | None = None, t_unix: float | None = None) -> None:

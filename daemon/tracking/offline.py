@@ -99,7 +99,8 @@ def reconstruct_file(
         if check_sensor is not None and info.width and info.height:
             check_sensor(info.width, info.height)
         tracker = setup.new_tracker((info.width or 0, info.height or 0))
-        attrs = {**setup.attrs, "input_file": str(Path(path).resolve()), "input_format": info.format}
+        attrs = {**setup.attrs, "input_file": str(Path(path).resolve()), "input_format": info.format,
+                 "sensor_width_px": info.width, "sensor_height_px": info.height}  # fmt: skip
         with CentrelineSink(output, attrs, s=tracker.s, n_joints=setup.params.chain.n_joints, atomic=atomic) as sink:
             # this thread reads, decodes, denoises and maps; the pipeline's worker updates the chain
             # and writes the updates (the same results as tracker.feed on each chunk)

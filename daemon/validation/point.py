@@ -69,8 +69,8 @@ class PointValidation:
         return int(self.stale.sum())
 
     @property
-    def delta_rms_over_l(self) -> tuple[float, float]:
-        """Time mean and standard deviation of Delta_RMS / L."""
+    def cloud_distance_over_l(self) -> tuple[float, float]:
+        """Time mean and standard deviation of the event-cloud distance Delta_RMS / L."""
         finite = self.delta_rms[np.isfinite(self.delta_rms)] / self.frame.length
         return (float(finite.mean()), float(finite.std())) if len(finite) else (math.nan, math.nan)
 

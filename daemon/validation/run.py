@@ -4,7 +4,7 @@ For every point with a sensor record: the centrelines (the run's own, another fo
 reconstruction of the raw file), the camera's trigger events from the raw file, and the sensor
 record go through the same :func:`~flagtrack.daemon.validation.point.validate_point` as live.
 Results go to ``RUN_DIR/validation/`` (or ``out_dir``): one figure per point, ``validation.csv``
-(the summary's columns, with the recomputed sensor and Delta_RMS numbers) and ``validation.png``.
+(the summary's columns, with the recomputed sensor and Delta_RMS/L numbers) and ``validation.png``.
 The run log is never rewritten.
 """
 
@@ -20,14 +20,14 @@ from flagtrack.daemon.core.events import empty_triggers
 from flagtrack.daemon.errors import ConfigError, FormatError
 from flagtrack.daemon.sweep.figures import plot_sweep
 from flagtrack.daemon.sweep.runlog import RUN_LOG, PointResult, read_run
-from flagtrack.daemon.sweep.summary import write_summary_csv
+from flagtrack.daemon.sweep.summary import run_caption, write_summary_csv
 from flagtrack.daemon.tracking.offline import reconstruct_file
 from flagtrack.daemon.tracking.section import TrackingConfig
 from flagtrack.daemon.tracking.setup import TrackingSetup, load_tracking_config_file
 from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.validation.collect import raw_triggers
 from flagtrack.daemon.validation.figures import plot_point
-from flagtrack.daemon.validation.point import FlagFrame, validate_point
+from flagtrack.daemon.validation.point import FlagFrame, PointValidation, validate_point
 from flagtrack.drivers.sensor.record import read_sensor_record
 from flagtrack.drivers.sensor.setup import SensorConfig
 
@@ -113,12 +113,14 @@ def validate_run(
         if point.sensor_file is None:
             points.append(point)
             continue
-        updated, figure = _validate_one(run_dir, point, out, frame, sensor, centrelines_dir, reconstruct, window_s)
+        updated, figure = _validate_one(run_dir, point, out, frame, sensor, centrelines_dir, reconstruct, window_s,
+                                        str(record.start.get("run_id", "?")))  # fmt: skip
         points.append(updated)
         if figure is not None:
             figures[point.point_id] = figure
     csv = write_summary_csv(points, out / "validation.csv")
-    title = f"run {record.start.get('run_id', '?')}: point sensor (recomputed)"
+    title = "Point-sensor error and event-cloud distance against the wind speed (paper fig. 5g), recomputed\n"
+    title += run_caption(record, points)
     figure = plot_sweep(points, out / "validation.png", title)
     return RunValidation(points, csv, figure, figures)
 
@@ -132,19 +134,44 @@ def _validate_one(
     centrelines_dir: str | Path | None,
     reconstruct: TrackingSetup | None,
     window_s: float,
+    run_id: str = "?",
 ) -> tuple[PointResult, Path | None]:
-    from flagtrack.drivers.formats.centreline import read_centrelines
-
     raw = run_dir / point.raw_file if point.raw_file else None
     lines_path = _centrelines_path(run_dir, point, out, centrelines_dir, reconstruct, raw)
     if lines_path is None or not lines_path.exists():
         return dataclasses.replace(point, sensor_status="no centrelines file"), None
+    validation = point_validation(run_dir, point, lines_path, frame, sensor)
+    figure = plot_point(
+        validation,
+        out / f"{point.point_id}.png",
+        f"run {run_id}, point {point.point_id}: {point.speed_mps:.2f} m/s, {point.state} (recomputed)",
+        window_s,
+    )
+    d_mean, d_std = validation.cloud_distance_over_l
+    fields = {
+        **validation.fields(),
+        "cloud_distance_mean_over_l": d_mean,
+        "cloud_distance_std_over_l": d_std,
+        "centreline_file": _relative(lines_path, run_dir),
+        "sensor_figure": _relative(figure, run_dir),
+    }
+    return dataclasses.replace(point, **fields), figure
+
+
+def point_validation(
+    run_dir: Path, point: PointResult, lines_path: Path, frame: FlagFrame, sensor: SensorConfig
+) -> PointValidation:
+    """The sensor comparison of one point of a run from its files: the centrelines of ``lines_path``,
+    the point's sensor record and the trigger events of its raw file."""
+    from flagtrack.drivers.formats.centreline import read_centrelines
+
+    raw = run_dir / point.raw_file if point.raw_file else None
     lines, attrs = read_centrelines(lines_path)
     record = read_sensor_record(run_dir / point.sensor_file)  # type: ignore[operator]
     triggers = empty_triggers()
     if sensor.sync.mode in ("auto", "trigger") and raw is not None and raw.exists() and len(record.trigger_t_us):
         triggers = raw_triggers(raw)
-    validation = validate_point(
+    return validate_point(
         lines if len(lines) else None,
         record,
         triggers,
@@ -154,21 +181,6 @@ def _validate_one(
         str(attrs.get("units", "px")),
         compare_without_events=point.state != "flapping",
     )
-    figure = plot_point(
-        validation,
-        out / f"{point.point_id}.png",
-        f"{point.point_id}: {point.speed_mps:.2f} m/s, {point.state} (recomputed)",
-        window_s,
-    )
-    d_mean, d_std = validation.delta_rms_over_l
-    fields = {
-        **validation.fields(),
-        "delta_rms_over_l": d_mean,
-        "delta_rms_std_over_l": d_std,
-        "centreline_file": _relative(lines_path, run_dir),
-        "sensor_figure": _relative(figure, run_dir),
-    }
-    return dataclasses.replace(point, **fields), figure
 
 
 def _centrelines_path(

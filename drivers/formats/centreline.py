@@ -1,12 +1,14 @@
-"""Centreline HDF5 files (the layout of docs/tracking.md), readable from MATLAB and Python.
+"""Centreline HDF5 files (the layout of docs/formats.md), readable from MATLAB and Python.
 
 ``/t`` (n_t,) s, ``/s`` (n_s,), ``/x`` ``/y`` (n_t, n_s), ``/joints/x`` ``/joints/y`` (n_t, N_j+1),
 ``/delta_rms`` (n_t,), ``/n_events`` (n_t,) int64, ``/lost`` (n_t,) uint8 (1: the flag was not found
 in that update, its shape is not to be trusted; a file written before it reads as zeros), ``/stale``
 (n_t,) uint8 (1: the shape rests on no recent evidence, remembered, not measured; a file written
-before it reads as zeros); root attributes hold every processing
-parameter, ``units``, ``input_file`` and ``flagtrack_version``. Files are written incrementally
-(resizable datasets, flushed per append) so memory is bounded and a crash keeps what was flushed.
+before it reads as zeros). Every dataset carries ``units`` and ``description`` attributes
+(:mod:`.centreline_layout`); root attributes hold every processing parameter, ``units``,
+``input_file``, the sensor size, ``format_version`` and ``flagtrack_version``. Files are written
+incrementally (resizable datasets, flushed per append) so memory is bounded and a crash keeps what
+was flushed.
 
 Every centreline file flagtrack writes (``reconstruct``, ``up --centrelines``, the recorder's files)
 goes through one :class:`CentrelineSink`: one shape check, one batching rule and one attribute rule
@@ -28,6 +30,7 @@ from flagtrack.daemon import __version__
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.atomic import PendingFile
+from flagtrack.drivers.formats.centreline_layout import describe_datasets, hdf5_attrs, root_format_attrs
 
 _PER_UPDATE = ("t", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events")
 _MAX_PENDING_VALUES = 1 << 23
@@ -51,7 +54,7 @@ class CentrelineWriter:
         self._file = h5py.File(self.path, "w")
         n_s = len(s)
         self._file.create_dataset("s", data=np.asarray(s, dtype=np.float64))
-        chunk_t = 1024
+        chunk_t = 256  # rows per chunk; the last chunk's unused rows take disk (1024: a 2 s point's file +40 %)
         self._file.create_dataset("t", (0,), maxshape=(None,), dtype="f8", chunks=(chunk_t,))
         for name, width in (("x", n_s), ("y", n_s), ("joints/x", n_joints + 1), ("joints/y", n_joints + 1)):
             self._file.create_dataset(name, (0, width), maxshape=(None, width), dtype="f8", chunks=(chunk_t, width))
@@ -59,8 +62,13 @@ class CentrelineWriter:
         self._file.create_dataset("n_events", (0,), maxshape=(None,), dtype="i8", chunks=(chunk_t,))
         for name in ("lost", "stale"):
             self._file.create_dataset(name, (0,), maxshape=(None,), dtype="u1", chunks=(chunk_t,))
-        write_attrs(self._file, {"flagtrack_version": __version__, **attrs})
+        write_attrs(self._file, {"flagtrack_version": __version__, **attrs, **root_format_attrs(attrs)})
         self.n_updates = 0
+        self.describe()
+
+    def describe(self) -> None:
+        """Give every dataset its ``units`` and ``description`` (the table of :mod:`.centreline_layout`)."""
+        describe_datasets(self._file, str(self._file.attrs.get("units", "")))
 
     def append(self, batch: CentrelineBatch) -> None:
         """Append ``batch`` (its ``s`` must match the file's) and flush."""
@@ -91,8 +99,9 @@ class CentrelineWriter:
         write_attrs(self._file, attrs)
 
     def close(self) -> None:
-        """Flush and close the file (idempotent)."""
+        """Describe the datasets, flush and close the file (idempotent)."""
         if self._file.id.valid:
+            self.describe()
             self._file.flush()
             self._file.close()
 
@@ -104,20 +113,12 @@ class CentrelineWriter:
 
 
 def write_attrs(target: h5py.File | h5py.Group, attrs: Mapping[str, Any]) -> None:
-    """Store attributes; lists, dicts and None are stored as JSON strings."""
-    for name, value in attrs.items():
-        if value is None or isinstance(value, dict | list | tuple) and not _is_numeric_sequence(value):
-            target.attrs[name] = json.dumps(value)
-        else:
-            target.attrs[name] = value
-
-
-def _is_numeric_sequence(value: Any) -> bool:
-    return (
-        isinstance(value, list | tuple)
-        and len(value) > 0
-        and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
-    )
+    """Store attributes as :func:`~.centreline_layout.hdf5_attrs` says; a None removes the attribute
+    (an unset value is absent, never the text ``null``)."""
+    for name in (name for name, value in attrs.items() if value is None and name in target.attrs):
+        del target.attrs[name]
+    for name, value in hdf5_attrs(attrs).items():
+        target.attrs[name] = value
 
 
 def centreline_attrs(
@@ -137,7 +138,7 @@ def centreline_attrs(
         input_file: what the centrelines were tracked from (an event file, the recorder's ``.raw``);
             None keeps ``processing``'s ``input_file``, and a file without one says ``null``.
         calibration: the calibration's attributes (``flagtrack.calibration.calibration_attrs``), if any.
-        extra: anything else (``input_format``, ``source``, ``events_in`` ...).
+        extra: anything else (``input_format``, ``source``, ``events_in``, ``sensor_width_px`` ...).
     """
     attrs = {**processing, **(calibration or {}), **extra, "units": units}
     attrs["input_file"] = input_file if input_file is not None else processing.get("input_file")

@@ -106,7 +106,7 @@ def test_end_to_end_tip_error_in_metres(calibration: Path, tmp_path: Path, capsy
     result = json.loads(capsys.readouterr().out)
     assert result["length"] == pytest.approx(0.18)
     assert result["n_common"] > 500
-    assert result["delta_rms_over_l"] < 0.01  # issue 7: tip error under 1 % of L
+    assert result["tip_error_rms_over_l"] < 0.01  # issue 7: tip error under 1 % of L
     from flagtrack.drivers.formats.centreline import read_centrelines
 
     _, attrs = read_centrelines(out)

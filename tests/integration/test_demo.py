@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.results_agree import check_demo_report, check_files, check_terminal
+
 KEYS = [
     "onset_mps_simulated",
     "decay_mps_simulated",
@@ -62,8 +64,13 @@ def test_quick_demo_finds_onset_and_decay_within_one_step(tmp_path: Path) -> Non
     flapping = [p for p in run["points"] if p["state"] == "flapping"]
     assert flapping and max(p["sensor_error_rms_over_l"] for p in flapping) == summary["sensor_error_rms_over_l_max"]
     assert {p["sensor_sync"] for p in run["points"]} == {"trigger"}
-    assert f"worst e/L RMS {summary['sensor_error_rms_over_l_max']:.2%}" in result.stderr
+    assert f"worst e/L RMS {100 * summary['sensor_error_rms_over_l_max']:.2f} % of L" in result.stderr
     # progress on a pipe: a plain line per point, no bar
     lines = [line for line in result.stderr.splitlines() if line.startswith("point ")]
     assert [line.split()[1] for line in lines] == ["1/5", "2/5", "3/5", "4/5", "5/5"] and "\r" not in result.stderr
-    assert all("e/L" in line for line in lines)
+    assert all("e/L RMS" in line for line in lines)
+    # every number reads the same on the terminal, in the files and in the report (issue 32)
+    run = check_files(Path(summary["run_json"]).parent)
+    assert check_terminal(lines, run) == 5
+    check_demo_report(result.stderr, summary, run)
+    assert not (Path(summary["run_json"]).parent / ".lock").exists()

@@ -78,18 +78,22 @@ def test_a_truth_with_only_t_s_x_y_is_compared_and_says_what_it_used(
     truth = truth_file(tmp_path / "other_simulator.h5", ("t", "s", "x", "y"))
     values, err = compare(recon_file(tmp_path / "recon.h5"), truth, capsys)
     # the tip is off by (3, 4) px everywhere: 5 px over L, L from /s as the truth has no attribute
-    assert values["delta_rms_over_l"] == pytest.approx(5.0 / L, rel=1e-3)
+    assert values["tip_error_rms_over_l"] == pytest.approx(5.0 / L, rel=1e-3)
     assert values["max_eps_rms_over_l"] == pytest.approx(5.0 / L, rel=1e-3)
     assert values["twi"] == pytest.approx(values["twi_ref"], abs=1e-3) and values["twi"] > 0.3
     assert values["length"] == pytest.approx(L)
-    assert values["cloud_rms_over_l"] == pytest.approx(1.5 / L)
+    assert values["cloud_distance_rms_over_l"] == pytest.approx(1.5 / L)
     assert values["truth_datasets"] == ["t", "s", "x", "y"]
-    assert values["joint_rms_over_l"] is None and values["cloud_rms_ref_over_l"] is None
-    assert set(values["not_available"]) == {"joint_rms_over_l", "cloud_rms_ref_over_l"}
+    assert values["joint_rms_over_l"] is None and values["cloud_distance_rms_ref_over_l"] is None
+    assert set(values["not_available"]) == {"joint_rms_over_l", "cloud_distance_rms_ref_over_l", "cloud_rms_ref_over_l"}
+    # the names before the tip error and the cloud distance were told apart still read, with the same values
+    assert values["aliases"]["delta_rms_over_l"] == "tip_error_rms_over_l"
+    for old, new in values["aliases"].items():
+        assert values[old] == values[new]
     lines = err.splitlines()
     assert lines[0] == f"flagtrack metrics: truth {truth}: used /t /s /x /y; L = 300 from the span of its /s"
     assert "joint_rms_over_l not available: the truth has no joints (/joints/x, /joints/y)" in lines[1]
-    assert "cloud_rms_ref_over_l not available: the truth has no Delta_RMS (/delta_rms)" in lines[2]
+    assert "cloud_distance_rms_ref_over_l not available: the truth has no Delta_RMS (/delta_rms)" in lines[2]
 
 
 def test_the_text_output_prints_n_a_for_what_the_truth_lacks(
@@ -99,8 +103,10 @@ def test_the_text_output_prints_n_a_for_what_the_truth_lacks(
     assert main(["metrics", "compare", str(recon_file(tmp_path / "recon.h5")), str(truth)]) == 0
     rows = dict(line.split(maxsplit=1) for line in capsys.readouterr().out.splitlines())
     assert rows["joint_rms_over_l"] == "n/a (the truth has no joints)"
-    assert float(rows["cloud_rms_ref_over_l"]) == pytest.approx(0.5 / L, rel=1e-5)  # 6 digits printed
-    assert list(rows)[:4] == ["delta_rms_over_l", "max_eps_rms_over_l", "twi", "twi_ref"]
+    value, percent = rows["cloud_distance_rms_ref_over_l"].split()[:2]  # a fraction, then % of L for a person
+    assert float(value) == pytest.approx(0.5 / L, rel=1e-5)  # 6 digits printed
+    assert float(percent.strip("(")) == pytest.approx(100 * 0.5 / L, rel=1e-2)
+    assert list(rows)[:4] == ["tip_error_rms_over_l", "max_eps_rms_over_l", "twi", "twi_ref"]
 
 
 def test_a_full_truth_gives_the_joint_error_and_its_delta_rms(
@@ -109,7 +115,7 @@ def test_a_full_truth_gives_the_joint_error_and_its_delta_rms(
     truth = truth_file(tmp_path / "full.h5", ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events"))
     values, err = compare(recon_file(tmp_path / "recon.h5"), truth, capsys)
     assert values["joint_rms_over_l"] == pytest.approx(5.0 / L, rel=1e-3)
-    assert values["cloud_rms_ref_over_l"] == pytest.approx(0.5 / L)
+    assert values["cloud_distance_rms_ref_over_l"] == pytest.approx(0.5 / L)
     assert values["truth_datasets"] == ["t", "s", "x", "y", "joints/x", "joints/y", "delta_rms"]
     assert values["not_available"] == {}
     assert err.splitlines() == [

@@ -7,6 +7,7 @@ naming the holder; a killed holder frees both at once.
 
 from __future__ import annotations
 
+import fcntl
 import signal
 import subprocess
 import sys
@@ -80,5 +81,22 @@ def test_a_run_folder_in_use_is_refused_naming_the_holder_and_freed_by_its_death
     finally:
         holder.kill()  # SIGKILL: no clean-up, the kernel drops the lock with the process
         holder.communicate(timeout=10)
+    assert (run_dir / LOCK_FILE).exists()  # the killed holder's file stays, locking nothing
     with RunLock.acquire(run_dir, "flagtrack sweep --resume runs/run"):
         assert "flagtrack sweep --resume runs/run" in (run_dir / LOCK_FILE).read_text()
+    assert not (run_dir / LOCK_FILE).exists()  # an orderly release leaves no lock file
+
+
+def test_a_finished_run_leaves_no_lock_file_and_a_removed_one_is_not_locked(tmp_path: Path) -> None:
+    """An orderly release removes ``.lock``; a process that opened the file just before it went (and
+    locks the removed file) is not an owner: it starts again on the path, and only one owner holds it."""
+    run_dir = tmp_path / "run"
+    first = RunLock.acquire(run_dir, "flagtrack sweep -c rig.yaml")
+    with open(run_dir / LOCK_FILE, encoding="utf-8") as late:  # opened before the release removes the file
+        first.release()
+        assert not (run_dir / LOCK_FILE).exists()
+        fcntl.flock(late.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)  # the removed file: locked, but nobody's lock
+        with RunLock.acquire(run_dir, "flagtrack sweep --resume run"):  # a new file, locked for real
+            with pytest.raises(ConfigError, match="in use by pid"):
+                RunLock.acquire(run_dir, "flagtrack sweep --resume run")
+    assert not (run_dir / LOCK_FILE).exists()

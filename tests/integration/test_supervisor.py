@@ -114,7 +114,7 @@ def test_a_sweep_records_every_point_and_ends_at_zero(tmp_path: Path) -> None:
             "amplitude_over_l",
             "frequency_hz",
             "twi",
-            "delta_rms_over_l",
+            "cloud_distance_mean_over_l",
             "event_rate_mev_s",
             "raw_bytes",
         ]

@@ -132,7 +132,7 @@ def test_sweep_on_a_terminal_shows_a_line_per_point_above_a_progress_bar(tmp_pat
     assert [line.split()[4] for line in lines] == ["up", "up", "down"]
     assert [line.split()[5] for line in lines] == ["still", "flapping", "still"], lines
     assert "A/L 0.2" in lines[1] or "A/L 0.3" in lines[1], lines[1]
-    assert all(re.search(r"lost (\d+\.\d%|-)", line) and "ETA" in line for line in lines)  # the tracker's /lost
+    assert all(re.search(r"lost (\d+\.\d %|-)", line) and "ETA" in line for line in lines)  # the tracker's /lost
     assert re.search(r"sweep [0-3]/3 \|[^|\n]*\| \d+:\d\d elapsed, ETA \d+:\d\d \| point \d", shown), shown  # live bar
     assert "sweep 3/3 |" in shown and "\r" in shown  # redrawn in place, ending full
     assert "flagtrack sweep: finished; run folder" in shown

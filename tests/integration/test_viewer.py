@@ -25,7 +25,9 @@ def test_viewer_logs_events_and_centrelines_to_rrd(tmp_path: Path) -> None:
         Bus(BusConfig(namespace="flagtrack/view", listen=(endpoint,))) as bus,
         Bus(BusConfig(namespace="flagtrack/view", connect=(endpoint,))) as source,
     ):
-        viewer = ViewerService(bus, ViewerConfig(sink="rrd", rrd_path=rrd, geometry_rate_hz=1000.0))
+        viewer = ViewerService(
+            bus, ViewerConfig(sink="rrd", rrd_path=rrd, update_rate_hz=None, geometry_rate_hz=1000.0)
+        )
         viewer.start()
         stop = threading.Event()
         thread = threading.Thread(target=viewer.run, args=(stop,))
@@ -92,7 +94,7 @@ def test_the_rrd_holds_each_update_centreline_at_its_time(tmp_path: Path) -> Non
     from rerun.chunk import RrdReader
 
     rrd = tmp_path / "lines.rrd"
-    cfg = ViewerConfig(sink="rrd", rrd_path=rrd, geometry_rate_hz=1000.0)
+    cfg = ViewerConfig(sink="rrd", rrd_path=rrd, update_rate_hz=None, geometry_rate_hz=1000.0)
     rec, _ = open_recording(cfg)
     logger = RerunLogger(rec, cfg)
     n_t, n_s = 5, 7
@@ -153,7 +155,7 @@ def test_messages_the_viewer_cannot_show_are_counted_and_it_goes_on(tmp_path: Pa
         Bus(BusConfig(namespace="flagtrack/vbad", listen=(endpoint,))) as bus,
         Bus(BusConfig(namespace="flagtrack/vbad", connect=(endpoint,))) as source,
     ):
-        viewer = ViewerService(bus, ViewerConfig(sink="rrd", rrd_path=rrd, geometry_rate_hz=5.0))
+        viewer = ViewerService(bus, ViewerConfig(sink="rrd", rrd_path=rrd, update_rate_hz=None, geometry_rate_hz=5.0))
         viewer.start()
         stop = threading.Event()
         thread = threading.Thread(target=viewer.run, args=(stop,))
@@ -214,3 +216,41 @@ def test_messages_the_viewer_cannot_show_are_counted_and_it_goes_on(tmp_path: Pa
         for strip in chunk.to_record_batch().column("LineStrips2D:strips").to_pylist()
     ]
     assert sorted(len(strip[0]) for strip in strips) == [7] * 5 + [51] * 20
+
+
+def test_the_view_keeps_one_update_per_slot_and_every_change_of_lost(tmp_path: Path) -> None:
+    """1 kHz updates shown at 100 Hz: a strip, joints and scalars every 10 ms; a 3-update lost stretch
+    between two shown updates still shows in plots/lost, its start and end at their times."""
+    from rerun.chunk import RrdReader
+
+    rrd = tmp_path / "slots.rrd"
+    cfg = ViewerConfig(sink="rrd", rrd_path=rrd, update_rate_hz=100.0, geometry_rate_hz=1000.0)
+    rec, _ = open_recording(cfg)
+    logger = RerunLogger(rec, cfg)
+    n_t, n_s = 200, 7
+    t = 1.0 + np.arange(n_t) * 1e-3
+    x = np.tile(np.linspace(0, 200, n_s), (n_t, 1))
+    lost = np.zeros(n_t, dtype=np.uint8)
+    lost[53:56] = 1  # t = 1.053 to 1.055 s, between the shown 1.050 and 1.060
+    for part in np.split(np.arange(n_t), [17, 120]):  # in uneven messages
+        m = len(part)
+        piece = CentrelineBatch(t[part], np.linspace(0, 200, n_s), x[part], 0 * x[part], np.zeros((m, 3)),
+                                np.zeros((m, 3)), np.ones(m), np.ones(m, dtype=np.int64), lost[part])  # fmt: skip
+        message = CentrelineMessage.from_batch(piece, source="tracker", seq=0, units="px", source_ns=np.zeros(m, int))
+        logger.centrelines(message)
+    assert logger.frame(0.0, force=True)
+    rec.flush()
+    rec.disconnect()
+    times: dict[str, list[float]] = {}
+    values: dict[str, list] = {}
+    for chunk in RrdReader(rrd).stream():
+        batch_rows = chunk.to_record_batch()
+        if chunk.entity_path in ("/tracker/centreline", "/plots/lost") and "camera" in batch_rows.schema.names:
+            ns = batch_rows.column("camera").cast("int64").to_numpy()
+            times.setdefault(chunk.entity_path, []).extend(ns * 1e-9)
+            if chunk.entity_path == "/plots/lost":
+                values.setdefault("lost", []).extend(v[0] for v in batch_rows.column("Scalars:scalars").to_pylist())
+    np.testing.assert_allclose(times["/tracker/centreline"], 1.0 + np.arange(20) * 0.01, atol=1e-6)
+    lost_at = dict(zip(np.round(times["/plots/lost"], 4), values["lost"], strict=True))
+    assert lost_at[1.053] == 1 and lost_at[1.056] == 0 and lost_at[1.05] == 0 and lost_at[1.06] == 0
+    assert len(lost_at) == 22  # 20 slots and the two changes

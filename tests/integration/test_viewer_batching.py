@@ -47,7 +47,7 @@ def test_a_file_gets_busy_entities_in_chunks_of_chunk_bytes_and_quiet_ones_in_on
     now the centrelines (416 bytes an update) and joints (100) go in chunks of 20 000 bytes and the
     scalars (16 bytes an update) wait for rrd_flush_s or the end: one chunk each."""
     rrd = tmp_path / "batched.rrd"
-    cfg = ViewerConfig(sink="rrd", rrd_path=rrd, chunk_bytes=20_000, rrd_flush_s=30.0)
+    cfg = ViewerConfig(sink="rrd", rrd_path=rrd, update_rate_hz=None, chunk_bytes=20_000, rrd_flush_s=30.0)
     rec, _ = open_recording(cfg)
     logger = RerunLogger(rec, cfg)
     for seq in range(100):
@@ -68,7 +68,7 @@ def test_a_file_gets_busy_entities_in_chunks_of_chunk_bytes_and_quiet_ones_in_on
 
 
 def test_a_live_viewer_gets_queued_rows_within_flush_s(tmp_path: Path) -> None:
-    cfg = ViewerConfig(sink="rrd", rrd_path=tmp_path / "live.rrd", flush_s=0.25)
+    cfg = ViewerConfig(sink="rrd", rrd_path=tmp_path / "live.rrd", update_rate_hz=None, flush_s=0.25)
     rec, _ = open_recording(cfg)
     logger = RerunLogger(rec, cfg, live=True)
     queue = logger.queues.get
@@ -93,7 +93,7 @@ def test_a_live_viewer_gets_queued_rows_within_flush_s(tmp_path: Path) -> None:
 
 def test_a_file_gets_quiet_entities_every_rrd_flush_s(tmp_path: Path) -> None:
     rrd = tmp_path / "periodic.rrd"
-    cfg = ViewerConfig(sink="rrd", rrd_path=rrd, rrd_flush_s=5.0)
+    cfg = ViewerConfig(sink="rrd", rrd_path=rrd, update_rate_hz=None, rrd_flush_s=5.0)
     rec, _ = open_recording(cfg)
     logger = RerunLogger(rec, cfg)
     for seq in range(12):  # a message a second for 12 s: sent at 5 s, 10 s and the end

@@ -39,7 +39,9 @@ def _columns(rrd: Path) -> dict[str, dict[str, list[Any]]]:
 @pytest.fixture(scope="module")
 def logged(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, dict[str, list[Any]]], dict[str, Any]]:
     rrd = tmp_path_factory.mktemp("view") / "all.rrd"
-    cfg = ViewerConfig(sink="rrd", rrd_path=rrd, geometry_rate_hz=1000.0, recent_events_ms=10.0, trail_s=1.0)
+    cfg = ViewerConfig(
+        sink="rrd", rrd_path=rrd, update_rate_hz=None, geometry_rate_hz=1000.0, recent_events_ms=10.0, trail_s=1.0
+    )
     rec, _ = open_recording(cfg)
     logger = RerunLogger(rec, cfg)
     packetizer = Packetizer("evt3", 640, 480)

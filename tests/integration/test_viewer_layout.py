@@ -120,11 +120,13 @@ def test_a_over_l_of_a_flapping_tip_in_a_tilted_frame(tmp_path: Path) -> None:
 
 
 def test_lost_flags_are_a_series(tmp_path: Path) -> None:
-    plain = columns(recorded(tmp_path, lambda logger: logger.centrelines(flapping(0, 0.1, 0.0))))
+    plain = columns(recorded(tmp_path, lambda logger: logger.centrelines(flapping(0, 0.1, 0.0)), update_rate_hz=None))
     found = np.array([v[0] for v in plain["/plots/lost"]["Scalars:scalars"]])
     assert "/plots/tip_y" in plain and len(found) == 100 and not found.any()
     (tmp_path / "view.rrd").unlink()
-    flagged = columns(recorded(tmp_path, lambda logger: logger.centrelines(flapping(0, 0.1, 0.0, lost=True))))
+    flagged = columns(
+        recorded(tmp_path, lambda logger: logger.centrelines(flapping(0, 0.1, 0.0, lost=True)), update_rate_hz=None)
+    )
     lost = np.array([v[0] for v in flagged["/plots/lost"]["Scalars:scalars"]])
     np.testing.assert_array_equal(lost, (np.arange(100) % 10 == 0).astype(float))
 

@@ -122,7 +122,6 @@ def test_every_file_carries_the_processing_parameters_units_input_and_version(tm
     assert set(got) == {
         "alpha",
         "root",
-        "refine_deg",
         "units",
         "input_file",
         "source",
@@ -132,9 +131,13 @@ def test_every_file_carries_the_processing_parameters_units_input_and_version(tm
         "early",
         "events_in",
         "events_kept",
-    }
+        "format",
+        "format_version",
+        "calibration_units",  # the plane unit of a file made with a calibration
+    }  # refine_deg is unset (None): absent, not the text 'null'
+    assert got["units"] == "px" and got["calibration_units"] == "px"
     assert got["units"] == "px" and got["source"] == "tracker" and got["input_file"] == "run.raw"
-    assert got["alpha"] == 0.6 and list(got["root"]) == [1.0, 2.0] and got["refine_deg"] is None
+    assert got["alpha"] == 0.6 and list(got["root"]) == [1.0, 2.0] and got.get("refine_deg") is None
     assert got["calibration_yaml"] == "degree: 3\n" and got["events_kept"] == 7
     assert centreline_attrs({}, units="px")["input_file"] is None  # every file says what it came from, if anything
 

@@ -32,7 +32,7 @@ def result(point, **changes) -> PointResult:
         amplitude_over_l=0.25 if flapping else 0.001,
         frequency_hz=11.0 if flapping else math.nan,
         event_rate_mev_s=0.3 if flapping else 0.007,
-        delta_rms_over_l=0.004,
+        cloud_distance_mean_over_l=0.004,
         raw_file=raw,
         centreline_file=lines,
         sensor_status="ok",

@@ -179,7 +179,7 @@ def test_summary_csv_and_figure(tmp_path: Path) -> None:
     with open(csv_path, newline="") as handle:
         rows = list(csv.DictReader(handle))
     assert tuple(rows[0])[:9] == (
-        "speed_mps", "branch", "state", "amplitude_over_l", "frequency_hz", "twi", "delta_rms_over_l",
+        "speed_mps", "branch", "state", "amplitude_over_l", "frequency_hz", "twi", "cloud_distance_mean_over_l",
         "event_rate_mev_s", "raw_bytes",
     )  # fmt: skip
     assert tuple(rows[0]) == SUMMARY_COLUMNS and len(rows) == len(points)
@@ -242,7 +242,7 @@ def test_sensor_fields_round_trip_and_older_records_load(tmp_path: Path) -> None
                 sensor_samples=1000,
                 sensor_missing=2,
                 sensor_file="points/x_sensor.h5",
-                delta_rms_std_over_l=0.001,
+                cloud_distance_std_over_l=0.001,
             )
         )
         log.point(measured(points[1]))  # no sensor
@@ -250,7 +250,7 @@ def test_sensor_fields_round_trip_and_older_records_load(tmp_path: Path) -> None
         old = {
             k: v
             for k, v in json.loads((tmp_path / RUN_LOG).read_text().splitlines()[2]).items()
-            if not k.startswith("sensor") and k != "delta_rms_std_over_l"
+            if not k.startswith("sensor") and k not in ("delta_rms_std_over_l", "cloud_distance_std_over_l")
         }
         handle.write(json.dumps({**old, "point_id": points[2].point_id, "index": points[2].index}) + "\n")
     got = read_run(tmp_path).points

@@ -89,7 +89,7 @@ def test_the_line_of_a_point_shows_its_facts_and_dashes_for_what_is_not_known() 
         "A/L 0.231",
         "f  12.4 Hz",
         "lost -",
-        "e/L 0.43%",
+        "e/L RMS 0.43 %",
         "[0:42, ETA 1:38]",
     ):
         assert part in line, (part, line)
@@ -97,7 +97,7 @@ def test_the_line_of_a_point_shows_its_facts_and_dashes_for_what_is_not_known() 
         state(last_state="still", amplitude_over_l=0.0004, frequency_hz=-1.0, sensor_error_rms_over_l=-1.0)
     )
     assert "f     - Hz" in still and "e/L" not in still and "A/L 0.000" in still
-    assert "lost 5.0%" in point_line(state(lost_fraction=0.05))
+    assert "lost 5.0 %" in point_line(state(lost_fraction=0.05))
     assert "FAILED" in point_line(state(last_status="failed"))
     assert bar_text(state()) == "0:42 elapsed, ETA 1:38 | point 4: 5.00 m/s up, flag flapping"
     assert clock(3725) == "1:02:05" and clock(-1.0) == "?"

@@ -1,12 +1,14 @@
-"""When the viewer sends an entity's queued rows: at a size, at a row count, or when the oldest has waited."""
+"""When the viewer sends an entity's queued rows: at a size, at a row count, or when the oldest has waited;
+which tracker updates it shows."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.services.viewer import ViewerConfig
-from flagtrack.daemon.services.viewer.batching import FlushPolicy, RowQueue
+from flagtrack.daemon.services.viewer.batching import FlushPolicy, RowQueue, UpdateSlots, changes
 
 
 def test_a_queue_is_due_when_its_oldest_row_has_waited_the_interval() -> None:
@@ -53,3 +55,17 @@ def test_a_queue_of_its_own_row_limit_is_due_at_it() -> None:
     assert not policy.due(strips, 1.0) and not policy.due(scalars, 1.0)
     strips.add("one more", 1, 416)
     assert policy.due(strips, 1.0) and not policy.due(scalars, 1.0)
+
+
+def test_the_view_shows_the_first_update_of_each_slot_whatever_the_batching() -> None:
+    """1 kHz updates over 0.1 s, shown at 200 Hz: one update in five, the same ones in one batch or in
+    uneven ones; None shows every update."""
+    t = 2.0 + np.arange(100) * 1e-3
+    whole = UpdateSlots(200.0).keep(t)
+    slots = UpdateSlots(200.0)
+    pieces = np.concatenate([slots.keep(part) for part in np.split(t, [3, 4, 37, 90])])
+    np.testing.assert_array_equal(whole, pieces)
+    assert whole.sum() == 20 and whole[0] and np.all(np.diff(t[whole]) > 0.004)
+    assert UpdateSlots(None).keep(t).all()
+    assert not UpdateSlots(200.0).keep(np.array([np.nan])).any()
+    np.testing.assert_array_equal(changes([0, 0, 1, 1, 0], 0.0), [False, False, True, False, True])

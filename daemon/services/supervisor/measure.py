@@ -65,9 +65,9 @@ class BusMeasure:
             amplitude_std_over_l=metrics.amplitude_std_over_l,
             frequency_hz=metrics.frequency_hz,
             twi=metrics.twi,
-            delta_rms_over_l=metrics.delta_rms_over_l,
+            cloud_distance_mean_over_l=metrics.delta_rms_over_l,
             event_rate_mev_s=float(np.mean(collection.rates_hz)) / 1e6 if collection.rates_hz else math.nan,
-            delta_rms_std_over_l=metrics.delta_rms_std_over_l,
+            cloud_distance_std_over_l=metrics.delta_rms_std_over_l,
             lost_fraction=metrics.lost_fraction,
             **self._check_sensor(point, run_dir, collection, state),
         )
@@ -82,5 +82,5 @@ class BusMeasure:
         base = run_dir / POINTS_DIR / point.point_id
         raw = run_dir / point_paths(point.point_id)[0]
         frame = FlagFrame(self.flag.length, self.flag.root, self.flag.direction_deg)
-        title = f"{point.point_id}: {point.speed_mps:.2f} m/s, {state}"
+        title = f"run {run_dir.name}, point {point.point_id}: {point.speed_mps:.2f} m/s, {state}"
         return check_point(base, run_dir, collection, raw, frame, self.sensor, state, title)

@@ -84,10 +84,10 @@ def check_point(
 def _log_check(sensor_id: str, validation: Any, error_rms_over_l: float) -> None:
     sync = validation.sync
     log.info(
-        "supervisor: sensor %s: %s, e/L RMS %.4f, sync %s %.1f ± %.1f us",
+        "supervisor: sensor %s: %s, e/L RMS %.2f %% of L, sync %s %.1f ± %.1f us",
         sensor_id,
         validation.status,
-        error_rms_over_l,
+        100 * error_rms_over_l,
         sync.method,
         sync.offset_us,
         sync.uncertainty_us,

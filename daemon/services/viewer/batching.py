@@ -62,3 +62,39 @@ class FlushPolicy:
         if queue.n_bytes >= self.chunk_bytes or queue.n_rows >= max_rows:
             return True
         return queue.since_s is not None and now_s - queue.since_s >= self.interval_s
+
+
+@dataclass
+class UpdateSlots:
+    """Which tracker updates the view shows: the first of each ``1 / rate_hz`` slot of camera time
+    (None: every one). The slot of the last update shown carries over from one message to the next,
+    so the choice does not depend on how the updates were batched."""
+
+    rate_hz: float | None
+    last_slot: float = float("nan")
+
+    def keep(self, t_s: Any) -> Any:
+        """(n,) bool: the updates at ``t_s`` (s, (n,)) that open a new slot."""
+        import numpy as np
+
+        t_s = np.asarray(t_s, dtype=np.float64)
+        if self.rate_hz is None:
+            return np.isfinite(t_s)
+        slots = np.floor(t_s * self.rate_hz + 1e-6)  # (a time a rounding below a slot's start opens it)
+        finite = np.isfinite(slots)
+        shown = slots[finite]
+        if not len(shown):
+            return finite
+        before = np.concatenate([[self.last_slot], shown[:-1]])
+        keep = np.zeros(len(t_s), dtype=bool)
+        keep[finite] = shown != before  # a new slot (or a camera clock that went back)
+        self.last_slot = float(shown[-1])
+        return keep
+
+
+def changes(values: Any, before: float) -> Any:
+    """(n,) bool: where ``values`` differ from the value before them (``before`` for the first)."""
+    import numpy as np
+
+    values = np.asarray(values, dtype=np.float64)
+    return values != np.concatenate([[before], values[:-1]])

@@ -26,6 +26,10 @@ class ViewerConfig:
         camera_id: the camera whose events are shown.
         recent_events_ms: events younger than this are drawn.
         max_points: at most this many event points per frame (subsampled beyond).
+        update_rate_hz: tracker updates shown per second of camera time at most (centreline, joints,
+            tip y, Delta_RMS, events per update; ``lost`` keeps every change too): the first update of
+            each ``1 / update_rate_hz`` slot. None: every update. The full stream stays in the
+            centreline files; 200 Hz draws a 5 s plot at about one update per pixel column.
         trail_s: length of the tip trail.
         geometry_rate_hz: frames per second for event clouds, the tip trail and A/L.
         amplitude_window_s: A/L is half the peak-to-peak of the tip over this much of the latest updates.
@@ -44,6 +48,7 @@ class ViewerConfig:
     camera_id: str = "cam0"
     recent_events_ms: float = 10.0
     max_points: int = 20_000
+    update_rate_hz: float | None = 200.0
     trail_s: float = 0.5
     geometry_rate_hz: float = 30.0
     amplitude_window_s: float = 1.0
@@ -52,8 +57,11 @@ class ViewerConfig:
     chunk_bytes: int = 2 << 20
 
     def __post_init__(self) -> None:
-        for name in ("geometry_rate_hz", "flush_s", "rrd_flush_s", "amplitude_window_s", "chunk_bytes"):
+        names = ("geometry_rate_hz", "flush_s", "rrd_flush_s", "amplitude_window_s", "chunk_bytes", "update_rate_hz")
+        for name in names:
             value = getattr(self, name)
+            if value is None and name == "update_rate_hz":
+                continue
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"must be a positive number, got {value!r}", key=f"viewer.{name}")
 

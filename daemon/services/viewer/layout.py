@@ -29,7 +29,7 @@ SERIES_NAMES = {
     AMPLITUDE: "A/L",
     EVENT_RATE: "event rate (ev/s)",
     WIND_SPEED: "wind speed (m/s)",
-    DELTA_RMS: "Δ_RMS ({units})",
+    DELTA_RMS: "event-cloud distance Δ_RMS ({units})",
     EVENTS_PER_UPDATE: "events per update",
     LOST: "lost",
 }

@@ -23,10 +23,11 @@ from flagtrack.daemon.core.metrics import window_amplitude_over_l
 from flagtrack.daemon.errors import ConfigError, FormatError
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, SupervisorState, TunnelState
+from flagtrack.daemon.sweep.quantities import QUANTITIES
 from flagtrack.drivers.formats.packets import decode_packet
 
 from . import layout
-from .batching import FlushPolicy, RowQueue
+from .batching import FlushPolicy, RowQueue, UpdateSlots, changes
 from .config import ViewerConfig, effective_sink
 from .serve import RerunServer
 
@@ -112,8 +113,18 @@ def supervisor_text(msg: SupervisorState) -> str:
     rows = [(f.name, v) for f, (_, v) in zip(extra, rows, strict=True) if v is not None and v != "" and v != f.default]
     if rows:
         lines += ["", "| | |", "|---|---|"]
-        lines += [f"| {name} | {f'{value:.4g}' if isinstance(value, float) else value} |" for name, value in rows]
+        lines += [f"| {name} | {_cell(name, value)} |" for name, value in rows]
     return "\n".join(lines)
+
+
+def _cell(name: str, value: Any) -> str:
+    """A field of the supervisor's table; an error or distance (a fraction of L) also as a person reads it,
+    in %, as the terminal lines and README.txt show it (``daemon/sweep/quantities.py``)."""
+    if not isinstance(value, float):
+        return str(value)
+    shown = QUANTITIES.get(name)
+    percent = shown is not None and shown.unit == "%" and value >= 0
+    return f"{value:.4g}" + (f" ({shown.text(value)})" if percent else "")  # type: ignore[union-attr]
 
 
 class RerunLogger:
@@ -144,6 +155,8 @@ class RerunLogger:
             layout.SUPERVISOR_STATE: self._send_document,
             layout.SUPERVISOR_LOG: self._send_text_log,
         }
+        self.slots = UpdateSlots(cfg.update_rate_hz)  # the tracker updates shown
+        self._last_lost = 0.0
         self._packets: deque[EventPacket] = deque()
         self._track: deque[np.ndarray] = deque()  # (n, 5) arrays: t, root x, root y, tip x, tip y
         self._track_new = False
@@ -159,8 +172,8 @@ class RerunLogger:
     # -- messages: queue rows -------------------------------------------------------------------
 
     def centrelines(self, msg: CentrelineMessage) -> None:
-        """Queue a batch of tracker updates: centreline, joints, tip y, Δ_RMS, events used and the lost
-        flags; note the tip and root for the trail and A/L."""
+        """Queue the updates of a batch the view shows (:attr:`slots`): centreline, joints, tip y, Δ_RMS,
+        events used, and the lost flags (at every change too); note every tip and root for the trail and A/L."""
         n = len(msg.t_s)
         if not n:
             return
@@ -169,14 +182,24 @@ class RerunLogger:
         jx, jy = np.asarray(msg.joints_x, dtype=np.float64), np.asarray(msg.joints_y, dtype=np.float64)
         if x.shape != y.shape or x.shape[0] != n or jx.shape != jy.shape or jx.ndim != 2 or jx.shape[0] != n:
             raise ValueError(f"centreline message of {n} updates with x {x.shape}, joints {jx.shape}")
-        strips = np.stack([x, y], axis=-1).astype(np.float32)  # (n, n_s, 2): one strip per update
-        self._queue(layout.CENTRELINE, (t, strips), n, strips.nbytes + 8 * n)
-        joints = np.stack([jx, jy], axis=-1).astype(np.float32).reshape(-1, 2)
-        self._queue(layout.JOINTS, (t, joints, np.full(n, jx.shape[1]), None), n, joints.nbytes + 12 * n)
-        self._scalars(layout.TIP_Y, t, msg.tip_y)
-        self._scalars(layout.DELTA_RMS, t, msg.delta_rms)
-        self._scalars(layout.EVENTS_PER_UPDATE, t, msg.n_events)
-        self._scalars(layout.LOST, t, msg.lost)
+        lost = np.asarray(msg.lost, dtype=np.float64).reshape(-1)
+        if len(lost) != n:
+            raise ValueError(f"centreline message of {n} updates with {len(lost)} lost flags")
+        keep = self.slots.keep(t)
+        lost_rows = keep | changes(lost, self._last_lost)  # every change of the flag shows
+        self._scalars(layout.LOST, t[lost_rows], lost[lost_rows])
+        self._last_lost = float(lost[-1])
+        k, shown = t[keep], int(keep.sum())
+        if shown:
+            strips = np.stack([x[keep], y[keep]], axis=-1).astype(np.float32)  # (k, n_s, 2): a strip per update
+            self._queue(layout.CENTRELINE, (k, strips), shown, strips.nbytes + 8 * shown)
+            joints = np.stack([jx[keep], jy[keep]], axis=-1).astype(np.float32).reshape(-1, 2)
+            self._queue(
+                layout.JOINTS, (k, joints, np.full(shown, jx.shape[1]), None), shown, joints.nbytes + 12 * shown
+            )
+            self._scalars(layout.TIP_Y, k, np.asarray(msg.tip_y)[keep])
+            self._scalars(layout.DELTA_RMS, k, np.asarray(msg.delta_rms)[keep])
+            self._scalars(layout.EVENTS_PER_UPDATE, k, np.asarray(msg.n_events)[keep])
         self._units = msg.units or self._units
         self._length = float(msg.s[-1] - msg.s[0]) if len(msg.s) > 1 else math.nan
         self._track.append(np.stack([t, x[:, 0], y[:, 0], x[:, -1], y[:, -1]], axis=1))
@@ -292,7 +315,8 @@ class RerunLogger:
         self._track_new = False
         track = np.concatenate(list(self._track))
         t_last = track[-1, 0]
-        trail = track[track[:, 0] >= t_last - self.cfg.trail_s][:, 3:5].astype(np.float32)
+        recent = track[track[:, 0] >= t_last - self.cfg.trail_s]
+        trail = recent[UpdateSlots(self.cfg.update_rate_hz).keep(recent[:, 0])][:, 3:5].astype(np.float32)
         t = np.array([_place(float(t_last), "tip trail")])
         if len(trail) > 1:
             self._queue(layout.TIP_TRAIL, (t, trail), 1, trail.nbytes + 16)

@@ -125,6 +125,8 @@ class RecordingPart:
             simulated = isinstance(camera, dict) and camera.get("adapter") == "simulated"
             self.raw.open(packet.encoding, packet.width, packet.height, packet.camera_id, packet.t_offset_us, simulated)
             self.geometry = {"width": packet.width, "height": packet.height, "encoding": packet.encoding}
+            if self.centrelines is not None:  # the centreline file says the sensor's size
+                self.centrelines.set_attrs({"sensor_width_px": packet.width, "sensor_height_px": packet.height})
             self.write_sidecar()
         if gap_from is not None:
             self.gaps.append([gap_from, packet.seq])
