@@ -15,9 +15,10 @@ import argparse
 import json
 import math
 from dataclasses import asdict, dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:  # numpy is imported where it is used: `flagtrack bench --help` stays cheap
+    import numpy as np
 
 COMMAND = "geometry"
 HELP = "accuracy of `flagtrack geometry` (root, direction, length) on simulated recordings"
@@ -53,6 +54,8 @@ class Case:
 
 def plan(n: int, seed: int, duration_s: float) -> list[Case]:
     """The grid: ``n`` cases drawn from ``seed``."""
+    import numpy as np
+
     cases = []
     for i in range(n):
         rng = np.random.default_rng([seed, i])
@@ -88,6 +91,8 @@ def plan(n: int, seed: int, duration_s: float) -> list[Case]:
 
 def _free_root(rng: np.random.Generator, width: int, height: int, length: float, direction_deg: float) -> tuple:
     """A root that keeps the flag's reach (L along the axis, 0.55 L either side) 8 px inside the sensor."""
+    import numpy as np
+
     d = math.radians(direction_deg)
     along, across = np.array([math.cos(d), math.sin(d)]), np.array([-math.sin(d), math.cos(d)])
     corners = np.array([a * length * along + b * 0.55 * length * across for a in (0, 1) for b in (-1, 1)])
@@ -114,6 +119,8 @@ class TappedFlag:
         return self.base.positions_at_phase(phase_rad, s, amp_scale)
 
     def positions(self, t_s: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        import numpy as np
+
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
         rows = [
             self.base.positions_at_phase(self.base.phase(t[i : i + 1]), s, math.exp(-t[i] / self.tau_s))
@@ -124,6 +131,8 @@ class TappedFlag:
 
 def simulate(case: Case) -> tuple[np.ndarray, Any]:
     """The case's events (time-ordered) and the plane -> pixel optics."""
+    import numpy as np
+
     from flagtrack.drivers.sim.dvs import DvsParams
     from flagtrack.drivers.sim.kinematics import KinematicsFamily, sample_kinematics
     from flagtrack.drivers.sim.optics import PlaneCamera, tilted_pinhole
@@ -147,6 +156,8 @@ def simulate(case: Case) -> tuple[np.ndarray, Any]:
 def _with_hot_pixels(events: np.ndarray, case: Case, optics: Any) -> np.ndarray:
     """``events`` plus ``case.hot_pixels`` pixels firing at 1-5 kHz: one just behind the root, one
     just beyond the tip, the others in the flag's reach."""
+    import numpy as np
+
     if case.hot_pixels == 0:
         return events
     rng = np.random.default_rng([case.seed, 7])
@@ -178,6 +189,8 @@ class _Unproject:
         self.optics = optics
 
     def map(self, x_px: np.ndarray, y_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        import numpy as np
+
         return self.optics.unproject(np.asarray(x_px, dtype=np.float64), np.asarray(y_px, dtype=np.float64))
 
 
@@ -205,6 +218,8 @@ def evaluate(case: Case) -> dict[str, Any]:
 
 def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Max and 95th percentile of each error's magnitude over the rows that found a flag."""
+    import numpy as np
+
     found = [r for r in rows if "error" not in r]
     out: dict[str, Any] = {"recordings": len(rows), "found": len(found)}
     for key in ("root_error_over_l", "direction_error_deg", "length_error_pct"):

@@ -163,7 +163,7 @@ def find_geometry(
     q1, q3 = np.percentile(lengths, [25, 75])
     root = frame.point(u_root, float(np.interp(u_root, fit.centres, _filled(fit.mean, fit.centres))))
     frequency = _frequency_hz(refs)
-    duration_s = (seen.t_us.max() - seen.t_us.min()) * 1e-6
+    duration_s = (float(events["t"][-1]) - float(events["t"][0])) * 1e-6
     return FlagGeometry(
         root=(float(root[0]), float(root[1])),
         direction_deg=frame.direction_deg,
