@@ -12,16 +12,10 @@ from typing import Any
 COMMAND = "geometry"
 HELP = "find the flag's root, rest direction and length from a short recording of it moving"
 DESCRIPTION = """\
-Find where the flag is from a few seconds of it flapping (or tapped by hand): its root (where it is
-attached to the pole), its rest direction and its length, in the tracker's frame: pixels (x right,
-y down, the direction in degrees from +x towards +y), or the plane's units with --calibration.
-Prints them with the `flagtrack reconstruct` options that use them; -o writes the `tracker:`
-section of a config (`flagtrack reconstruct -c`, the rig's config). A recording with no flag in it
-is one line and exit status 2.
-
-example:
-  flagtrack geometry flap.raw -o tracker.yaml
-  flagtrack reconstruct run.raw -o run.h5 -c tracker.yaml
+Find the flag's root, rest direction and length from a few seconds of it flapping (or tapped by
+hand), in pixels or, with --calibration, the plane's units; prints the `flagtrack reconstruct`
+options that use them, and -o writes the `tracker:` section. See docs/commands.md and
+docs/first-day.md.
 """
 
 DEFAULT_MAX_EVENTS = 4_000_000
