@@ -98,6 +98,25 @@ class _PixelState:
     lists: np.ndarray
     counts: np.ndarray
 
+    @classmethod
+    def at_rest(cls, n_px: int, params: PhotoreceptorParams, rng: np.random.Generator) -> _PixelState:
+        """Every pixel settled on the background; thresholds drawn from ``rng``."""
+        u_bg = math.log(params.background + 1e-3)
+        return cls(
+            acc=np.zeros(n_px),
+            level=np.full(n_px, u_bg),
+            ref=np.full(n_px, u_bg),
+            contrast=np.maximum(rng.normal(params.contrast, params.sigma_contrast, n_px), 0.1),
+            last=np.zeros(n_px, np.int64),
+            stamp=np.full(n_px, -1, np.int64),
+            lists=np.empty((4, n_px), np.int64),
+            counts=np.zeros(3, np.int64),
+        )
+
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """The arrays in the kernel's order."""
+        return (self.acc, self.level, self.ref, self.contrast, self.last, self.stamp, self.lists, self.counts)
+
 
 def slow_photoreceptor_events(
     kin: LineKinematics,
@@ -112,18 +131,7 @@ def slow_photoreceptor_events(
         raise ValueError("duration_s must be finite and > 0")
     box = _envelope(kin, duration_s, width, height, params.margin_px, params.n_s)
     rng = np.random.default_rng(seed)
-    n_px = box.w * box.h
-    u_bg = math.log(params.background + 1e-3)
-    state = _PixelState(
-        acc=np.zeros(n_px),
-        level=np.full(n_px, u_bg),
-        ref=np.full(n_px, u_bg),
-        contrast=np.maximum(rng.normal(params.contrast, params.sigma_contrast, n_px), 0.1),
-        last=np.zeros(n_px, np.int64),
-        stamp=np.full(n_px, -1, np.int64),
-        lists=np.empty((4, n_px), np.int64),
-        counts=np.zeros(3, np.int64),
-    )
+    state = _PixelState.at_rest(box.w * box.h, params, rng)
     jitter = rng.random(100_003)
     gain = 1.0 - math.exp(-params.step_us / params.tau_us) if params.tau_us > 0 else 1.0
     s = np.linspace(0.0, kin.length, params.n_s)
@@ -132,30 +140,9 @@ def slow_photoreceptor_events(
     for first in range(0, n_steps, _BLOCK_STEPS):
         steps = np.arange(first, min(first + _BLOCK_STEPS, n_steps))
         x, y = kin.positions(steps * params.step_us * 1e-6, s)
-        out_t, out_i, out_p, n_out = _run_steps(
-            np.ascontiguousarray(x - box.x0),
-            np.ascontiguousarray(y - box.y0),
-            first,
-            box.w,
-            box.h,
-            params.line_sigma_px,
-            params.step_us,
-            params.background,
-            gain,
-            state.acc,
-            state.level,
-            state.ref,
-            state.contrast,
-            state.last,
-            state.stamp,
-            state.lists,
-            state.counts,
-            jitter,
-            out_t,
-            out_i,
-            out_p,
-            n_out,
-        )
+        x, y = np.ascontiguousarray(x - box.x0), np.ascontiguousarray(y - box.y0)
+        line = (box.w, box.h, params.line_sigma_px, params.step_us, params.background, gain)
+        out_t, out_i, out_p, n_out = _run_steps(x, y, first, *line, *state.arrays(), jitter, out_t, out_i, out_p, n_out)
     return _to_events(out_t[:n_out], out_i[:n_out], out_p[:n_out], box)
 
 
