@@ -177,3 +177,48 @@ def test_the_deploy_configs_pass_the_cli(path: Path, capsys: pytest.CaptureFixtu
     """The quick form of tests/unit/test_deploy_configs.py: what each example says, through the command."""
     assert main(["config", "check", str(path), "--no-files"]) == 0, capsys.readouterr().err
     assert "this host's files, folders, ports and SDKs not looked at" in capsys.readouterr().out
+
+
+def secured_rig(folder: Path, certs_dir: Path) -> Path:
+    tls = {
+        "ca": str(certs_dir / "ca.pem"),
+        "cert": f"{certs_dir}/{{identity}}.pem",
+        "key": f"{certs_dir}/{{identity}}.key",
+    }
+    bus = {"listen": ["tls/127.0.0.1:7447"], "security": {"tls": tls, "acl": True}}
+    return rig_file(folder, bus=bus, services=["camera", "tracker"], supervisor=None, tunnel=None)
+
+
+def test_a_secured_rigs_certificates_are_checked_for_each_identity(tmp_path: Path) -> None:
+    import datetime as dt
+    import os
+
+    from flagtrack.daemon.security import certs
+
+    good, other = tmp_path / "certs", tmp_path / "other"
+    certs.init(good, ["camera", "tracker"])
+    path = secured_rig(tmp_path, good)
+    report = check_rig_file(path)
+    assert "each service alone" in report.runs[0] and report.notes == ()
+
+    def fails_with(words: str) -> None:
+        with pytest.raises(
+            ConfigError, match=rf"file {path}, key 'bus.security.tls.\w+': identity 'tracker': .*{words}"
+        ):
+            check_rig_file(path)
+
+    os.replace(good / "tracker.pem", tmp_path / "tracker.pem")
+    fails_with("no such file")
+    shutil.copy(good / "camera.pem", good / "tracker.pem")
+    fails_with("is the certificate of 'camera'")
+    certs.init(other, ["tracker"])
+    for suffix in (".pem", ".key"):
+        shutil.copy(other / f"tracker{suffix}", good / f"tracker{suffix}")
+    fails_with("was not issued by the CA")
+    past = dt.datetime.now(dt.UTC) - dt.timedelta(days=20)
+    certs.issue(good, "tracker", days=10, now=past, replace=True)
+    fails_with("expired on")
+    certs.issue(good, "tracker", days=10, replace=True)
+    (note,) = check_rig_file(path).notes
+    assert not note.pending and "(tracker) expires in" in note.text and "flagtrack certs issue" in note.text
+    assert check_rig_file(path, files=False).notes == ()
