@@ -266,6 +266,13 @@ def _build_sensor(b: Build) -> Service:
     return SensorService(b.bus, cfg, lambda: open_sensor(cfg, camera, rig.path))
 
 
+def _check_sensor(rig: RigSections, findings: Findings) -> None:
+    from flagtrack.daemon.rig.host import check_port
+
+    if rig.sensor is not None and rig.sensor.driver != "simulated":
+        check_port(rig.sensor.port, key="sensor.port", what="the sensor", findings=findings)
+
+
 def _prepare_sensor(p: Preparation) -> None:
     p.warm_up_triggers()  # a point's sensor check reads the pulses of its raw file
 
@@ -390,6 +397,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         publishes=("sensor_samples(sensor)",),
         alive="sensor/{sensor}",
         build=_build_sensor,
+        check=_check_sensor,
         prepare=_prepare_sensor,
     ),
     ServiceSpec(

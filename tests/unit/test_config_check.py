@@ -222,3 +222,16 @@ def test_a_secured_rigs_certificates_are_checked_for_each_identity(tmp_path: Pat
     (note,) = check_rig_file(path).notes
     assert not note.pending and "(tracker) expires in" in note.text and "flagtrack certs issue" in note.text
     assert check_rig_file(path, files=False).notes == ()
+
+
+def test_a_device_not_plugged_in_is_a_note_left_to_the_rig_when_strict(tmp_path: Path) -> None:
+    port = str(tmp_path / "ttyUSB9")  # a device path that is not there
+    tunnel = {"driver": "ascii", "port": port}
+    sensor = {"id": "om70", "driver": "ascii", "port": port}
+    path = rig_file(tmp_path, tunnel=tunnel, sensor=sensor, services=["camera", "sensor"])
+    notes = {n.key: n for n in check_rig_file(path).notes}
+    assert set(notes) == {"tunnel.port", "sensor.port"} and all(n.pending for n in notes.values())
+    assert f"{port} is not there now" in notes["tunnel.port"].text
+    with pytest.raises(ConfigError, match=r"key '(tunnel|sensor).port'.*\(--strict\)"):
+        check_rig_file(path, strict=True)
+    load_rig(path)  # the rig's own commands say so when they open it
