@@ -64,17 +64,29 @@ def tracker_line(rig: RigSections) -> str:
 def recorder_line(rig: RigSections) -> str:
     r = rig.recorder
     when = f"records from the start to {r.path}" if r.path else "records on command"
-    free = free_bytes(r.directory)
-    room = ""
+    return f"into {r.directory}; {when}"
+
+
+def disk_line(rig: RigSections, names: tuple[str, ...] | list[str]) -> str | None:
+    """The free space of the folders the services write, and what it holds (None: they write none)."""
+    parts = []
+    supervisor = rig.supervisor
+    rate_bytes_s = supervisor.expected_rate_mev_s * 1e6 * supervisor.bytes_per_event
+    free = free_bytes(rig.recorder.directory) if "recorder" in names else None
     if free is not None:
-        rate_bytes_s = rig.supervisor.expected_rate_mev_s * 1e6 * rig.supervisor.bytes_per_event
         minutes = (
-            f": about {free / rate_bytes_s / 60:.0f} min at {rig.supervisor.expected_rate_mev_s:g} Mev/s"
+            f", about {free / rate_bytes_s / 60:.0f} min at {supervisor.expected_rate_mev_s:g} Mev/s"
             if rate_bytes_s
             else ""
         )
-        room = f" ({size_text(free)} free{minutes})"
-    return f"into {r.directory}{room}; {when}"
+        parts.append(f"{rig.recorder.directory}: {size_text(free)} free{minutes}")
+    estimate = estimate_plan(rig) if "supervisor" in names else None
+    free = free_bytes(supervisor.runs_dir) if estimate is not None else None
+    if estimate is not None and free is not None:
+        parts.append(
+            f"{supervisor.runs_dir}: {size_text(free)} free, the sweep needs about {size_text(estimate.disk_bytes)}"
+        )
+    return "; ".join(parts) or None
 
 
 def viewer_line(rig: RigSections) -> str:
@@ -102,14 +114,12 @@ def supervisor_line(rig: RigSections) -> str:
     estimate = estimate_plan(rig)
     if estimate is None:
         return f"{s.mode}: publishes the flag's state (no sweep plan); run folders in {s.runs_dir}"
-    free = free_bytes(s.runs_dir)
-    room = f", {size_text(free)} free" if free is not None else ""
     sweep = s.sweep
     assert sweep is not None  # an estimate comes from a plan
     return (
         f"sweep: {estimate.points} points, {estimate.lowest_mps:.2f} to {estimate.highest_mps:.2f} m/s, "
         f"{' then '.join(estimate.branches)}; settle {sweep.settle_s:g} s, record {sweep.record_s:g} s: "
-        f"about {_duration(estimate.duration_s)}, about {size_text(estimate.disk_bytes)} in {s.runs_dir}{room}"
+        f"about {_duration(estimate.duration_s)}, about {size_text(estimate.disk_bytes)} in {s.runs_dir}"
     )
 
 

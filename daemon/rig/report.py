@@ -16,7 +16,7 @@ from pathlib import Path
 
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.rig.config import RigConfig, check_rig, load_rig
-from flagtrack.daemon.rig.describe import DESCRIPTIONS, bus_line, tunnel_line
+from flagtrack.daemon.rig.describe import DESCRIPTIONS, bus_line, disk_line, tunnel_line
 from flagtrack.daemon.rig.findings import Findings, Note
 from flagtrack.daemon.rig.host import check_port
 from flagtrack.daemon.rig.plan import PlanEstimate, estimate_plan
@@ -80,6 +80,9 @@ def check_rig_file(
     lines += [(name, DESCRIPTIONS[name](rig)) for name in READING_ORDER if name in names]
     if rig.tunnel is not None:
         lines.append(("tunnel", tunnel_line(rig)))
+    disk = disk_line(rig, names) if files else None
+    if disk is not None:
+        lines.append(("disk", disk))
     plan = estimate_plan(rig) if "supervisor" in names else None
     runs = _runs(rig, str(path), kind, names)
     return RigReport(str(path), kind, tuple(names), runs, tuple(lines), plan, tuple(findings.notes), files)
@@ -121,7 +124,7 @@ def _runs(rig: RigConfig, path: str, kind: str, names: Sequence[str]) -> tuple[s
         runs.append(f"flagtrack up -c {path}: {', '.join(up)}")
     if rig.supervisor.sweep is not None and "supervisor" in names:
         sweeping = (
-            "the supervisor sweeps under up too (mode sweep; a restart resumes)"
+            "the supervisor also sweeps whenever it starts (mode sweep; a restart resumes)"
             if ("supervisor" in up and rig.supervisor.mode == "sweep")
             else "the same services and the supervisor, which runs the plan"
         )
