@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from flagtrack.daemon.errors import ConfigError
+from flagtrack.daemon.rig.findings import Findings
 from flagtrack.daemon.rig.sections import HARDWARE_ADAPTERS, CameraConfig, RigSections, viewer_writes_file
 from flagtrack.daemon.rig.table import SERVICE_NAMES, in_table_order
 from flagtrack.daemon.schema import Keys
@@ -131,9 +132,10 @@ def load_rig(path: str | Path, services: Sequence[str] | None = None) -> RigConf
     return rig
 
 
-def check_rig(rig: RigConfig, services: Sequence[str]) -> None:
+def check_rig(rig: RigConfig, services: Sequence[str], findings: Findings | None = None) -> Findings:
     """Check what ``services`` need of ``rig`` that a file or a setting can say, opening and creating
-    nothing: each service's own check of the service table (:mod:`.table`).
+    nothing: each service's own check of the service table (:mod:`.table`), then the certificates
+    the processes of a secured bus present (:mod:`.certificates`).
 
     Input files must exist (``camera.replay.path``, ``tracker.calibration``); output folders must
     exist or be creatable (``recorder.directory`` and ``path``, the ``.rrd`` file's, ``supervisor.runs_dir``);
@@ -141,9 +143,17 @@ def check_rig(rig: RigConfig, services: Sequence[str]) -> None:
     ROI form); what only the device can tell (an ROI that fits its sensor) is checked when ``up``
     opens it, before anything else (:func:`flagtrack.daemon.rig.build.open_hardware_camera`).
 
+    ``findings``: where what this host lacks goes (default: strict, each raised as an error: what the
+    commands that run the rig use; ``flagtrack config check`` collects them as notes).
+
     Raises:
         ConfigError: naming the key and the rig file.
     """
+    from flagtrack.daemon.rig.certificates import check_certificates
+
+    findings = findings if findings is not None else Findings()
     for spec in in_table_order(list(services)):
         if spec.check is not None:
-            spec.check(rig)
+            spec.check(rig, findings)
+    check_certificates(rig, services, findings)
+    return findings

@@ -23,7 +23,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from flagtrack.daemon.rig.context import Build, Preparation
+    from flagtrack.daemon.rig.findings import Findings
     from flagtrack.daemon.rig.sections import RigSections
     from flagtrack.daemon.services.runner import Service
 
@@ -44,7 +47,8 @@ class ServiceSpec:
         watches: it watches every service's liveliness.
         build: constructs it (opening nothing) from :class:`~flagtrack.daemon.rig.context.Build`.
         check: what it needs of the rig that a file or a setting can say, opening and creating nothing
-            (raises ``ConfigError`` naming the key and the rig file).
+            (raises ``ConfigError`` naming the key and the rig file; what this host lacks goes to the
+            :class:`~flagtrack.daemon.rig.findings.Findings`, which raises it when strict).
         prepare: its slow one-off work before the rig runs (kernels, imports), with
             :class:`~flagtrack.daemon.rig.context.Preparation`.
         finishes: whether its normal end ends the rig (otherwise the rig runs until stopped).
@@ -60,7 +64,7 @@ class ServiceSpec:
     alive: str = ""
     watches: bool = False
     needs: tuple[str, ...] = ()
-    check: Callable[[RigSections], None] | None = None
+    check: Callable[[RigSections, Findings], None] | None = None
     prepare: Callable[[Preparation], None] | None = None
     finishes: Callable[[RigSections], bool] | None = None
     stop_s: Callable[[RigSections], float] | None = None
@@ -84,10 +88,25 @@ def _build_supervisor(b: Build) -> Service:
     )
 
 
-def _check_supervisor(rig: RigSections) -> None:
+def _check_supervisor(rig: RigSections, findings: Findings) -> None:
+    """The tunnel it drives, every speed it would ask for, the services it waits for, its run folder."""
+    from flagtrack.daemon.errors import ConfigError
+    from flagtrack.daemon.rig.host import check_port
+    from flagtrack.daemon.rig.plan import check_disk, check_speeds
     from flagtrack.daemon.typed_yaml import require_folder
 
-    require_folder(rig.supervisor.runs_dir, key="supervisor.runs_dir", path=rig.path)
+    if rig.tunnel is None:  # `flagtrack sweep -c` adds the supervisor to a rig's services
+        raise ConfigError("the supervisor needs a 'tunnel:' section (driver: simulated for no hardware)", path=rig.path)
+    unknown = [name for name in rig.supervisor.required if name not in SERVICE_NAMES]
+    if unknown:
+        known = ", ".join(SERVICE_NAMES)
+        raise ConfigError(f"unknown service {unknown[0]!r} (known: {known})", key="supervisor.required", path=rig.path)
+    check_speeds(rig)
+    if rig.tunnel.driver != "simulated":
+        check_port(rig.tunnel.port, key="tunnel.port", what="the tunnel's controller", findings=findings)
+    if findings.files:
+        require_folder(rig.supervisor.runs_dir, key="supervisor.runs_dir", path=rig.path)
+        check_disk(rig, findings)
 
 
 def _prepare_supervisor(_p: Preparation) -> None:
@@ -131,11 +150,13 @@ def _build_recorder(b: Build) -> Service:
     )
 
 
-def _check_recorder(rig: RigSections) -> None:
+def _check_recorder(rig: RigSections, findings: Findings) -> None:
     from flagtrack.daemon.services.recorder import recording_base
     from flagtrack.daemon.typed_yaml import require_folder
 
-    _check_calibration(rig)  # its files name the calibration
+    _check_calibration(rig, findings)  # its files name the calibration
+    if not findings.files:
+        return
     require_folder(rig.recorder.directory, key="recorder.directory", path=rig.path)
     if rig.recorder.path:
         base = recording_base(rig.recorder.directory, rig.recorder.path)
@@ -156,11 +177,45 @@ def _build_tracker(b: Build) -> Service:
     return TrackerService(b.bus, cfg, setup.factory, setup.units)
 
 
-def _check_calibration(rig: RigSections) -> None:
+def _check_calibration(rig: RigSections, findings: Findings) -> None:
+    """The calibration file: the first day makes it (``flagtrack calibrate -o``), so one not made yet is
+    pending; one that is there must be a calibration."""
     from flagtrack.daemon.typed_yaml import require_file
 
-    if rig.tracker.calibration is not None:
-        require_file(rig.tracker.calibration, key="tracker.calibration", path=rig.path)
+    calibration = rig.tracker.calibration
+    if calibration is None or not findings.files:
+        return
+    try:
+        missing = not calibration.exists()
+    except OSError:  # a folder on the way that may not be searched: require_file says so
+        missing = False
+    if missing:
+        findings.note(
+            f"{calibration} is not made yet: flagtrack calibrate BOARD.raw --board NxM --square-mm S -o "
+            f"{calibration} (docs/calibration.md); the rig's commands refuse to start without it",
+            key="tracker.calibration",
+            path=rig.path,
+            error=f"no such file: {calibration}",
+        )
+        return
+    require_file(calibration, key="tracker.calibration", path=rig.path)
+    if findings.strict:  # the tracker loads it itself, right after the checks
+        return
+    from flagtrack.calibration.calfile import load_mapping
+    from flagtrack.daemon.errors import ConfigError, FormatError
+
+    try:
+        load_mapping(calibration)
+    except FormatError as exc:
+        raise ConfigError(str(exc), key="tracker.calibration", path=rig.path) from None
+
+
+def _check_tracker(rig: RigSections, findings: Findings) -> None:
+    """Its calibration, and (config check: strict, the rig sets the tracker up itself right after the
+    checks) the ``tracker:`` section as the tracker will build it: root, length, ranges."""
+    _check_calibration(rig, findings)
+    if not findings.strict:
+        rig.tracker.tracker_params(path=rig.path)
 
 
 def _prepare_tracker(p: Preparation) -> None:
@@ -182,11 +237,11 @@ def _build_viewer(b: Build) -> Service:
     return ViewerService(b.bus, cfg, exit_after_final=b.exit_at_end_of_stream)
 
 
-def _check_viewer(rig: RigSections) -> None:
+def _check_viewer(rig: RigSections, findings: Findings) -> None:
     from flagtrack.daemon.rig.sections import viewer_writes_file
     from flagtrack.daemon.typed_yaml import require_output_file
 
-    if viewer_writes_file(rig.viewer):
+    if findings.files and viewer_writes_file(rig.viewer):
         require_output_file(rig.viewer.rrd_path, key="viewer.rrd_path", path=rig.path)
 
 
@@ -211,6 +266,13 @@ def _build_sensor(b: Build) -> Service:
     return SensorService(b.bus, cfg, lambda: open_sensor(cfg, camera, rig.path))
 
 
+def _check_sensor(rig: RigSections, findings: Findings) -> None:
+    from flagtrack.daemon.rig.host import check_port
+
+    if rig.sensor is not None and rig.sensor.driver != "simulated":
+        check_port(rig.sensor.port, key="sensor.port", what="the sensor", findings=findings)
+
+
 def _prepare_sensor(p: Preparation) -> None:
     p.warm_up_triggers()  # a point's sensor check reads the pulses of its raw file
 
@@ -224,21 +286,37 @@ def _build_camera(b: Build) -> Service:
     return CameraService(b.bus, b.rig.camera, b.camera_adapter())
 
 
-def _check_camera(rig: RigSections) -> None:
+def _check_camera(rig: RigSections, findings: Findings) -> None:
     import importlib
 
+    from flagtrack.daemon.rig.host import sdk_missing
     from flagtrack.daemon.rig.sections import HARDWARE_ADAPTERS
     from flagtrack.daemon.typed_yaml import require_file
 
     camera = rig.camera
-    if camera.adapter == "replay" and camera.replay is not None:
+    if camera.adapter == "replay" and camera.replay is not None and findings.files:
         require_file(camera.replay.path, key="camera.replay.path", path=rig.path)
+        if not findings.strict:  # config check: a recording it can read (strict, the replay reads it itself)
+            _check_recording(camera.replay.path, rig.path)
     if camera.adapter in HARDWARE_ADAPTERS:  # what only the device can say: when up opens it, first
         from flagtrack.daemon.rig.camera_auto import resolve_auto
 
-        importlib.import_module(f"flagtrack.drivers.camera.{camera.adapter}").check_config(
-            resolve_auto(rig).hardware, path=rig.path
-        )
+        adapter = importlib.import_module(f"flagtrack.drivers.camera.{camera.adapter}")
+        adapter.check_config(resolve_auto(rig).hardware, path=rig.path)
+        missing = sdk_missing(camera.adapter) if findings.files else None
+        if missing is not None:
+            findings.later(f"{missing} is not installed here: {adapter.INSTALL_HINT}", key="camera.adapter")
+
+
+def _check_recording(recording: Path, path: str | None) -> None:
+    from flagtrack.daemon.errors import ConfigError, FormatError
+    from flagtrack.drivers.formats.files import open_events
+
+    try:
+        with open_events(recording):
+            pass
+    except FormatError as exc:
+        raise ConfigError(str(exc), key="camera.replay.path", path=path) from None
 
 
 def _prepare_camera(p: Preparation) -> None:
@@ -295,7 +373,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         subscribes=("camera_events(camera)",),
         alive="tracker",
         build=_build_tracker,
-        check=_check_calibration,
+        check=_check_tracker,
         prepare=_prepare_tracker,
     ),
     ServiceSpec(
@@ -321,6 +399,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         publishes=("sensor_samples(sensor)",),
         alive="sensor/{sensor}",
         build=_build_sensor,
+        check=_check_sensor,
         prepare=_prepare_sensor,
     ),
     ServiceSpec(

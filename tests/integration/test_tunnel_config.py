@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 
 from flagtrack.daemon.errors import ConfigError
-from flagtrack.daemon.sweep.plan import Record, load_sweep_config, sweep_plan
+from flagtrack.daemon.rig.config import load_rig
+from flagtrack.daemon.sweep.plan import Record, sweep_plan
 from flagtrack.drivers.tunnel.setup import TunnelConfig, load_tunnel_config
 from tests.conftest import REPO
 
@@ -27,7 +28,8 @@ def test_deploy_ascii_example_is_the_default_protocol() -> None:
 
 
 def test_deploy_sweep_example_is_the_papers_loop() -> None:
-    cfg = load_sweep_config(DEPLOY / "tunnel-sweep.yaml")
+    cfg = load_rig(DEPLOY / "rig-single-pc.yaml", services=()).supervisor.sweep
+    assert cfg is not None
     records = [s for s in sweep_plan(cfg) if isinstance(s, Record)]
     assert len(records) == 45 and cfg.speed_values()[0] == 3.0 and cfg.speed_values()[-1] == 8.5
 
