@@ -20,6 +20,7 @@ from flagtrack.daemon.core.aim_overlay import AimOverlays, chain_overlay, plane_
 from flagtrack.daemon.core.chain import ChainParams
 from flagtrack.daemon.core.events import empty_events
 from flagtrack.daemon.errors import ConfigError, FormatError
+from flagtrack.daemon.services.runner import StopEvent, stop_on_signals
 from flagtrack.drivers.camera.base import Camera, CameraData, CameraInfo, EndOfStream
 from flagtrack.drivers.formats.codec import Decoder, make_decoder
 from flagtrack.drivers.formats.packets import decode_packet
@@ -225,21 +226,24 @@ def feed(
     draw = _Drawing(cadence, on_frame, on_status)
     wall0: float | None = None  # a camera's duration counts from its first answer taken in (the first
     # read or decode may compile)
+    # the first Ctrl-C (or SIGTERM) ends the run after the step under way (a kernel compile is never
+    # cut in the middle): the last frame is still drawn
     try:
-        while cadence.duration_s is None or not _elapsed(source, acc, wall0, cadence.duration_s):
-            try:
-                data = source.camera.read(0.1)
-            except EndOfStream:
-                break
-            if data is not None:
+        with stop_on_signals(StopEvent()) as stop:
+            while not stop.is_set() and (
+                cadence.duration_s is None or not _elapsed(source, acc, wall0, cadence.duration_s)
+            ):
                 try:
-                    acc.push(events_of(data), data.t_until_us)
-                except FormatError as exc:
-                    raise FormatError(f"{source.description}: {exc}") from exc
-                draw(acc)
-            wall0 = time.monotonic() if wall0 is None else wall0
-    except KeyboardInterrupt:
-        pass  # the first Ctrl-C ends the run: the last frame is still drawn
+                    data = source.camera.read(0.1)
+                except EndOfStream:
+                    break
+                if data is not None:
+                    try:
+                        acc.push(events_of(data), data.t_until_us)
+                    except FormatError as exc:
+                        raise FormatError(f"{source.description}: {exc}") from exc
+                    draw(acc)
+                wall0 = time.monotonic() if wall0 is None else wall0
     finally:
         source.camera.close()
     return draw.frame(acc)

@@ -14,7 +14,7 @@ from flagtrack.daemon.rig.config import RigConfig, check_rig
 from flagtrack.daemon.rig.prepare import prepare_services
 from flagtrack.daemon.rig.table import in_table_order
 from flagtrack.daemon.services.centreline_file import CentrelineFileService
-from flagtrack.daemon.services.runner import RunReport, Service, run_services
+from flagtrack.daemon.services.runner import RunReport, Service, StopEvent, run_services, stop_on_signals
 from flagtrack.daemon.tracking.setup import processing_attrs, tracking_setup
 from flagtrack.daemon.transport import Bus
 from flagtrack.daemon.typed_yaml import require_output_file
@@ -61,8 +61,12 @@ def run_rig(
     if centrelines is not None:
         require_output_file(centrelines, key="--centrelines", path=None)
     setup = tracking_setup(rig.tracker, path=rig.path) if "tracker" in names else None
-    if not prepared:
-        prepare_services(rig, names, say, tracker=setup)
+    if not prepared:  # a compile may take a while: Ctrl-C ends the run after it, never inside it
+        with stop_on_signals(StopEvent()) as stop:
+            prepare_services(rig, names, say, tracker=setup)
+        if stop.is_set():
+            say(f"{stop.reason} before the services started")
+            return RigRun(130, [], RunReport(signal_count=1))
     finishers = [spec.name for spec in in_table_order(names) if spec.finishes is not None and spec.finishes(rig)]
     shutdown_timeout_s = _stop_time_s(rig, names, shutdown_timeout_s, say)
     # a hardware camera opens first: what only the device can refuse stops the rig before anything else opens

@@ -219,15 +219,25 @@ def _say(line: str) -> None:
 
 
 @contextlib.contextmanager
-def capture_signals(group: ServiceGroup, on_force: Callable[[], None] | None = None) -> Iterator[None]:
-    """While inside: the first SIGINT/SIGTERM stops the group gracefully, the second forces the process
-    out (exit 130). The previous handlers are restored on the way out (uvicorn's ``capture_signals``)."""
+def stop_on_signals(
+    stop: StopEvent,
+    on_force: Callable[[], None] | None = None,
+    on_signal: Callable[[int], None] | None = None,
+) -> Iterator[StopEvent]:
+    """While inside: the first SIGINT/SIGTERM asks ``stop`` (the work under way, a compile included,
+    is never interrupted in the middle), the second forces the process out (exit 130);
+    ``on_signal`` gets the count so far. The previous handlers are restored on the way out
+    (uvicorn's ``capture_signals``)."""
+    count = 0
 
     def handler(signum: int, _frame: object) -> None:
-        group.report.signal_count += 1
+        nonlocal count
+        count += 1
+        if on_signal is not None:
+            on_signal(count)
         name = signal.Signals(signum).name
-        if group.report.signal_count == 1:
-            group.stop.request(f"stopped by {name}")
+        if count == 1:
+            stop.request(f"stopped by {name}")
             _say(f"flagtrack: {name} received, stopping (again to force)")
             return
         _say(f"flagtrack: second {name}, forcing exit")
@@ -237,10 +247,22 @@ def capture_signals(group: ServiceGroup, on_force: Callable[[], None] | None = N
 
     previous = {signum: signal.signal(signum, handler) for signum in (signal.SIGINT, signal.SIGTERM)}
     try:
-        yield
+        yield stop
     finally:
         for signum, old in previous.items():
             signal.signal(signum, old)
+
+
+def capture_signals(
+    group: ServiceGroup, on_force: Callable[[], None] | None = None
+) -> contextlib.AbstractContextManager[StopEvent]:
+    """While inside: the first SIGINT/SIGTERM stops the group gracefully, the second forces the process
+    out (exit 130); the signals are counted in the group's report (:func:`stop_on_signals`)."""
+
+    def counted(count: int) -> None:
+        group.report.signal_count = count
+
+    return stop_on_signals(group.stop, on_force, counted)
 
 
 def run_services(

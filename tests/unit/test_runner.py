@@ -204,3 +204,21 @@ def test_signal_handlers_are_restored_after_the_run() -> None:
     finally:
         for s, old in before.items():
             signal.signal(s, old)
+
+
+def test_a_signal_inside_stop_on_signals_asks_the_stop_and_raises_nothing() -> None:
+    """Work under the capture is never cut by a KeyboardInterrupt (a compile, a numba unpickle: cut,
+    they end in a SystemError traceback); the first signal asks the stop, counted, and the previous
+    handler is back afterwards."""
+    import os
+    import signal
+
+    from flagtrack.daemon.services.runner import StopEvent, stop_on_signals
+
+    counts: list[int] = []
+    before = signal.getsignal(signal.SIGINT)
+    with stop_on_signals(StopEvent(), on_signal=counts.append) as stop:
+        os.kill(os.getpid(), signal.SIGINT)  # the handler runs at the next bytecode: no exception
+        finished = sum(range(1000))  # the work under way goes on to its end
+    assert finished == 499500 and stop.is_set() and stop.reason == "stopped by SIGINT" and counts == [1]
+    assert signal.getsignal(signal.SIGINT) is before
