@@ -22,6 +22,9 @@ import numpy as np
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.metrics import lateral_displacement, tip_amplitude_over_l, travelling_wave_index_in_time
 
+GAP_STEPS = 5.0
+"""A cycle whose updates are further apart somewhere than this many times their median step is no
+cycle (its duration and amplitude span a gap)."""
 TWI_UPDATES, TWI_SAMPLES = 64, 16
 """A cycle's travelling-wave index is taken from at most this many of its updates (evenly spread in
 time) and this many samples along the flag (root and tip included): an SVD of 64 x 16 takes well
@@ -175,9 +178,11 @@ class FlagStateTracker:
                 k += 1
                 self._crossings = [*self._crossings[-1:], t_cross]
                 if len(self._crossings) == 2 and self._crossings[1] - self._crossings[0] <= self.params.max_cycle_s:
-                    self._cycle = self._figures(self._crossings[0], self._crossings[1], cycle=True)
-                    states.append(self._state(chunk, i, completes=True))
-                    position = i + 1
+                    figures = self._figures(self._crossings[0], self._crossings[1], cycle=True)
+                    if figures is not None:
+                        self._cycle = figures
+                        states.append(self._state(chunk, i, completes=True))
+                        position = i + 1
             elif due < len(t_s):
                 states.append(self._state(chunk, due, completes=False))
                 position = due + 1
@@ -258,12 +263,16 @@ class FlagStateTracker:
             np.concatenate([c.stale for c in parts])[rows],
         )
 
-    def _figures(self, start_s: float, end_s: float, cycle: bool) -> _Figures:
-        """The figures over the updates in [start_s, end_s] (a cycle's: its frequency and TWI too)."""
+    def _figures(self, start_s: float, end_s: float, cycle: bool) -> _Figures | None:
+        """The figures over the updates in [start_s, end_s] (a cycle's: its frequency and TWI too);
+        None for a cycle with a gap in its updates (dropped packets, a camera that skipped ahead)."""
         p = self.params
         rows = self._rows(start_s, end_s)
         measured = np.isfinite(rows.tip)
         n = len(rows.t_s)
+        steps = np.diff(rows.t_s)
+        if cycle and (n < 4 or steps.max() > GAP_STEPS * np.median(steps)):
+            return None
         twi = math.nan
         if cycle and p.twi and measured.sum() >= 16:
             used = _spread(np.flatnonzero(measured), TWI_UPDATES)
@@ -288,8 +297,9 @@ class FlagStateTracker:
             figures, flapping = cycle, True
             phase = 2.0 * math.pi * ((t_s - self._crossings[-1]) * cycle.frequency_hz % 1.0)
         else:
-            figures, flapping = self._figures(t_s - p.interval_s, t_s, cycle=False), False
-            phase = math.nan
+            still = self._figures(t_s - p.interval_s, t_s, cycle=False)
+            assert still is not None
+            figures, flapping, phase = still, False, math.nan
         return CycleState(
             index=i,
             t_s=t_s,

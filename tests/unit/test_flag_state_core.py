@@ -116,3 +116,12 @@ def test_bad_parameters_are_refused() -> None:
         StateParams(L, history_s=0.5, max_cycle_s=1.0)
     with pytest.raises(ValueError, match="positive"):
         StateParams(0.0)
+
+
+def test_a_cycle_across_a_gap_is_no_cycle() -> None:
+    t = np.arange(0.0, 2.0, 5e-4)
+    keep = (t < 1.0) | (t > 1.03)  # 30 ms of updates missing (a camera that skipped ahead)
+    states = states_of(flag(t, 0.25, 10.0).select(keep), 64)
+    cycles = [s for s in states if s.completes_cycle]
+    assert all(s.frequency_hz == pytest.approx(10.0, rel=0.01) for s in cycles)
+    assert not any(s.cycle_start_s < 1.0 < s.cycle_end_s for s in cycles)
