@@ -15,6 +15,9 @@ from flagtrack.daemon.errors import FlagtrackError
 from flagtrack.daemon.schema import CentrelineMessage, EventRate, FlagState, SpeedReply, SpeedRequest
 from flagtrack.daemon.transport import Bus, BusConfig, Subscription
 
+RESEND_S = 1.0
+"""An unanswered request is sent again (same id: the supervisor answers it again, applies it once)."""
+
 
 class NoAnswer(FlagtrackError):
     """The tunnel's owner did not answer a speed request in time (no supervisor, another mode's
@@ -129,17 +132,21 @@ class Rig:
         keys = self.bus.keys
         with self._lock:
             if self._replies is None:
-                self._replies = self.bus.subscribe(keys.speed_reply(self.identity), SpeedReply, capacity=64)
+                self._replies = self.bus.subscribe(keys.speed_reply(), SpeedReply, capacity=1024)
                 self._requests = self.bus.publisher(keys.speed_request(self.identity), tag_source=True)
         request_id = uuid.uuid4().hex
         request = SpeedRequest(float(speed_mps), request_id, self.identity, note, time.time_ns())
         deadline = time.monotonic() + timeout_s
-        self._wait_for_listener(self._requests, deadline)
-        self._requests.put(request)
-        while (left := deadline - time.monotonic()) > 0:
-            reply = self._replies.recv(timeout_s=left)
-            if reply is not None and reply.request_id == request_id:
-                return reply
+        self._wait_for_listener(self._requests, min(deadline, time.monotonic() + RESEND_S))
+        while True:
+            self._requests.put(request)  # again after a second unanswered: the first answer may have gone
+            resend = time.monotonic() + RESEND_S  # before the supervisor heard of this subscription
+            while (wait := min(resend, deadline) - time.monotonic()) > 0:
+                reply = self._replies.recv(timeout_s=wait)
+                if reply is not None and reply.request_id == request_id:
+                    return reply
+            if time.monotonic() >= deadline:
+                break
         raise NoAnswer(
             f"no answer to the request for {speed_mps:g} m/s within {timeout_s:g} s (is the supervisor in mode "
             f"control, and is {self.identity!r} one of the rig's operators?)"
@@ -178,7 +185,8 @@ class Rig:
 
     @staticmethod
     def _wait_for_listener(publisher: Any, deadline: float) -> None:
-        """Give the supervisor's subscription time to reach a fresh publisher (up to the deadline)."""
+        """Give the supervisor's subscription time to reach a fresh publisher (up to ``deadline``; through
+        a router a peer may never hear of it, and its puts go through all the same)."""
         matching = getattr(getattr(publisher, "_publisher", None), "matching_status", None)
         while matching is not None and not matching.matching and time.monotonic() < deadline:
             time.sleep(0.01)

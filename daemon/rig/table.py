@@ -279,7 +279,7 @@ SERVICES: tuple[ServiceSpec, ...] = (
         "run the supervisor alone: tunnel, flag state from event rates, sweeps, feedback or control",
         sections=("supervisor", "tunnel", "tracker", "sensor"),
         needs=("tunnel",),
-        publishes=("supervisor_state()", "tunnel_state()", "recorder_command()", "speed_replies()"),
+        publishes=("supervisor_state()", "tunnel_state()", "recorder_command()", "speed_reply()"),
         subscribes=(
             "event_rate(camera)",
             "centrelines()",

@@ -93,13 +93,9 @@ class Keys:
         """Every identity's speed requests (what the tunnel's owner subscribes to)."""
         return f"{self.namespace}/tunnel/request/*"
 
-    def speed_reply(self, identity: str) -> str:
-        """The tunnel owner's answers to one identity's requests (:class:`SpeedReply`)."""
-        return f"{self.namespace}/tunnel/reply/{identity}"
-
-    def speed_replies(self) -> str:
-        """Every identity's answers (what the tunnel's owner publishes on)."""
-        return f"{self.namespace}/tunnel/reply/*"
+    def speed_reply(self) -> str:
+        """The tunnel owner's answers to speed requests (:class:`SpeedReply`, naming the request and who asked)."""
+        return f"{self.namespace}/tunnel/reply"
 
     def alive(self, service: str) -> str:
         """Liveliness token of one service instance."""
@@ -439,7 +435,7 @@ class FlagState:
 @dataclass(frozen=True)
 class SpeedRequest:
     """A request to the tunnel's owner for a wind speed, m/s, on :meth:`Keys.speed_request` of the
-    identity asking (``requester``: that identity, as the sender says it)."""
+    identity asking (``requester``: that identity, as the sender says it; the key is what counts)."""
 
     TYPE: ClassVar[MessageType] = MessageType.SPEED_REQUEST
     speed_mps: float
@@ -451,9 +447,10 @@ class SpeedRequest:
 
 @dataclass(frozen=True)
 class SpeedReply:
-    """The tunnel owner's answer to a :class:`SpeedRequest`: whether it was taken, what was asked and
-    the set-point applied (``-1.0``: none), and why they differ (``reason``); ``setpoint_mps`` and
-    ``speed_mps`` the tunnel's set-point and readback when it answered (``-1.0``: not known)."""
+    """The tunnel owner's answer to a :class:`SpeedRequest` (``request_id``; ``requester``: the identity
+    its key named): whether it was taken, what was asked and the speed applied (``-1.0``: none), and
+    why they differ (``reason``); ``setpoint_mps`` and ``speed_mps`` the tunnel's set-point and
+    readback when it answered (``-1.0``: not known)."""
 
     TYPE: ClassVar[MessageType] = MessageType.SPEED_REPLY
     request_id: str

@@ -88,7 +88,7 @@ def test_the_rules_are_made_from_the_rigs_keys(tmp_path: Path) -> None:
         keys.supervisor_state(),
         keys.tunnel_state(),
         keys.recorder_command(),
-        keys.speed_replies(),
+        keys.speed_reply(),
     }
     assert "viewer-publish" not in rules  # a viewer only looks
     assert set(rules["operator-publish"]["key_exprs"]) == {

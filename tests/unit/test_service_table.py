@@ -31,7 +31,7 @@ def test_each_services_rights_are_the_keys_its_entry_names() -> None:
     rates = (k.event_rate("cam0"), k.event_rate("cam1"))
     assert service_rights(k, CAMERAS, SENSORS) == {
         "supervisor": Rights(
-            publish=(k.supervisor_state(), k.tunnel_state(), k.recorder_command(), k.speed_replies()),
+            publish=(k.supervisor_state(), k.tunnel_state(), k.recorder_command(), k.speed_reply()),
             subscribe=(
                 *rates,
                 k.centrelines(),

@@ -32,7 +32,7 @@ class BusSide:
         monitor: the supervisor's subscriptions.
         observers: called with every state published, in the run's thread; an observer that
             raises is logged once and the states keep coming.
-        refusing: speed requests to answer as refused (the mode takes none) and why, or None.
+        refusing: speed requests to answer as refused while no control loop takes them, and why.
     """
 
     def __init__(
@@ -54,7 +54,7 @@ class BusSide:
 
     def pump(self) -> None:
         self.monitor.pump()
-        if self.refusing is not None:
+        if self.refusing is not None and not self.refusing[0].taking:
             desk, why = self.refusing
             desk.refuse_all(why)
 

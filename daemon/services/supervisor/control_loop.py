@@ -96,6 +96,8 @@ class ControlLoop:
         else:
             self.target_mps = max(0.0, session.tunnel.setpoint_mps)
         self._t0_s = session.clock.monotonic()
+        if self.desk is not None:
+            self.desk.taking = True
         held = False
         while self.cfg.duration_s == 0 or session.clock.monotonic() - self._t0_s < self.cfg.duration_s:
             session.idle(0)  # the rig watched: stop request, services gone, camera silent
@@ -109,6 +111,8 @@ class ControlLoop:
         session.mode = "done"
 
     def close(self, reason: str, error: str | None) -> None:
+        if self.desk is not None:
+            self.desk.taking = False
         if self.faults_in_a_row and self.fault_said:
             log.warning("supervisor: the law faulted %d times in a row at the end", self.faults_in_a_row)
         self.record.close(reason, error)

@@ -1,7 +1,8 @@
 """Speed requests from the bus, as the tunnel's owner takes them: who asks, whether they may, the answer.
 
-A request comes on ``<ns>/tunnel/request/<identity>`` and its answer goes to
-``<ns>/tunnel/reply/<identity>``. On a secured bus (mutual TLS) the supervisor listens only on the
+A request comes on ``<ns>/tunnel/request/<identity>`` and its answer goes to ``<ns>/tunnel/reply``
+(naming the request and the identity; declared from the start, so that no first answer is lost
+while the bus learns of its listeners). On a secured bus (mutual TLS) the supervisor listens only on the
 keys of the identities ``bus.security.operators`` names, and with access control only that identity
 may publish on its key: the key says who asks. On a plain bus anyone may ask as anyone; the log says
 so. Every request is logged with its identity, and every one is answered.
@@ -12,7 +13,6 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections import OrderedDict
 from dataclasses import dataclass
 
 from flagtrack.daemon.schema import SpeedReply, SpeedRequest
@@ -20,8 +20,8 @@ from flagtrack.daemon.transport import Bus, Publisher, Subscription
 
 log = logging.getLogger(__name__)
 
-MAX_REPLY_KEYS = 32
-"""Answer publishers kept (one per identity that asked; on a plain bus anyone may name any)."""
+REMEMBERED = 256
+"""Answers kept, by identity and request id: a request sent again is answered again, not applied again."""
 
 
 @dataclass(frozen=True)
@@ -55,12 +55,16 @@ class SpeedDesk:
         acl = bool(security is not None and security.acl)
         self.unchecked = "" if self.secured and acl else ("no access control" if self.secured else "plain bus")
         self.answered = 0
+        self.taking = False  # a control loop takes the requests (until then they are refused)
         self._subscriptions: list[Subscription] = []
-        self._replies: OrderedDict[str, Publisher] = OrderedDict()
+        self._replies: Publisher | None = None
+        self._answers: dict[tuple[str, str], SpeedReply] = {}  # (identity, request id) -> its answer
 
     def start(self) -> None:
-        """Subscribe: on a secured bus to each operator's key, on a plain one to every identity's."""
+        """Subscribe: on a secured bus to each operator's key, on a plain one to every identity's;
+        declare the answers' publisher."""
         keys = self.bus.keys
+        self._replies = self.bus.publisher(keys.speed_reply())
         wanted = [keys.speed_request(name) for name in self.operators] if self.secured else [keys.speed_requests()]
         self._subscriptions = [
             self.bus.subscribe(key, SpeedRequest, capacity=256, max_bytes=1 << 20, origins=True) for key in wanted
@@ -76,9 +80,15 @@ class SpeedDesk:
                 identity = key.rsplit("/", 1)[-1]
                 asked = Asked(identity, self.unchecked, request, subscription.origin)
                 log.info("speed request %s from %s: %g m/s", request.request_id or "-", asked.who, request.speed_mps)
+                repeated = self._answers.get((identity, request.request_id))
+                if repeated is not None:  # sent again (its answer was not heard): answered again, not applied
+                    self._put(repeated)
+                    continue
                 if self.secured and identity not in self.operators:  # (a key no operator holds: not listened to)
                     self.answer(asked, False, -1.0, f"{identity} is not an operator (bus.security.operators)")
                     continue
+                if identity in newest and newest[identity].request.request_id == request.request_id:
+                    continue  # the same request sent again before its answer: once
                 if identity in newest:
                     self.answer(newest[identity], False, -1.0, "superseded by a newer request")
                 newest[identity] = asked
@@ -105,26 +115,26 @@ class SpeedDesk:
             speed_mps=_known(speed_mps),
             t_wall_s=time.time(),
         )
-        self._reply_publisher(asked.identity).put(reply)
+        self._put(reply)
+        if reply.request_id:
+            self._answers[(asked.identity, reply.request_id)] = reply
+            while len(self._answers) > REMEMBERED:
+                del self._answers[next(iter(self._answers))]
         self.answered += 1
         verdict = f"applied {applied_mps:g} m/s" if accepted else "refused"
         log.info(
             "speed request %s from %s: %s%s", reply.request_id or "-", asked.who, verdict, f" ({reason})" * bool(reason)
         )
 
+    def _put(self, reply: SpeedReply) -> None:
+        if self._replies is None:
+            raise RuntimeError("SpeedDesk: start() first")
+        self._replies.put(reply)
+
     def refuse_all(self, reason: str) -> None:
         """Answer every request waiting as refused (the supervisor takes none in this mode)."""
         for asked in self.take():
             self.answer(asked, False, -1.0, reason)
-
-    def _reply_publisher(self, identity: str) -> Publisher:
-        publisher = self._replies.pop(identity, None)
-        if publisher is None:
-            publisher = self.bus.publisher(self.bus.keys.speed_reply(identity))
-            while len(self._replies) >= MAX_REPLY_KEYS:
-                self._replies.popitem(last=False)[1].close()
-        self._replies[identity] = publisher
-        return publisher
 
 
 def _known(value: float) -> float:

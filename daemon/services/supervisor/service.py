@@ -109,10 +109,13 @@ class SupervisorService:
     def run(self, stop: threading.Event) -> None:
         self.procedure = self._procedure()
         refusing = None
-        if self.desk is not None and self.cfg.mode != "control":
-            refusing = (self.desk, f"the supervisor is in mode {self.cfg.mode}; speed requests go to mode control")
-        elif self.desk is not None and not self.cfg.control.requests:
-            refusing = (self.desk, "this control run takes no speed requests (supervisor.control.requests)")
+        if self.desk is not None:
+            why = f"the supervisor is in mode {self.cfg.mode}; speed requests go to mode control"
+            if self.cfg.mode == "control":
+                why = "the control loop has not started, or has ended"
+                if not self.cfg.control.requests:
+                    why = "this control run takes no speed requests (supervisor.control.requests)"
+            refusing = (self.desk, why)
         outside = BusSide(self.bus, self.name, self.cfg, self.monitor, self._observers, refusing)
         self.bus.declare_alive(self.name)
         cfg = self.cfg
