@@ -55,7 +55,7 @@ class ControlLoop:
     """
 
     mode = "control"
-    watch_services = True
+    watch_services = False  # (watched from the loop on: services may take their time to come up)
 
     def __init__(
         self,
@@ -100,7 +100,10 @@ class ControlLoop:
             self.desk.taking = True
         held = False
         while self.cfg.duration_s == 0 or session.clock.monotonic() - self._t0_s < self.cfg.duration_s:
-            session.idle(0)  # the rig watched: stop request, services gone, camera silent
+            session.idle(0)  # the rig watched: a stop request
+            problem = session.outside.problem()
+            if problem:  # a service gone, the camera silent
+                raise RunStopped(problem)
             self._take_requests(session)
             if not held and self.law is not None and self._law_due(session):
                 held = self._law_step(session)

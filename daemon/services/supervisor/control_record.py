@@ -96,6 +96,8 @@ class ControlRecord:
         import logging
 
         log = logging.getLogger(__name__)
+        if self._lock is None:
+            return  # never opened: the run stopped before its loop (nothing was written)
         if self._log is not None:
             self._log.close()
             self._log = None
