@@ -39,7 +39,7 @@ DESCRIPTION = __doc__
 EVENTS_PER_PX2_PER_MEV_S = 2.2
 """The twin's event density per Mev/s asked, at A/L 0.22-0.26 (4.0-5.1 Mev/s at 10 px^-2, measured)."""
 LAW = '''
-"""The bench's law: each cycle the speed moves by GAIN x the A/L error; the set-point steps once."""
+"""Hold A/L at a set-point that steps once: each cycle the speed moves by GAIN x the A/L error."""
 
 TARGETS, STEP_AFTER_S, GAIN = {targets!r}, {step_after!r}, {gain!r}
 setpoint = TARGETS[0]

@@ -177,3 +177,14 @@ def test_a_missing_law_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.Cap
     assert main(["control", "-c", str(rig), "--controller", "law.txt"]) == 2
     assert "give the law as FILE.py:FUNCTION" in capsys.readouterr().err
     assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_the_feedback_demo_holds_the_flag_through_the_step(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--feedback", "--out", str(tmp_path), "--json", "-q"]) == 0
+    found = json.loads(capsys.readouterr().out)
+    assert found["amplitude_error_rms_over_l"] < 0.02 and found["amplitude_error_rms_over_l_before_step"] < 0.02
+    assert found["settled_cycles"] > 50 and found["faults"] == 0 and found["latency_steps"] > 100
+    assert (tmp_path / "control" / "control.png").stat().st_size > 0
+    assert (tmp_path / "law.py").read_text().count("\n") < 25  # the law the user can read and change
