@@ -13,11 +13,14 @@ import threading
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 
 from flagtrack.daemon.cli import main
 from flagtrack.daemon.schema import TunnelState
+from flagtrack.daemon.services.supervisor.analysis import point_metrics
 from flagtrack.daemon.transport import Bus, BusConfig
+from flagtrack.drivers.formats.centreline import read_centrelines
 from tests.fakes.helpers import wait_until
 from tests.integration.test_transport import free_port
 from tests.integration.test_up import start
@@ -188,3 +191,34 @@ def test_the_feedback_demo_holds_the_flag_through_the_step(tmp_path: Path, capsy
     assert found["settled_cycles"] > 50 and found["faults"] == 0 and found["latency_steps"] > 100
     assert (tmp_path / "control" / "control.png").stat().st_size > 0
     assert (tmp_path / "law.py").read_text().count("\n") < 25  # the law the user can read and change
+    live_and_offline_agree(tmp_path / "control")
+
+
+def live_and_offline_agree(run_dir: Path) -> None:
+    """Each cycle's state as the law saw it live has the A/L the sweep's per-point figure gives offline
+    for that cycle's recorded centrelines, and over ten whole cycles at a steady speed the cycles per
+    second are the per-point frequency within 1 %."""
+    batch, _ = read_centrelines(run_dir / "recording_centrelines.h5")
+    cycles = [r["state"] for r in records(run_dir) if r["state"] and r["state"]["completes_cycle"]]
+    cycles = list({s["seq"]: s for s in cycles}.values())
+    assert len(cycles) > 100
+    for state in cycles:
+        rows = (batch.t_s >= state["cycle_start_s"]) & (batch.t_s <= state["cycle_end_s"])
+        offline = point_metrics([batch.select(rows)], 300.0, (150.0, 240.0), 0.0)
+        assert state["amplitude_over_l"] == pytest.approx(offline.amplitude_over_l, rel=1e-9)
+        assert state["updates"] == int(rows.sum())
+    stretches, run = [], [cycles[0]]
+    for state in cycles[1:]:
+        if state["cycle_start_s"] == run[-1]["cycle_end_s"]:
+            run.append(state)
+        else:
+            stretches.append(run)
+            run = [state]
+    chunks = [r[k : k + 10] for r in [*stretches, run] for k in range(0, len(r) - 9, 10)]
+    steady = [c for c in chunks if np.ptp([s["frequency_hz"] for s in c]) < 0.02 * c[0]["frequency_hz"]]
+    assert len(steady) >= 3  # (while the speed moves, f does: the FFT's peak and the mean rate differ)
+    for run in steady:
+        rows = (batch.t_s >= run[0]["cycle_start_s"]) & (batch.t_s <= run[-1]["cycle_end_s"])
+        offline = point_metrics([batch.select(rows)], 300.0, (150.0, 240.0), 0.0)
+        per_s = len(run) / (run[-1]["cycle_end_s"] - run[0]["cycle_start_s"])
+        assert per_s == pytest.approx(offline.frequency_hz, rel=0.01)
