@@ -5,7 +5,8 @@ flapping cycle it completes and, between those, one every ``interval_s`` of came
 flag, a slow cycle). A cycle runs from one upward crossing of the tip's lateral displacement through
 its centre (its moving average over ``centre_tau_s``, counted from when that average has run that
 long) to the next; an upward crossing counts once the tip has swung ``hysteresis_over_l`` below the
-centre since the last one (noise on a still flag makes no cycles). A cycle's figures are those the sweep's per-point figures are made with, over the
+centre since the last one (noise on a still flag makes no cycles; nor does a stretch with a gap in its updates, or one more than 30 % shorter or longer
+than the last cycle). A cycle's figures are those the sweep's per-point figures are made with, over the
 cycle's updates: A/L by :func:`~.metrics.tip_amplitude_over_l` of the lateral displacement
 (:func:`~.metrics.lateral_displacement`), the travelling-wave index by
 :func:`~.metrics.travelling_wave_index_in_time`; its frequency is one over its duration. Updates
@@ -25,6 +26,11 @@ from flagtrack.daemon.core.metrics import lateral_displacement, tip_amplitude_ov
 GAP_STEPS = 5.0
 """A cycle whose updates are further apart somewhere than this many times their median step is no
 cycle (its duration and amplitude span a gap)."""
+CYCLE_RATIO = 1.3
+"""A cycle more than this many times shorter or longer than the last one counted (if it ended within
+``max_cycle_s``) is no cycle: a flag's period changes by a few per cent a cycle at the most (the
+twin's, ramped at 2 m/s^2, by 6 %); remembered or jumping shapes (a tracker or a camera behind) make
+such crossings."""
 TWI_UPDATES, TWI_SAMPLES = 64, 16
 """A cycle's travelling-wave index is taken from at most this many of its updates (evenly spread in
 time) and this many samples along the flag (root and tip included): an SVD of 64 x 16 takes well
@@ -265,8 +271,14 @@ class FlagStateTracker:
 
     def _figures(self, start_s: float, end_s: float, cycle: bool) -> _Figures | None:
         """The figures over the updates in [start_s, end_s] (a cycle's: its frequency and TWI too);
-        None for a cycle with a gap in its updates (dropped packets, a camera that skipped ahead)."""
+        None for a cycle with a gap in its updates (dropped packets, a camera that skipped ahead), or
+        more than :data:`CYCLE_RATIO` times shorter or longer than the last cycle counted."""
         p = self.params
+        last = self._cycle
+        if cycle and last is not None and start_s - last.end_s <= p.max_cycle_s:
+            ratio = (end_s - start_s) / (last.end_s - last.start_s)
+            if not 1.0 / CYCLE_RATIO <= ratio <= CYCLE_RATIO:
+                return None
         rows = self._rows(start_s, end_s)
         measured = np.isfinite(rows.tip)
         n = len(rows.t_s)

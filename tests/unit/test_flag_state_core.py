@@ -125,3 +125,15 @@ def test_a_cycle_across_a_gap_is_no_cycle() -> None:
     cycles = [s for s in states if s.completes_cycle]
     assert all(s.frequency_hz == pytest.approx(10.0, rel=0.01) for s in cycles)
     assert not any(s.cycle_start_s < 1.0 < s.cycle_end_s for s in cycles)
+
+
+def test_a_stretch_of_jumping_shapes_makes_no_cycle() -> None:
+    t = np.arange(0.0, 2.0, 5e-4)
+    batch = flag(t, 0.25, 10.0)
+    y = batch.y.copy()
+    glitch = (t > 1.012) & (t < 1.03)  # the tip jumps across its centre and back (a stale shape let go)
+    y[glitch, -1] = ROOT[1] - np.sign(y[glitch, -1] - ROOT[1]) * 60.0
+    jumpy = CentrelineBatch(t, batch.s, batch.x, y, batch.joints_x, batch.joints_y, batch.delta_rms, batch.n_events)
+    cycles = [s for s in states_of(jumpy, 64) if s.completes_cycle]
+    assert all(s.frequency_hz == pytest.approx(10.0, rel=0.02) for s in cycles)
+    assert any(s.cycle_start_s > 1.03 for s in cycles)  # and the cycles after it count again
