@@ -35,7 +35,11 @@ from typing import Any
 
 COMMAND = "control"
 HELP = "latency of the control loop (camera packet to tunnel command) and A/L held through a set-point step"
-DESCRIPTION = __doc__
+DESCRIPTION = """\
+The simulated rig as three processes (twin camera at --rate Mev/s, tracker, control) with a law holding
+A/L through a set-point step: the loop's latency p50/p99 (camera packet received to speed command
+written) and the A/L error once settled, with the twin's rate and the machine's load. More: docs/control.md.
+"""
 EVENTS_PER_PX2_PER_MEV_S = 2.2
 """The twin's event density per Mev/s asked, at A/L 0.22-0.26 (4.0-5.1 Mev/s at 10 px^-2, measured)."""
 LAW = '''
