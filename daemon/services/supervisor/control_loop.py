@@ -4,7 +4,8 @@ to the tunnel inside the :class:`~flagtrack.daemon.sweep.session.Session` (the s
 Each step, the law is called with the newest flag state (at most once per ``period_s``, as soon as a
 state newer than the last one has come); what it asks is bounded by ``tunnel.safety`` and written as
 the next set-point of the tunnel's ramp at once (no wait for the readback), and the step is recorded
-with the latency from the camera packet behind the state to that write. A law that raises or returns
+with the latency from the camera packet behind the state to that write (the serial driver's flush
+to the port when it says when, else the end of the exchange). A law that raises or returns
 what is not a speed holds the speed (said once, in one line); ``max_faults`` in a row stop the run
 safe. Requests from the bus go through the same bounds and are answered. The session ends the run
 with the tunnel ramped to zero, whatever ends it (the duration, a signal, a service gone, an error).
@@ -153,8 +154,10 @@ class ControlLoop:
         self.faults_in_a_row = 0
         if asked is not None:
             applied, reason = bound_speed(asked, self.bounds.min_speed_mps, self.bounds.max_speed_mps)
+            before_ns = self.clock_ns()
             written = self._command(session, applied)
-            latency_ms = (self.clock_ns() - state.source_ns) / 1e6 if state.source_ns > 0 else math.nan
+            sent_ns = _sent_ns(session.tunnel, before_ns) or self.clock_ns()
+            latency_ms = (sent_ns - state.source_ns) / 1e6 if state.source_ns > 0 else math.nan
             record.update(applied_mps=applied, setpoint_mps=written, latency_ms=latency_ms)
             if reason:
                 record["reason"] = reason
@@ -231,3 +234,10 @@ class ControlLoop:
         """Keep the ramp going to the target between steps (a law that holds, a request)."""
         if abs(session.tunnel.setpoint_mps - self.target_mps) > 1e-9:
             self._command(session, self.target_mps)
+
+
+def _sent_ns(tunnel: Any, since_ns: int) -> int:
+    """When the tunnel's serial driver last flushed a command to its port, if it says and that was
+    after ``since_ns`` (0 otherwise: the caller takes the time the exchange ended, the reply read)."""
+    sent_ns = getattr(getattr(getattr(tunnel, "link", None), "adapter", None), "last_sent_ns", 0)
+    return sent_ns if isinstance(sent_ns, int) and sent_ns >= since_ns else 0
