@@ -11,6 +11,9 @@ into the loop. From the run's ``control.jsonl``:
 - ``loop_latency_p50_ms`` / ``loop_latency_p99_ms``: for each step that wrote a speed, from the camera
   adapter's reception of the packet that completed the last window of the state the law used, to
   the speed command written to the tunnel's serial port (its reply read);
+- ``to_state_p50_ms`` / ``..._p99_ms``: the part up to the flag state's publication (camera, tracker,
+  flag-state service), and ``state_to_command_...`` the rest (one bus hop, the supervisor, the law,
+  the write);
 - ``amplitude_error_rms_over_l``: RMS of the cycles' A/L less the set-point, from ``--settle`` s
   after the step to the end (``..._before_step``: the same before the step).
 
@@ -233,7 +236,9 @@ def figures(run_dir: Path, targets: list[float], settle_s: float) -> dict[str, A
 
     path = run_dir / "control.jsonl"
     records = [json.loads(line) for line in path.read_text().splitlines()] if path.exists() else []
-    latencies = np.array([r["latency_ms"] for r in records if r.get("latency_ms") is not None])
+    timed = [r for r in records if r.get("latency_ms") is not None]
+    latencies = np.array([r["latency_ms"] for r in timed])
+    to_state = np.array([(r["state"]["published_ns"] - r["state"]["source_ns"]) / 1e6 for r in timed])
     cycles = [r for r in records if r.get("state") and r["state"]["completes_cycle"]]
     after = [r for r in cycles if r.get("setpoint") == targets[1]]
     step_s = after[0]["t_s"] if after else math.inf
@@ -248,6 +253,10 @@ def figures(run_dir: Path, targets: list[float], settle_s: float) -> dict[str, A
         "loop_latency_p50_ms": float(np.percentile(latencies, 50)) if len(latencies) else None,
         "loop_latency_p99_ms": float(np.percentile(latencies, 99)) if len(latencies) else None,
         "latency_steps": len(latencies),
+        "to_state_p50_ms": float(np.percentile(to_state, 50)) if len(timed) else None,
+        "to_state_p99_ms": float(np.percentile(to_state, 99)) if len(timed) else None,
+        "state_to_command_p50_ms": float(np.percentile(latencies - to_state, 50)) if len(timed) else None,
+        "state_to_command_p99_ms": float(np.percentile(latencies - to_state, 99)) if len(timed) else None,
         "amplitude_error_rms_over_l": rms(settled),
         "amplitude_error_rms_over_l_before_step": rms(before),
         "settled_cycles": len(settled),
@@ -271,6 +280,9 @@ def describe(r: dict[str, Any]) -> str:
             f"{'kept up' if r['camera_kept_up'] else 'fell behind real time'})",
             f"  loop latency over {r['latency_steps']} steps: p50 {num(r['loop_latency_p50_ms'], '.1f')} ms, "
             f"p99 {num(r['loop_latency_p99_ms'], '.1f')} ms (camera packet received -> speed command written)",
+            f"    of which camera packet -> flag state published p50 {num(r['to_state_p50_ms'], '.1f')} ms, p99 "
+            f"{num(r['to_state_p99_ms'], '.1f')} ms (camera, tracker, flag state); state published -> command "
+            f"written p50 {num(r['state_to_command_p50_ms'], '.1f')} ms, p99 {num(r['state_to_command_p99_ms'], '.1f')} ms",
             f"  A/L held at {r['targets'][1]:g} after the step from {r['targets'][0]:g}: error RMS "
             f"{num(r['amplitude_error_rms_over_l'], '.4f')} over {r['settled_cycles']} settled cycles "
             f"(before the step: {num(r['amplitude_error_rms_over_l_before_step'], '.4f')})",
