@@ -15,7 +15,7 @@ from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.security.config import REDACTED
 from flagtrack.daemon.security.names import identifier_problem
 from flagtrack.daemon.services.camera import CameraStreamConfig
-from flagtrack.daemon.services.flagstate import FlagStateConfig
+from flagtrack.daemon.services.flagstate_section import FlagStateConfig
 from flagtrack.daemon.services.recorder import RecorderConfig
 from flagtrack.daemon.services.supervisor.section import SupervisorConfig
 from flagtrack.daemon.services.tracker import TrackerServiceConfig
