@@ -14,7 +14,7 @@ phase, ... per cycle) and returns a wind speed in m/s (None: hold). The supervis
 the sweep's safety wrapper (tunnel.safety bounds and ramp); a law that raises or returns nonsense
 holds the speed, and supervisor.control.max_faults in a row stop the run with the tunnel at zero, as
 Ctrl-C does. Everything goes to the run folder (--out): control.jsonl, the recording, a figure.
-Example: flagtrack control -c rig.yaml --controller law.py:hold_amplitude --duration 60. More: docs/control.md.
+Example: flagtrack control -c rig.yaml --controller examples/hold_amplitude.py:law --duration 60. More: docs/control.md.
 """
 
 
