@@ -1,13 +1,13 @@
 """Map the top-level code folders into the ``flagtrack`` import namespace.
 
 ``daemon/`` -> ``flagtrack.daemon``, ``drivers/`` -> ``flagtrack.drivers``,
-``calibration/`` -> ``flagtrack.calibration``; every subpackage is discovered so that a
+``calibration/`` -> ``flagtrack.calibration``, ``client/`` -> ``flagtrack.client``; every subpackage is discovered so that a
 plain ``pip install .`` imports everything (checked by tests/unit/test_packaging.py).
 """
 
 from setuptools import find_packages, setup
 
-TOP_FOLDERS = ("daemon", "drivers", "calibration")
+TOP_FOLDERS = ("daemon", "drivers", "calibration", "client")
 
 package_dir = {f"flagtrack.{top}": top for top in TOP_FOLDERS}
 packages = []

@@ -109,10 +109,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="end with one JSON object of the results")
     parser.add_argument("--quick", action="store_true", help="a 5-point sweep (4.2, 4.7, 5.2 m/s) in about 30 s")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines or bar, only the results")
+    parser.add_argument(
+        "--feedback",
+        action="store_true",
+        help="instead: a control law holds the flag's A/L through a step (docs/control.md)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo and report the simulated and detected onset and decay speeds and the sensor check."""
+    if args.feedback:
+        from flagtrack.daemon.commands._feedback_demo import run_feedback_demo
+
+        return run_feedback_demo(args)
     from flagtrack.daemon.commands._progress import SweepProgressView
     from flagtrack.daemon.rig.config import RigConfig
     from flagtrack.daemon.rig.run import prepare_services, run_rig

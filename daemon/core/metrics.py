@@ -157,6 +157,31 @@ def travelling_wave_index(lateral: np.ndarray) -> float:
     return float(sv[1] / sv[0]) if sv[0] > 0 else 0.0
 
 
+def travelling_wave_index_in_time(t_s: np.ndarray, lateral: np.ndarray, gap_factor: float = 5.0) -> float:
+    """Travelling-wave index of (n_t, n_s) ``lateral`` sampled at times ``t_s`` (n_t,), over its longest
+    run of updates without a gap (a step over ``gap_factor`` median steps), resampled on a uniform
+    time grid (the modes need one); NaN when that run is short (< 16 updates) or not finite."""
+    t_s, lateral = np.asarray(t_s, dtype=np.float64), np.asarray(lateral, dtype=np.float64)
+    run = longest_run(t_s, gap_factor)
+    t_run, lateral_run = t_s[run], lateral[run]
+    if len(t_run) < 16 or lateral.ndim != 2 or lateral.shape[1] < 2 or not np.all(np.isfinite(lateral_run)):
+        return math.nan
+    uniform_t = np.linspace(t_run[0], t_run[-1], len(t_run))
+    resampled = np.stack([np.interp(uniform_t, t_run, lateral_run[:, k]) for k in range(lateral.shape[1])], axis=1)
+    return float(travelling_wave_index(resampled))
+
+
+def longest_run(t_s: np.ndarray, gap_factor: float = 5.0) -> slice:
+    """The longest stretch of updates without a gap (a step over ``gap_factor`` times the median step)."""
+    steps = np.diff(t_s)
+    if len(steps) == 0:
+        return slice(0, len(t_s))
+    breaks = np.flatnonzero(steps > gap_factor * np.median(steps)) + 1
+    edges = np.concatenate([[0], breaks, [len(t_s)]])
+    k = int(np.argmax(np.diff(edges)))
+    return slice(int(edges[k]), int(edges[k + 1]))
+
+
 def cloud_distance(
     events_x: np.ndarray, events_y: np.ndarray, line_x: np.ndarray, line_y: np.ndarray, block: int = 4096
 ) -> float:

@@ -15,6 +15,7 @@ from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.security.config import REDACTED
 from flagtrack.daemon.security.names import identifier_problem
 from flagtrack.daemon.services.camera import CameraStreamConfig
+from flagtrack.daemon.services.flagstate_section import FlagStateConfig
 from flagtrack.daemon.services.recorder import RecorderConfig
 from flagtrack.daemon.services.supervisor.section import SupervisorConfig
 from flagtrack.daemon.services.tracker import TrackerServiceConfig
@@ -66,6 +67,7 @@ class RigSections:
     tunnel: TunnelConfig | None = None
     supervisor: SupervisorConfig = field(default_factory=SupervisorConfig)
     sensor: SensorConfig | None = None
+    flag_state: FlagStateConfig = field(default_factory=FlagStateConfig)
     services: tuple[str, ...] = ("camera", "tracker", "recorder", "viewer")
     path: str | None = None
 

@@ -107,6 +107,11 @@ def _check_supervisor(rig: RigSections, findings: Findings) -> None:
     if findings.files:
         require_folder(rig.supervisor.runs_dir, key="supervisor.runs_dir", path=rig.path)
         check_disk(rig, findings)
+    controller = rig.supervisor.control.controller
+    if rig.supervisor.mode == "control" and controller is not None and controller != "pi" and findings.files:
+        from flagtrack.daemon.services.supervisor.laws import law_file
+
+        law_file(controller, key="supervisor.control.controller", path=rig.path)
 
 
 def _prepare_supervisor(_p: Preparation) -> None:
@@ -331,21 +336,38 @@ def _prepare_camera(p: Preparation) -> None:
         p.warm_up_triggers()
 
 
+# -- flag state ----------------------------------------------------------------------------------
+
+
+def _build_flagstate(b: Build) -> Service:
+    from flagtrack.daemon.services.flagstate import FlagStateService
+
+    rig = b.rig
+    tracker = rig.tracker
+    root_x, root_y = tracker.root or (0.0, 0.0)
+    params = rig.flag_state.params(
+        float(tracker.length or 1.0), (float(root_x), float(root_y)), float(tracker.direction_deg)
+    )
+    return FlagStateService(b.bus, params, rig.camera.id)
+
+
 # -- the table -----------------------------------------------------------------------------------
 
 SERVICES: tuple[ServiceSpec, ...] = (
     ServiceSpec(
         "supervisor",
-        "run the supervisor alone: tunnel, flag state from event rates, sweeps or feedback",
+        "run the supervisor alone: tunnel, flag state from event rates, sweeps, feedback or control",
         sections=("supervisor", "tunnel", "tracker", "sensor"),
         needs=("tunnel",),
-        publishes=("supervisor_state()", "tunnel_state()", "recorder_command()"),
+        publishes=("supervisor_state()", "tunnel_state()", "recorder_command()", "speed_reply()"),
         subscribes=(
             "event_rate(camera)",
             "centrelines()",
             "recorder_status()",
             "tunnel_command()",
             "sensor_samples(sensor)",
+            "flag_state()",
+            "speed_requests()",
         ),
         alive="supervisor",
         watches=True,
@@ -354,6 +376,15 @@ SERVICES: tuple[ServiceSpec, ...] = (
         prepare=_prepare_supervisor,
         finishes=_supervisor_finishes,
         stop_s=_supervisor_stop_s,
+    ),
+    ServiceSpec(
+        "flagstate",
+        "run the flag-state service alone: the flag's amplitude, frequency and phase cycle by cycle",
+        sections=("flag_state", "tracker"),
+        publishes=("flag_state()",),
+        subscribes=("centrelines()", "tunnel_state()"),
+        alive="flagstate",
+        build=_build_flagstate,
     ),
     ServiceSpec(
         "recorder",

@@ -25,6 +25,9 @@ class MessageType(enum.IntEnum):
     RECORDER_COMMAND = 9
     RECORDER_STATUS = 10
     SENSOR_SAMPLES = 11
+    FLAG_STATE = 12
+    SPEED_REQUEST = 13
+    SPEED_REPLY = 14
 
 
 @dataclass(frozen=True)
@@ -76,6 +79,23 @@ class Keys:
     def sensor_samples(self, sensor_id: str) -> str:
         """Point-sensor samples (:class:`SensorSamples`)."""
         return f"{self.namespace}/sensor/{sensor_id}/samples"
+
+    def flag_state(self) -> str:
+        """The flag's state cycle by cycle (:class:`FlagState`)."""
+        return f"{self.namespace}/flag/state"
+
+    def speed_request(self, identity: str) -> str:
+        """Wind-speed requests of one identity to the tunnel's owner (:class:`SpeedRequest`); on a
+        secured bus only that identity may publish here, so the key says who asks."""
+        return f"{self.namespace}/tunnel/request/{identity}"
+
+    def speed_requests(self) -> str:
+        """Every identity's speed requests (what the tunnel's owner subscribes to)."""
+        return f"{self.namespace}/tunnel/request/*"
+
+    def speed_reply(self) -> str:
+        """The tunnel owner's answers to speed requests (:class:`SpeedReply`, naming the request and who asked)."""
+        return f"{self.namespace}/tunnel/reply"
 
     def alive(self, service: str) -> str:
         """Liveliness token of one service instance."""
@@ -392,6 +412,80 @@ class RecorderStatus:
     device_drop_reason: str = ""
 
 
+@dataclass(frozen=True)
+class FlagState:
+    """The flag's state at one tracker update: published once per flapping cycle (at the update that
+    completes it) and every ``flag_state.interval_s`` of camera time between cycles.
+
+    The figures are over the last cycle (a still flag: over the last interval): ``amplitude_over_l``
+    (half the tip's lateral peak-to-peak over L), ``frequency_hz`` (one over the cycle's duration),
+    ``twi`` (travelling-wave index), ``lost_fraction`` and ``stale_fraction`` (of the updates they are
+    over, those the tracker did not find or did not measure anew), over ``cycle_start_s`` to
+    ``cycle_end_s`` (``updates`` updates). ``t_s`` is the update's camera time, ``tip_x``, ``tip_y``
+    (``units``) and ``tip_lateral_over_l`` its tip, ``phase_rad`` its phase in the cycle (0 at the
+    tip's upward crossing of its centre). ``speed_mps`` is the tunnel's last readback.
+    ``source_ns``: the wall time (ns) the camera adapter received the packet that completed that
+    update (for the loop's latency); ``published_ns``: when this was published. A number that is not
+    known is ``-1.0`` (none of those can be negative: no NaN on the wire); ``frequency_hz``,
+    ``phase_rad`` and ``twi`` are not known while the flag is still.
+    """
+
+    TYPE: ClassVar[MessageType] = MessageType.FLAG_STATE
+    source: str
+    seq: int
+    t_s: float
+    tip_x: float
+    tip_y: float
+    tip_lateral_over_l: float
+    flapping: bool
+    amplitude_over_l: float
+    frequency_hz: float
+    phase_rad: float
+    twi: float
+    lost_fraction: float
+    stale_fraction: float
+    speed_mps: float
+    cycle_start_s: float
+    cycle_end_s: float
+    updates: int
+    completes_cycle: bool
+    units: str = "px"
+    source_ns: int = 0
+    published_ns: int = 0
+
+
+@dataclass(frozen=True)
+class SpeedRequest:
+    """A request to the tunnel's owner for a wind speed, m/s, on :meth:`Keys.speed_request` of the
+    identity asking (``requester``: that identity, as the sender says it; the key is what counts)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.SPEED_REQUEST
+    speed_mps: float
+    request_id: str
+    requester: str = ""
+    note: str = ""
+    sent_ns: int = 0
+
+
+@dataclass(frozen=True)
+class SpeedReply:
+    """The tunnel owner's answer to a :class:`SpeedRequest` (``request_id``; ``requester``: the identity
+    its key named): whether it was taken, what was asked and the speed applied (``-1.0``: none), and
+    why they differ (``reason``); ``setpoint_mps`` and ``speed_mps`` the tunnel's set-point and
+    readback when it answered (``-1.0``: not known)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.SPEED_REPLY
+    request_id: str
+    requester: str
+    accepted: bool
+    asked_mps: float
+    applied_mps: float
+    reason: str = ""
+    setpoint_mps: float = -1.0
+    speed_mps: float = -1.0
+    t_wall_s: float = 0.0
+
+
 def _no_pulses() -> np.ndarray:
     return np.zeros(0, dtype=np.int64)
 
@@ -434,5 +528,8 @@ MESSAGE_TYPES: dict[MessageType, type] = {
         RecorderCommand,
         RecorderStatus,
         SensorSamples,
+        FlagState,
+        SpeedRequest,
+        SpeedReply,
     )
 }

@@ -54,11 +54,14 @@ def _unique(items: Iterable[str]) -> tuple[str, ...]:
     return tuple(dict.fromkeys(items))
 
 
-def operator_rights(keys: Keys) -> Rights:
-    """An operator's rights beyond its services': send recorder and tunnel commands, read every key
-    of the namespace, watch liveliness."""
+def operator_rights(keys: Keys, name: str) -> Rights:
+    """Operator ``name``'s rights beyond its services': send recorder and tunnel commands, ask for
+    wind speeds on its own request key (so that key says who asks), read every key of the namespace,
+    watch liveliness."""
     return Rights(
-        publish=(keys.recorder_command(), keys.tunnel_command()), subscribe=(f"{keys.namespace}/**",), watch=True
+        publish=(keys.recorder_command(), keys.tunnel_command(), keys.speed_request(name)),
+        subscribe=(f"{keys.namespace}/**",),
+        watch=True,
     )
 
 
@@ -73,7 +76,7 @@ def identity_rights(keys: Keys, security: SecurityConfig, services: Mapping[str,
         for role in security.identities.get(name, (name,) if name in services else ()):
             total = total | services[role]
         if name in security.operators:
-            total = total | operator_rights(keys)
+            total = total | operator_rights(keys, name)
         rights[name] = total
     return rights
 

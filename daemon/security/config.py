@@ -11,7 +11,7 @@ Example (``deploy/rig-secure.yaml``)::
           cert: /etc/flagtrack/certs/{identity}.pem     # {identity}: the one this process presents
           key: /etc/flagtrack/certs/{identity}.key
         acl: true                                       # default deny; rules made from the rig
-        operators: [operator]                           # may also send recorder and tunnel commands
+        operators: [operator]                           # may also send recorder and tunnel commands, ask for speeds
 
 A process presents one identity (the common name of its certificate): ``identity`` if given, else
 the service it runs (``flagtrack camera`` presents ``camera``), ``router`` for ``flagtrack router``.
@@ -75,7 +75,8 @@ class SecurityConfig:
         identities: identity -> the services whose rights it has, for identities that are not a
             service's name (``analysis: [tracker, recorder, viewer]`` for ``flagtrack up`` on one host;
             the rig checks the names against its services).
-        operators: identities that may in addition send recorder and tunnel commands (and read every key).
+        operators: identities that may in addition send recorder and tunnel commands, ask for wind
+            speeds (on their own request key), and read every key.
         acl: enforce access-control rules made from the rig (default deny).
         user, password, password_file: Zenoh user/password authentication of this process (a
             password in the file is better than in the rig file; either is redacted from records).

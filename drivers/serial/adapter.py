@@ -10,6 +10,7 @@ holder, so two programs never drive one tunnel.
 from __future__ import annotations
 
 import logging
+import time
 
 import serial
 
@@ -46,6 +47,7 @@ class SerialAdapter:
         self.device = port
         self.eol = eol
         self.timeout_s = timeout_s
+        self.last_sent_ns = 0  # wall time of the last write's flush, ns
         if port_obj is not None:
             self.serial = port_obj
             return
@@ -68,6 +70,7 @@ class SerialAdapter:
             self.serial.reset_input_buffer()
             self.serial.write(data)
             self.serial.flush()
+            self.last_sent_ns = time.time_ns()  # (the latency of a control loop ends here)
         except (serial.SerialException, OSError) as exc:
             raise DriverError(f"write failed: {exc}", device=self.device) from exc
 

@@ -116,6 +116,7 @@ class SafeTunnel:
         self._keepalive_failures = 0
         self._heartbeat_s: float | None = None  # the owner's loop, once it reports (None: not watched)
         self._withheld = False
+        self._last_step_s: float | None = None  # when step_toward last wrote a set-point
 
     @property
     def device(self) -> str:
@@ -161,6 +162,34 @@ class SafeTunnel:
             self._wait_for(speed_mps, abortable=True)
         except DriverError as exc:
             raise self._stop_after(exc) from exc
+
+    def step_toward(self, target_mps: float) -> float:
+        """Write one set-point on the ramp to ``target_mps`` and return it (m/s), without waiting for
+        the readback: for a loop that commands every period. The set-point moves at most
+        ``max_ramp_mps2`` times the time since the last step (at most ``ramp_period_s``).
+
+        Raises:
+            DriverError: target out of bounds (nothing sent), the controller failed, or :meth:`abort`
+                was called (in the last two cases the tunnel has been ramped to zero where it answers).
+        """
+        self.check_setpoint(target_mps)
+        if self._setpoint_mps is None:
+            self.start()
+        now_s = time.monotonic()
+        last_s = self._last_step_s
+        dt_s = self.params.ramp_period_s if last_s is None else min(self.params.ramp_period_s, now_s - last_s)
+        self._last_step_s = now_s
+        largest = self.params.max_ramp_mps2 * dt_s
+        value = self.setpoint_mps + max(-largest, min(largest, target_mps - self.setpoint_mps))
+        try:
+            if self._abort.is_set():
+                raise TunnelAborted("set-point change aborted", device=self.device)
+            self._exchange(lambda: self.link.write_setpoint_mps(value))
+        except DriverError as exc:
+            raise self._stop_after(exc) from exc
+        self._setpoint_mps = value
+        self._beat_if_watched()
+        return value
 
     def read_speed_mps(self) -> float:
         """Speed read back from the controller, m/s."""

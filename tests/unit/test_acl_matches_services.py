@@ -134,3 +134,28 @@ def test_a_simulated_camera_follows_the_tunnel_state() -> None:
     bus = RecordingBus()
     BusSpeedSource(bus)()  # type: ignore[arg-type]  # (it subscribes at its first call, in the camera's loop)
     covered(bus, rights(bus, "camera"))
+
+
+def test_the_flag_state_services_keys() -> None:
+    from flagtrack.daemon.core.flagstate import StateParams
+    from flagtrack.daemon.services.flagstate import FlagStateService
+
+    bus = RecordingBus()
+    service = FlagStateService(bus, StateParams(300.0), "cam0")  # type: ignore[arg-type]
+    service.start()
+    service.run(stopped())
+    covered(bus, rights(bus, "flagstate"))
+    assert bus.published == {bus.keys.flag_state()} and bus.tokens == {bus.keys.alive("flagstate")}
+
+
+def test_the_supervisors_speed_requests_and_states() -> None:
+    from flagtrack.daemon.schema import FlagState
+    from flagtrack.daemon.services.supervisor.requests import SpeedDesk
+    from flagtrack.daemon.transport import BusConfig
+
+    bus = RecordingBus()
+    bus.cfg = BusConfig(namespace="flagtrack/lab1")  # type: ignore[attr-defined]
+    SpeedDesk(bus).start()  # type: ignore[arg-type]
+    bus.subscribe(bus.keys.flag_state(), FlagState)  # (mode control's)
+    covered(bus, rights(bus, "supervisor"))
+    assert bus.keys.speed_reply() in bus.published and bus.keys.speed_requests() in bus.subscribed

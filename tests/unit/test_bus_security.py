@@ -88,9 +88,14 @@ def test_the_rules_are_made_from_the_rigs_keys(tmp_path: Path) -> None:
         keys.supervisor_state(),
         keys.tunnel_state(),
         keys.recorder_command(),
+        keys.speed_reply(),
     }
     assert "viewer-publish" not in rules  # a viewer only looks
-    assert set(rules["operator-publish"]["key_exprs"]) == {keys.recorder_command(), keys.tunnel_command()}
+    assert set(rules["operator-publish"]["key_exprs"]) == {
+        keys.recorder_command(),
+        keys.tunnel_command(),
+        keys.speed_request("operator"),  # its own request key only: the key says who asks
+    }
     analysis = set(rules["analysis-subscribe"]["key_exprs"])
     assert {keys.camera_events("cam7"), keys.centrelines(), keys.recorder_command()} <= analysis
     assert rules["recorder-token"]["key_exprs"] == [keys.alive("recorder")]

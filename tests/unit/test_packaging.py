@@ -9,7 +9,7 @@ import pytest
 
 from tests.conftest import REPO
 
-TOP_FOLDERS = ("daemon", "drivers", "calibration")
+TOP_FOLDERS = ("daemon", "drivers", "calibration", "client")
 
 
 def source_modules() -> list[str]:

@@ -31,10 +31,21 @@ def test_each_services_rights_are_the_keys_its_entry_names() -> None:
     rates = (k.event_rate("cam0"), k.event_rate("cam1"))
     assert service_rights(k, CAMERAS, SENSORS) == {
         "supervisor": Rights(
-            publish=(k.supervisor_state(), k.tunnel_state(), k.recorder_command()),
-            subscribe=(*rates, k.centrelines(), k.recorder_status(), k.tunnel_command(), k.sensor_samples("om70")),
+            publish=(k.supervisor_state(), k.tunnel_state(), k.recorder_command(), k.speed_reply()),
+            subscribe=(
+                *rates,
+                k.centrelines(),
+                k.recorder_status(),
+                k.tunnel_command(),
+                k.sensor_samples("om70"),
+                k.flag_state(),
+                k.speed_requests(),
+            ),
             tokens=(k.alive("supervisor"),),
             watch=True,
+        ),
+        "flagstate": Rights(
+            publish=(k.flag_state(),), subscribe=(k.centrelines(), k.tunnel_state()), tokens=(k.alive("flagstate"),)
         ),
         "recorder": Rights(
             publish=(k.recorder_status(),),

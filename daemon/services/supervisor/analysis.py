@@ -12,7 +12,7 @@ from flagtrack.daemon.core.metrics import (
     flapping_frequency_hz,
     lateral_displacement,
     tip_amplitude_over_l,
-    travelling_wave_index,
+    travelling_wave_index_in_time,
 )
 
 MAX_CYCLES = 100_000
@@ -66,7 +66,7 @@ def point_metrics(
     amplitude = tip_amplitude_over_l(tip, length)
     frequency = flapping_frequency_hz(batch.t_s, tip)  # gaps (dropped packets) are allowed for
     spread = _amplitude_spread(batch.t_s, tip, length, frequency, cycles_window)
-    twi = _twi(batch.t_s, lateral)
+    twi = travelling_wave_index_in_time(batch.t_s, lateral)
     delta = batch.delta_rms[np.isfinite(batch.delta_rms)] / length
     return PointMetrics(
         amplitude,
@@ -78,18 +78,6 @@ def point_metrics(
         float(delta.std()) if len(delta) else math.nan,
         float(batch.lost.mean()),
     )
-
-
-def _twi(t_s: np.ndarray, lateral: np.ndarray) -> float:
-    """Travelling-wave index over the longest run of updates without a gap (the modes need evenly
-    sampled time), NaN when it is short (< 16 updates) or not finite."""
-    run = _longest_run(t_s)
-    t_run, lateral_run = t_s[run], lateral[run]
-    if len(t_run) < 16 or not np.all(np.isfinite(lateral_run)):
-        return math.nan
-    uniform_t = np.linspace(t_run[0], t_run[-1], len(t_run))
-    resampled = np.stack([np.interp(uniform_t, t_run, lateral_run[:, k]) for k in range(lateral.shape[1])], axis=1)
-    return float(travelling_wave_index(resampled))
 
 
 def usable_batches(batches: list[CentrelineBatch]) -> list[CentrelineBatch]:
@@ -116,17 +104,6 @@ def usable_batches(batches: list[CentrelineBatch]) -> list[CentrelineBatch]:
         kept.append(chosen)
         last_t = float(chosen.t_s[-1])
     return kept
-
-
-def _longest_run(t_s: np.ndarray, gap_factor: float = 5.0) -> slice:
-    """The longest stretch of updates without a gap (a step over ``gap_factor`` times the median step)."""
-    steps = np.diff(t_s)
-    if len(steps) == 0:
-        return slice(0, len(t_s))
-    breaks = np.flatnonzero(steps > gap_factor * np.median(steps)) + 1
-    edges = np.concatenate([[0], breaks, [len(t_s)]])
-    k = int(np.argmax(np.diff(edges)))
-    return slice(int(edges[k]), int(edges[k + 1]))
 
 
 def _amplitude_spread(t_s: np.ndarray, tip: np.ndarray, length: float, frequency_hz: float, cycles: int) -> float:

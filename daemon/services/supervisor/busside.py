@@ -12,6 +12,7 @@ from typing import Any
 from flagtrack.daemon.schema import RecorderCommand, RecorderStatus, SupervisorState, TunnelState
 from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor
+from flagtrack.daemon.services.supervisor.requests import SpeedDesk
 from flagtrack.daemon.services.supervisor.section import SupervisorConfig
 from flagtrack.daemon.sweep.ports import Report
 from flagtrack.daemon.sweep.progress import SweepProgress
@@ -31,6 +32,7 @@ class BusSide:
         monitor: the supervisor's subscriptions.
         observers: called with every state published, in the run's thread; an observer that
             raises is logged once and the states keep coming.
+        refusing: speed requests to answer as refused while no control loop takes them, and why.
     """
 
     def __init__(
@@ -40,9 +42,11 @@ class BusSide:
         cfg: SupervisorConfig,
         monitor: BusMonitor,
         observers: Sequence[Callable[[SupervisorState], None]] = (),
+        refusing: tuple[SpeedDesk, str] | None = None,
     ) -> None:
         keys = bus.keys
         self.name, self.cfg, self.monitor, self.observers = name, cfg, monitor, observers
+        self.refusing = refusing
         self._state_pub = bus.publisher(keys.supervisor_state())
         self._tunnel_pub = bus.publisher(keys.tunnel_state())
         self._recorder_pub = bus.publisher(keys.recorder_command(), tag_source=True)  # the recorder logs who
@@ -50,6 +54,9 @@ class BusSide:
 
     def pump(self) -> None:
         self.monitor.pump()
+        if self.refusing is not None and not self.refusing[0].taking:
+            desk, why = self.refusing
+            desk.refuse_all(why)
 
     def beat(self, mode: str) -> None:
         beat(self.name, f"{mode}, flag {self.monitor.state.value}")

@@ -17,7 +17,13 @@ from flagtrack.daemon.transport import Bus
 
 log = logging.getLogger(__name__)
 
-SERVICE_KEYS = {"camera": "camera/{camera_id}", "tracker": "tracker", "recorder": "recorder", "viewer": "viewer"}
+SERVICE_KEYS = {
+    "camera": "camera/{camera_id}",
+    "tracker": "tracker",
+    "recorder": "recorder",
+    "viewer": "viewer",
+    "flagstate": "flagstate",
+}
 MAX_REPLIES = 256
 """Recorder answers kept for the supervisor to pick up (the oldest go: others' request ids, forged ones)."""
 

@@ -50,16 +50,55 @@ class FeedbackConfig:
 
 
 @dataclass(frozen=True)
+class ControlConfig:
+    """Mode ``control``: a control law, and speed requests from the bus, inside the safety wrapper.
+
+    Attributes:
+        controller: the law, ``FILE.py:FUNCTION`` (``FUNCTION(state) -> speed_mps | None``, None:
+            hold), ``pi`` (the built-in PI of the ``feedback:`` section), or None (no law: the speed
+            moves only on requests).
+        period_s: the law is called at most this often, with the newest flag state, s.
+        duration_s: run this long once the loop starts (0: until stopped).
+        start_speed_mps: speed set before the loop starts (0: none).
+        settle_s: wait after the start speed is reached before the loop starts, s.
+        max_faults: the run stops safe after this many faults of the law in a row (it raised or
+            returned what is not a speed).
+        safe_speed_mps: after those faults, the tunnel holds this speed, and no law runs, until the
+            run ends (0: the run ends at once, the tunnel ramped to zero).
+        requests: take speed requests from the bus (on a secured bus, from operators only).
+        record: record the camera and the centrelines of the whole run in the run folder.
+    """
+
+    controller: str | None = None
+    period_s: float = 0.05
+    duration_s: float = 60.0
+    start_speed_mps: float = 0.0
+    settle_s: float = 0.0
+    max_faults: int = 3
+    safe_speed_mps: float = 0.0
+    requests: bool = True
+    record: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.period_s > 0 or self.duration_s < 0 or self.settle_s < 0:
+            raise ValueError("period_s must be positive, duration_s and settle_s >= 0")
+        if self.max_faults < 1 or self.start_speed_mps < 0 or self.safe_speed_mps < 0:
+            raise ValueError("max_faults must be >= 1, start_speed_mps and safe_speed_mps >= 0")
+
+
+@dataclass(frozen=True)
 class SupervisorConfig:
     """What the supervisor does and when it gives up.
 
     Attributes:
-        mode: ``monitor`` (publish the flag state only), ``sweep`` (run ``sweep``), ``feedback``.
+        mode: ``monitor`` (publish the flag state only), ``sweep`` (run ``sweep``), ``feedback``,
+            ``control`` (a control law and speed requests, ``control``).
         runs_dir: where run folders are made.
         run_name: the run folder's name (default: date and time).
         sweep: the sweep plan (mode ``sweep``).
         onset: the onset/decay detector (docs/tunnel.md for the measured defaults).
-        feedback: the closed loop (mode ``feedback``).
+        feedback: the closed loop (mode ``feedback``; the law ``pi`` of mode ``control``).
+        control: the control loop (mode ``control``).
         silence_timeout_s: no event rate (or a required service gone) for this long: safe state.
         required: services whose disappearance (liveliness) stops the run.
         startup_timeout_s: how long the required services may take to appear.
@@ -79,12 +118,13 @@ class SupervisorConfig:
             turns it off (a person starts a new run there).
     """
 
-    mode: Literal["monitor", "sweep", "feedback"] = "monitor"
+    mode: Literal["monitor", "sweep", "feedback", "control"] = "monitor"
     runs_dir: Path = Path("runs")
     run_name: str | None = None
     sweep: SweepConfig | None = None
     onset: OnsetParams = field(default_factory=OnsetParams)
     feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
+    control: ControlConfig = field(default_factory=ControlConfig)
     silence_timeout_s: float = 3.0
     required: tuple[str, ...] = ("camera", "tracker", "recorder")
     startup_timeout_s: float = 20.0

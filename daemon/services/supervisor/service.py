@@ -11,16 +11,22 @@ watchdog (deploy/tunnel-*.yaml).
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from collections.abc import Callable
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.schema import SupervisorState
+from flagtrack.daemon.schema import FlagState, SupervisorState
 from flagtrack.daemon.services.supervisor.busside import BusSide
+from flagtrack.daemon.services.supervisor.control_loop import ControlLoop
+from flagtrack.daemon.services.supervisor.control_record import ControlRecord
 from flagtrack.daemon.services.supervisor.feedback_loop import FeedbackLoop
+from flagtrack.daemon.services.supervisor.laws import Law, load_law
 from flagtrack.daemon.services.supervisor.measure import BusMeasure, FlagGeometry
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor
+from flagtrack.daemon.services.supervisor.requests import SpeedDesk
 from flagtrack.daemon.services.supervisor.section import SupervisorConfig
 from flagtrack.daemon.sweep.runlog import PointResult
 from flagtrack.daemon.sweep.runner import SweepRunner, SweepSettings
@@ -66,7 +72,10 @@ class SupervisorService:
         self.resume_dir = resume_dir
         self.sensor = sensor
         self.session: Session | None = None
-        self.procedure: SweepRunner | FeedbackLoop | Monitoring | None = None
+        self.procedure: SweepRunner | FeedbackLoop | ControlLoop | Monitoring | None = None
+        self.desk: SpeedDesk | None = None
+        self._law: Law | None = None
+        self._states: Any = None
         self._observers: list[Callable[[SupervisorState], None]] = []
 
     def start(self) -> None:
@@ -76,6 +85,12 @@ class SupervisorService:
         try:
             sensor_id = None if self.sensor is None else self.sensor.id
             self.monitor = BusMonitor(self.bus, self.camera_id, self.cfg.onset, self.cfg.required, sensor_id)
+            self.desk = SpeedDesk(self.bus)
+            self.desk.start()
+            if self.cfg.mode == "control":
+                control = self.cfg.control
+                self._law = None if control.controller is None else load_law(control.controller, self.cfg.feedback)
+                self._states = self.bus.subscribe(self.bus.keys.flag_state(), FlagState, capacity=256, ring=True)
         except BaseException:
             self.close()
             raise
@@ -93,7 +108,15 @@ class SupervisorService:
 
     def run(self, stop: threading.Event) -> None:
         self.procedure = self._procedure()
-        outside = BusSide(self.bus, self.name, self.cfg, self.monitor, self._observers)
+        refusing = None
+        if self.desk is not None:
+            why = f"the supervisor is in mode {self.cfg.mode}; speed requests go to mode control"
+            if self.cfg.mode == "control":
+                why = "the control loop has not started, or has ended"
+                if not self.cfg.control.requests:
+                    why = "this control run takes no speed requests (supervisor.control.requests)"
+            refusing = (self.desk, why)
+        outside = BusSide(self.bus, self.name, self.cfg, self.monitor, self._observers, refusing)
         self.bus.declare_alive(self.name)
         cfg = self.cfg
         limits = Limits(
@@ -105,9 +128,11 @@ class SupervisorService:
         self.session = Session(self.tunnel, outside, limits)
         self.session.run(self.procedure, stop)
 
-    def _procedure(self) -> SweepRunner | FeedbackLoop | Monitoring:
+    def _procedure(self) -> SweepRunner | FeedbackLoop | ControlLoop | Monitoring:
         """The mode's procedure."""
         cfg = self.cfg
+        if cfg.mode == "control":
+            return self._control_loop()
         if cfg.mode == "feedback":
             return FeedbackLoop(cfg.feedback, self.monitor, self.flag)
         if cfg.mode != "sweep":
@@ -128,6 +153,20 @@ class SupervisorService:
         measure = BusMeasure(self.monitor, self.flag, self.sensor)
         return SweepRunner(settings, measure, self.rig_snapshot, self.resume_dir)
 
+    def _control_loop(self) -> ControlLoop:
+        """Mode ``control``'s procedure, its run folder in ``runs_dir``."""
+        cfg, control = self.cfg, self.cfg.control
+        name = cfg.run_name or datetime.now().strftime("control-%Y%m%d-%H%M%S")
+        about = {
+            "law": None if self._law is None else self._law.name,
+            "period_s": control.period_s,
+            "control": dataclasses.asdict(control),
+            "rig": self.rig_snapshot,
+        }
+        record = ControlRecord(Path(cfg.runs_dir).expanduser() / name, about)
+        desk = self.desk if control.requests else None
+        return ControlLoop(control, self._law, self._states, desk, record, self.tunnel.params)
+
     @property
     def stop_reason(self) -> str:
         """Why the run ended (``finished``, a signal, an error), "" while it runs."""
@@ -135,7 +174,9 @@ class SupervisorService:
 
     @property
     def run_dir(self) -> Path | None:
-        """The sweep's run folder, once known."""
+        """The sweep's or the control run's folder, once known."""
+        if isinstance(self.procedure, ControlLoop):
+            return self.procedure.record.run_dir
         return self.procedure.run_dir if isinstance(self.procedure, SweepRunner) else None
 
     @property

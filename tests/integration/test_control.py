@@ -1,0 +1,224 @@
+"""``flagtrack control`` on the simulated rig (pty tunnel, twin camera, tracker, flag state, recorder,
+supervisor, real Zenoh in one process): a law asking 99 m/s gets the tunnel's bound and the record
+says why; a law that raises or returns nonsense holds the speed, is said once, and ends the run
+safe; the readback never leaves the bounds; SIGTERM ends it safe too; the run folder has it all."""
+
+from __future__ import annotations
+
+import json
+import logging
+import signal
+import textwrap
+import threading
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from flagtrack.daemon.cli import main
+from flagtrack.daemon.schema import TunnelState
+from flagtrack.daemon.services.supervisor.analysis import point_metrics
+from flagtrack.daemon.transport import Bus, BusConfig
+from flagtrack.drivers.formats.centreline import read_centrelines
+from tests.fakes.helpers import wait_until
+from tests.integration.test_transport import free_port
+from tests.integration.test_up import start
+
+MAX_MPS, TOLERANCE_MPS = 8.0, 0.15
+
+
+def rig_file(tmp_path: Path, port: int, **control: object) -> Path:
+    """A light simulated rig listening on 127.0.0.1:``port`` (so a test can watch its bus)."""
+    settings = {"period_s": 0.05, "duration_s": 20, "start_speed_mps": 5.5, "settle_s": 1.0, "max_faults": 3}
+    settings.update(control)
+    body = f"""
+    rig: ctl{port}
+    bus: {{listen: ["tcp/127.0.0.1:{port}"]}}
+    camera:
+      adapter: simulated
+      packet_us: 4000
+      simulated: {{events_per_px2: 0.5, noise_rate_hz: 5000, max_lag_s: 1.0,
+                  flutter: {{onset_speed_mps: 4.9, decay_speed_mps: 4.4, tau_amp_s: 0.15}}}}
+    tracker: {{root: [150, 240], length: 300, tau_s: 0.002}}
+    tracker_service: {{max_batch_delay_s: 0.005}}
+    recorder: {{directory: {tmp_path / "rec"}}}
+    tunnel:
+      driver: simulated
+      timeout_s: 2.0
+      safety: {{max_speed_mps: {MAX_MPS}, max_ramp_mps2: 4.0, ramp_period_s: 0.05, tolerance_mps: {TOLERANCE_MPS},
+               settle_timeout_s: 5.0, poll_period_s: 0.05, keepalive_s: 0.25, watchdog_s: 1.0}}
+      sim: {{tau_s: 0.1, ramp_mps2: 6.0, watchdog_s: 1.0}}
+    supervisor:
+      runs_dir: {tmp_path / "runs"}
+      onset: {{learn_s: 1.0}}
+      silence_timeout_s: 3.0
+      startup_timeout_s: 60
+      control: {json.dumps(settings)}
+    services: [camera, tracker]
+    """
+    path = tmp_path / "rig.yaml"
+    path.write_text(textwrap.dedent(body))
+    return path
+
+
+def law_file(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "law.py"
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def watch_tunnel(port: int, namespace: str, states: list[TunnelState]) -> threading.Event:
+    """Gather the rig's tunnel states from another session until the returned event is set."""
+    done = threading.Event()
+    ready = threading.Event()
+
+    def gather() -> None:
+        with Bus(BusConfig(namespace=namespace, connect=(f"tcp/127.0.0.1:{port}",))) as bus:
+            sub = bus.subscribe(bus.keys.tunnel_state(), TunnelState, capacity=100_000)
+            ready.set()
+            while not done.is_set():
+                state = sub.recv(timeout_s=0.1)
+                if state is not None:
+                    states.append(state)
+
+    threading.Thread(target=gather, daemon=True).start()
+    ready.wait(10)
+    return done
+
+
+def records(run_dir: Path) -> list[dict]:
+    return [json.loads(line) for line in (run_dir / "control.jsonl").read_text().splitlines()]
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(240)
+def test_a_law_is_bounded_held_on_faults_and_stopped_safe(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    law = law_file(
+        tmp_path,
+        """
+        calls = 0
+        setpoint = 0.2
+
+        def law(state):
+            global calls
+            calls += 1
+            if calls <= 5:
+                return 99.0  # far above the tunnel's bound
+            if calls <= 8:
+                return None  # hold
+            if calls == 9:
+                return "fast"  # not a speed
+            raise ZeroDivisionError("gain over zero")
+        """,
+    )
+    port = free_port()
+    states: list[TunnelState] = []
+    done = watch_tunnel(port, f"flagtrack/ctl{port}", states)
+    out = tmp_path / "runs" / "exp1"
+    caplog.set_level(logging.WARNING)
+    code = main(["control", "-c", str(rig_file(tmp_path, port)), "--controller", f"{law}:law", "--out", str(out), "-q"])
+    done.set()
+    assert code == 1  # stopped by the law's faults, not finished
+    steps = records(out)
+    laws = [r for r in steps if r["requester"] == "law"]
+    asked_99 = [r for r in laws if r["asked_mps"] == 99.0]
+    assert len(asked_99) == 5
+    assert all(r["applied_mps"] == MAX_MPS and "tunnel.safety.max_speed_mps" in r["reason"] for r in asked_99)
+    assert all(0 < r["setpoint_mps"] <= MAX_MPS for r in asked_99)  # the ramp's set-point, within the bounds
+    faults = [r for r in laws if r.get("reason", "").startswith("fault")]
+    assert [("str" in r["reason"], "ZeroDivisionError" in r["reason"]) for r in faults] == [
+        (True, False),
+        (False, True),
+        (False, True),
+    ]
+    assert all(r["applied_mps"] == MAX_MPS and r["asked_mps"] is None for r in faults)  # the speed held
+    assert all(r["state"]["source"] == "cam0" and r["setpoint"] == 0.2 for r in laws)
+    said = [r for r in caplog.records if r.levelno >= logging.ERROR and f"{law}:law" in r.getMessage()]
+    assert len(said) == 1 and "held" in said[0].getMessage()  # said once, in one line
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "stopped" and "faulted 3 times in a row" in run["stop_reason"]
+    assert run["counts"]["faults"] == 3 and run["loop_latency_ms"]["steps"] == 5
+    for name in ("README.txt", "control.png", "recording.raw", "recording.json", "recording_centrelines.h5"):
+        assert (out / name).stat().st_size > 0, name
+    with h5py.File(out / "recording_centrelines.h5") as f:
+        assert len(f["t"]) > 100
+    readbacks = [s.speed_mps for s in states if s.speed_mps >= 0]
+    assert readbacks and max(readbacks) <= MAX_MPS + TOLERANCE_MPS
+    assert states[-1].setpoint_mps == 0.0  # ended at zero
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(240)
+def test_sigterm_stops_the_loop_safe_and_the_record_says_so(tmp_path: Path) -> None:
+    law = law_file(tmp_path, "def law(state):\n    return 5.0\n")
+    port = free_port()
+    states: list[TunnelState] = []
+    done = watch_tunnel(port, f"flagtrack/ctl{port}", states)
+    out = tmp_path / "runs" / "exp2"
+    rig = rig_file(tmp_path, port, duration_s=0)  # until stopped
+    proc = start("control", "-c", str(rig), "--controller", f"{law}:law", "--out", str(out), "-q")
+    try:
+        wait_until(lambda: (out / "control.jsonl").exists() and len(records(out)) >= 3, 150, "three control steps")
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=90)
+    finally:
+        proc.kill()
+        done.set()
+    assert proc.returncode != 0, err
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "stopped" and "SIGTERM" in run["stop_reason"].upper(), run["stop_reason"]
+    assert all(r["asked_mps"] == 5.0 and r["applied_mps"] == 5.0 for r in records(out))
+    assert states and states[-1].setpoint_mps == 0.0
+
+
+def test_a_missing_law_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rig = rig_file(tmp_path, free_port())
+    assert main(["control", "-c", str(rig), "--controller", "nowhere.py:law"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["flagtrack control: error: key '--controller': no such file: nowhere.py"]
+    assert main(["control", "-c", str(rig), "--controller", "law.txt"]) == 2
+    assert "give the law as FILE.py:FUNCTION" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_the_feedback_demo_holds_the_flag_through_the_step(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--feedback", "--out", str(tmp_path), "--json", "-q"]) == 0
+    found = json.loads(capsys.readouterr().out)
+    assert found["amplitude_error_rms_over_l"] < 0.02 and found["amplitude_error_rms_over_l_before_step"] < 0.02
+    assert found["settled_cycles"] > 50 and found["faults"] == 0 and found["latency_steps"] > 100
+    assert (tmp_path / "control" / "control.png").stat().st_size > 0
+    assert (tmp_path / "law.py").read_text().count("\n") < 25  # the law the user can read and change
+    live_and_offline_agree(tmp_path / "control")
+
+
+def live_and_offline_agree(run_dir: Path) -> None:
+    """Each cycle's state as the law saw it live has the A/L the sweep's per-point figure gives offline
+    for that cycle's recorded centrelines, and over ten whole cycles at a steady speed the cycles per
+    second are the per-point frequency within 1 %."""
+    batch, _ = read_centrelines(run_dir / "recording_centrelines.h5")
+    cycles = [r["state"] for r in records(run_dir) if r["state"] and r["state"]["completes_cycle"]]
+    cycles = list({s["seq"]: s for s in cycles}.values())
+    assert len(cycles) > 100
+    for state in cycles:
+        rows = (batch.t_s >= state["cycle_start_s"]) & (batch.t_s <= state["cycle_end_s"])
+        offline = point_metrics([batch.select(rows)], 300.0, (150.0, 240.0), 0.0)
+        assert state["amplitude_over_l"] == pytest.approx(offline.amplitude_over_l, rel=1e-9)
+        assert state["updates"] == int(rows.sum())
+    stretches, run = [], [cycles[0]]
+    for state in cycles[1:]:
+        if state["cycle_start_s"] == run[-1]["cycle_end_s"]:
+            run.append(state)
+        else:
+            stretches.append(run)
+            run = [state]
+    chunks = [r[k : k + 10] for r in [*stretches, run] for k in range(0, len(r) - 9, 10)]
+    steady = [c for c in chunks if np.ptp([s["frequency_hz"] for s in c]) < 0.02 * c[0]["frequency_hz"]]
+    assert len(steady) >= 3  # (while the speed moves, f does: the FFT's peak and the mean rate differ)
+    for run in steady:
+        rows = (batch.t_s >= run[0]["cycle_start_s"]) & (batch.t_s <= run[-1]["cycle_end_s"])
+        offline = point_metrics([batch.select(rows)], 300.0, (150.0, 240.0), 0.0)
+        per_s = len(run) / (run[-1]["cycle_end_s"] - run[0]["cycle_start_s"])
+        assert per_s == pytest.approx(offline.frequency_hz, rel=0.01)
