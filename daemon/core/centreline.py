@@ -22,6 +22,9 @@ class CentrelineBatch:
         n_events: (n_t,) int64 events used by each update.
         lost: (n_t,) uint8, 1 where the flag was not found in the update (its shape is not to be
             trusted); ``None`` when constructed: zeros (a tracker without loss detection).
+        shed: (n_t,) float32 in [0, 1], the fraction of the camera's data since the previous update
+            that a live tracker shed to keep within its latency budget (not looked at); ``None``
+            when constructed: zeros (everything used, as offline).
     """
 
     t_s: np.ndarray
@@ -33,6 +36,7 @@ class CentrelineBatch:
     delta_rms: np.ndarray
     n_events: np.ndarray
     lost: np.ndarray = None  # type: ignore[assignment]  # None: zeros, set in __post_init__
+    shed: np.ndarray = None  # type: ignore[assignment]  # None: zeros, set in __post_init__
 
     def __post_init__(self) -> None:
         n_t, n_s = len(self.t_s), len(self.s)
@@ -40,7 +44,16 @@ class CentrelineBatch:
             object.__setattr__(self, "lost", np.zeros(n_t, dtype=np.uint8))
         else:
             object.__setattr__(self, "lost", np.asarray(self.lost, dtype=np.uint8))
-        checks = (("x", (n_t, n_s)), ("y", (n_t, n_s)), ("delta_rms", (n_t,)), ("n_events", (n_t,)), ("lost", (n_t,)))
+        shed: np.ndarray | None = self.shed
+        object.__setattr__(self, "shed", np.zeros(n_t, np.float32) if shed is None else np.asarray(shed, np.float32))
+        checks: tuple[tuple[str, tuple[int, ...]], ...] = (
+            ("x", (n_t, n_s)),
+            ("y", (n_t, n_s)),
+            ("delta_rms", (n_t,)),
+            ("n_events", (n_t,)),
+            ("lost", (n_t,)),
+            ("shed", (n_t,)),
+        )
         for name, want in checks:
             got = getattr(self, name).shape
             if got != want:
@@ -73,6 +86,7 @@ class CentrelineBatch:
             delta_rms=self.delta_rms[index],
             n_events=self.n_events[index],
             lost=self.lost[index],
+            shed=self.shed[index],
         )
 
     @staticmethod
@@ -91,4 +105,5 @@ class CentrelineBatch:
             delta_rms=np.concatenate([b.delta_rms for b in batches]),
             n_events=np.concatenate([b.n_events for b in batches]),
             lost=np.concatenate([b.lost for b in batches]),
+            shed=np.concatenate([b.shed for b in batches]),
         )

@@ -29,11 +29,13 @@ from flagtrack.daemon.errors import SchemaError
 from flagtrack.daemon.schema.messages import MESSAGE_TYPES, CentrelineMessage, MessageType, SensorSamples
 
 MAGIC = b"FT"
-VERSION = 2
+VERSION = 3
 """Written in every message. 2 (2026-11-24) added optional fields (EventPacket.stream_id,
-CentrelineMessage.stream, status counters); version 1 messages decode with their defaults, and
-scalar fields this build does not know are ignored, so later additions need no new version."""
-READABLE_VERSIONS = frozenset({1, 2})
+CentrelineMessage.stream, status counters); 3 (2026-11-27) the optional array CentrelineMessage.shed
+(a build that reads only 1 and 2 would refuse the unknown array by its name; it refuses the version
+instead). Messages of earlier versions decode with their defaults, and scalar fields this build does
+not know are ignored, so scalar additions need no new version."""
+READABLE_VERSIONS = frozenset({1, 2, 3})
 _HEADER = struct.Struct("<2sBBI")
 M = TypeVar("M")
 
@@ -207,6 +209,7 @@ _SHAPES: dict[type, tuple[tuple[str, tuple[str, ...], str], ...]] = {
         ("n_events", ("n",), _INT),
         ("source_ns", ("n",), _INT),
         ("lost", ("n",), _INT),
+        ("shed", ("n",), _REAL),
     ),
     SensorSamples: (("t_us", ("n",), _INT), ("value", ("n",), _REAL), ("trigger_t_us", ("m",), _INT)),
 }

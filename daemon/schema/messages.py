@@ -157,6 +157,10 @@ def _not_said() -> np.ndarray:
     return np.zeros(0, dtype=np.uint8)
 
 
+def _none_shed() -> np.ndarray:
+    return np.zeros(0, dtype=np.float32)
+
+
 @dataclass(frozen=True)
 class CentrelineMessage:
     """A batch of tracker updates: t, joints, smoothed centreline, tip, Δ_RMS, events used.
@@ -170,7 +174,9 @@ class CentrelineMessage:
     ``stream`` numbers the camera streams the tracker has tracked (0 for the first; one more after
     each end of stream or camera restart), so a recorder knows which stream's file the updates go to.
     ``lost`` (n_t,) uint8: 1 where the flag was not found in the update (optional: a message without
-    it, from an older tracker, decodes as all found).
+    it, from an older tracker, decodes as all found). ``shed`` (n_t,) float32 in [0, 1]: the fraction
+    of the camera's data since the previous update that the tracker shed to stay within its latency
+    budget (``tracker.max_lag_ms``; optional: a message without it decodes as all 0, nothing shed).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.CENTRELINES
@@ -192,10 +198,13 @@ class CentrelineMessage:
     published_ns: int = 0
     stream: int = 0
     lost: np.ndarray = field(default_factory=_not_said)
+    shed: np.ndarray = field(default_factory=_none_shed)
 
     def __post_init__(self) -> None:
         if len(self.lost) == 0 and len(self.t_s) > 0:  # not said (an older tracker): all found
             object.__setattr__(self, "lost", np.zeros(len(self.t_s), dtype=np.uint8))
+        if len(self.shed) == 0 and len(self.t_s) > 0:  # not said (an older tracker): nothing shed
+            object.__setattr__(self, "shed", np.zeros(len(self.t_s), dtype=np.float32))
 
     @classmethod
     def from_batch(
@@ -230,6 +239,7 @@ class CentrelineMessage:
             n_events=batch.n_events,
             source_ns=np.asarray(source_ns, np.int64),
             lost=batch.lost,
+            shed=batch.shed,
         )
 
     def batch(self) -> CentrelineBatch:
@@ -244,6 +254,7 @@ class CentrelineMessage:
             delta_rms=self.delta_rms,
             n_events=self.n_events,
             lost=self.lost,
+            shed=self.shed,
         )
 
 
@@ -257,6 +268,9 @@ class TrackerStatus:
     ``late_packets``: duplicates and late packets of the stream, dropped.
     ``lost_updates``, ``lost_stretches``: updates that did not find the flag, and runs of them
     (since the service started).
+    ``shed_fraction``: of the camera's events of the last interval, those the tracker shed to stay
+    within its latency budget (0: all tracked); ``shed_packets``: packets it skipped for it (since
+    the service started; they are not missing: the recorder and the rates have them).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.TRACKER_STATUS
@@ -274,6 +288,8 @@ class TrackerStatus:
     late_packets: int = 0
     lost_updates: int = 0
     lost_stretches: int = 0
+    shed_fraction: float = 0.0
+    shed_packets: int = 0
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,9 @@
 
 ``/t`` (n_t,) s, ``/s`` (n_s,), ``/x`` ``/y`` (n_t, n_s), ``/joints/x`` ``/joints/y`` (n_t, N_j+1),
 ``/delta_rms`` (n_t,), ``/n_events`` (n_t,) int64, ``/lost`` (n_t,) uint8 (1: the flag was not found
-in that update, its shape is not to be trusted; a file written before it reads as zeros); root attributes hold every processing
+in that update, its shape is not to be trusted; a file written before it reads as zeros), ``/shed`` (n_t,)
+float32 (the fraction of the camera's data since the previous update that a live tracker shed for its
+latency budget; a file written before it reads as zeros); root attributes hold every processing
 parameter, ``units``, ``input_file`` and ``flagtrack_version``. Files are written incrementally
 (resizable datasets, flushed per append) so memory is bounded and a crash keeps what was flushed.
 
@@ -28,7 +30,7 @@ from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.atomic import PendingFile
 
 _PER_UPDATE = ("t", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events")
-_LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost")
+_LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost", "shed")
 
 
 class CentrelineWriter:
@@ -54,6 +56,7 @@ class CentrelineWriter:
         self._file.create_dataset("delta_rms", (0,), maxshape=(None,), dtype="f8", chunks=(chunk_t,))
         self._file.create_dataset("n_events", (0,), maxshape=(None,), dtype="i8", chunks=(chunk_t,))
         self._file.create_dataset("lost", (0,), maxshape=(None,), dtype="u1", chunks=(chunk_t,))
+        self._file.create_dataset("shed", (0,), maxshape=(None,), dtype="f4", chunks=(chunk_t,))
         write_attrs(self._file, {"flagtrack_version": __version__, **attrs})
         self.n_updates = 0
 
@@ -71,6 +74,7 @@ class CentrelineWriter:
             "delta_rms": batch.delta_rms,
             "n_events": batch.n_events,
             "lost": batch.lost,
+            "shed": batch.shed,
         }
         start = self.n_updates
         for name, values in columns.items():
@@ -381,6 +385,7 @@ def read_centrelines(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any]]
                 delta_rms=f["delta_rms"][()],
                 n_events=f["n_events"][()],
                 lost=f["lost"][()] if "lost" in f else None,
+                shed=f["shed"][()] if "shed" in f else None,
             )
             attrs = {name: _decode_attr(value) for name, value in f.attrs.items()}
     except OSError as exc:
@@ -434,6 +439,7 @@ def read_truth(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any], tuple
             delta_rms=np.asarray(data.get("delta_rms", np.full(n_t, np.nan)), dtype=np.float64),
             n_events=np.asarray(data.get("n_events", np.zeros(n_t)), dtype=np.int64),
             lost=np.asarray(data.get("lost", np.zeros(n_t)), dtype=np.uint8),
+            shed=np.asarray(data.get("shed", np.zeros(n_t)), dtype=np.float32),
         )
     except ValueError as exc:
         raise FormatError(f"ground truth: {exc}", path=str(path)) from exc
