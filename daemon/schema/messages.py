@@ -269,8 +269,9 @@ class TrackerStatus:
     ``lost_updates``, ``lost_stretches``: updates that did not find the flag, and runs of them
     (since the service started).
     ``shed_fraction``: of the camera's events of the last interval, those the tracker shed to stay
-    within its latency budget (0: all tracked); ``shed_packets``: packets it skipped for it (since
-    the service started; they are not missing: the recorder and the rates have them).
+    within its latency budget (0: all tracked); ``shed_packets``, ``shed_events``: the packets it
+    skipped for it and their events (since the service started; they are not missing: the recorder
+    and the rates have them).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.TRACKER_STATUS
@@ -290,6 +291,7 @@ class TrackerStatus:
     lost_stretches: int = 0
     shed_fraction: float = 0.0
     shed_packets: int = 0
+    shed_events: int = 0
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,7 @@ import dataclasses
 import logging
 import threading
 import time
+from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,7 +36,7 @@ from flagtrack.daemon.schema import EventPacket, TrackerStatus
 from flagtrack.daemon.services.lost_count import LostCount
 from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
-from flagtrack.daemon.services.tracker_budget import LatencyBudget, ShedSpans
+from flagtrack.daemon.services.tracker_budget import LatencyBudget, ShedSpans, gather
 from flagtrack.daemon.services.tracker_outbox import CentrelineOutbox, updates_source_ns
 from flagtrack.daemon.tracking.pipeline import TrackerPipeline
 from flagtrack.daemon.transport import Bus, Publisher, Subscription
@@ -68,6 +69,11 @@ class TrackerServiceConfig:
             the replay could go beyond it, and then loses packets (counted as dropped).
         exit_at_end_of_stream: stop after the camera's end of stream (a replayed file).
         max_coalesce: packets already queued are tracked together, up to this many.
+        gather_ms: a call holding fewer than ``gather_events`` events waits for more packets until
+            this long after its oldest packet reached the camera: at a low rate, packets are
+            tracked and published a few together instead of one by one (the per-call work is most
+            of the tracker's cost there); 0: every packet at once.
+        gather_events: a call with this many events waits for no more.
     """
 
     camera_id: str = "cam0"
@@ -78,6 +84,8 @@ class TrackerServiceConfig:
     queue_bytes: int = 256 << 20
     exit_at_end_of_stream: bool = False
     max_coalesce: int = 64
+    gather_ms: float = 4.0
+    gather_events: int = 20_000
 
 
 def warm_up_kernels(tracker_factory: Any) -> None:
@@ -158,6 +166,8 @@ class TrackerService:
 
     def run(self, stop: threading.Event) -> None:
         self.warm_up()
+        if self.budget is not None:
+            self.budget.ready_ns = time.time_ns()
         packets, status_pub = self.packets_sub, self._status_pub
         self.bus.declare_alive(self.name)
         last_status = time.monotonic()
@@ -172,8 +182,8 @@ class TrackerService:
                 if packet is None:
                     packet = packets.recv(timeout_s=self.cfg.max_batch_delay_s if len(self._outbox) else idle_wait_s)
                 if packet is not None:
-                    start_ns, tracked = time.perf_counter_ns(), self.events
-                    batch, shed = self._gather(packet)
+                    batch, shed, self._held = gather(packet, packets.recv, self.budget, self.cfg)
+                    start_ns, tracked = time.perf_counter_ns(), self.events  # (the work, not the wait)
                     lag_s = self.handle(batch, shed)
                     if batch[-1].end_of_stream and self.cfg.exit_at_end_of_stream:
                         break
@@ -196,33 +206,8 @@ class TrackerService:
             self._count_drops()
             self.problems.flush(force=True)
 
-    def _gather(self, first: EventPacket) -> tuple[list[EventPacket], int]:
-        """``first`` and the packets queued behind it, tracked together (up to ``max_coalesce``),
-        and how many of them, from the front, to shed: those too late for the budget. The packets
-        taken are as many as can be published within it; one more received is held for the next call."""
-        channel, budget, now_ns = self.packets_sub, self.budget, time.time_ns()
-        batch, shed, events = [first], 0, first.n_events
-        if budget is not None and budget.too_late(first, now_ns):
-            shed, events = 1, 0
-        while len(batch) - shed < self.cfg.max_coalesce and not batch[-1].end_of_stream:
-            if (more := channel.recv(timeout_s=0)) is None:
-                break
-            if budget is not None and shed == len(batch) and budget.too_late(more, now_ns):
-                shed += 1  # none taken yet: shed while too late
-            elif (
-                budget is not None
-                and shed < len(batch)
-                and not budget.room(min(batch[shed].sent_ns, more.sent_ns), events + more.n_events, now_ns)
-            ):
-                self._held = more  # no room: the next call takes it (or sheds it)
-                break
-            else:
-                events += more.n_events
-            batch.append(more)
-        return batch, shed
-
-    def handle(self, packets: list[EventPacket], shed: int = 0) -> float:
-        """Decode and track packets (in order) but the first ``shed`` (skipped: the latency budget);
+    def handle(self, packets: list[EventPacket], shed: Collection[int] = ()) -> float:
+        """Decode and track packets (in order) but those at the indices ``shed`` (skipped: the latency budget);
         return the lag (s) from the last one's arrival at the camera.
 
         Packets that queued up while the tracker was busy are decoded and fed together: the packets
@@ -262,7 +247,7 @@ class TrackerService:
                 last_us = horizon if horizon is not None else packet.t_first_us
                 packet = dataclasses.replace(packet, data=b"", n_events=0, t_last_us=last_us)
             self.packets += 1
-            if index < shed and problem is None and not packet.end_of_stream:
+            if index in shed and problem is None and not packet.end_of_stream:
                 self._track_run(run)
                 run = []
                 self._skip(packet)
@@ -487,6 +472,7 @@ class TrackerService:
             lost_stretches=self.lost.stretches,
             shed_fraction=_fraction(self.shed.events - window["shed_events"], self.events - window["events"]),
             shed_packets=self.shed.packets,
+            shed_events=self.shed.events,
         )
 
 
