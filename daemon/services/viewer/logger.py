@@ -159,8 +159,8 @@ class RerunLogger:
     # -- messages: queue rows -------------------------------------------------------------------
 
     def centrelines(self, msg: CentrelineMessage) -> None:
-        """Queue a batch of tracker updates: centreline, joints, tip y, Δ_RMS, events used and the lost
-        flags; note the tip and root for the trail and A/L."""
+        """Queue a batch of tracker updates: centreline, joints, tip y, Δ_RMS, events used, the lost
+        flags and the share shed; note the tip and root for the trail and A/L."""
         n = len(msg.t_s)
         if not n:
             return
@@ -177,6 +177,7 @@ class RerunLogger:
         self._scalars(layout.DELTA_RMS, t, msg.delta_rms)
         self._scalars(layout.EVENTS_PER_UPDATE, t, msg.n_events)
         self._scalars(layout.LOST, t, msg.lost)
+        self._scalars(layout.SHED, t, msg.shed)
         self._units = msg.units or self._units
         self._length = float(msg.s[-1] - msg.s[0]) if len(msg.s) > 1 else math.nan
         self._track.append(np.stack([t, x[:, 0], y[:, 0], x[:, -1], y[:, -1]], axis=1))
