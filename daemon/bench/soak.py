@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # NumPy is imported when the benchmark runs (fast --help)
     import numpy as np
 
-from flagtrack.daemon.bench.live import _free_port
+from flagtrack.daemon.bench.live_run import free_port as _free_port
 
 COMMAND = "soak"
 HELP = "camera -> tracker -> recorder (+ supervisor) as processes for M minutes at R Mev/s: loss, memory, latency"

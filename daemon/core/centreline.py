@@ -24,6 +24,9 @@ class CentrelineBatch:
             trusted); ``None`` when constructed: zeros (a tracker without loss detection).
         stale: (n_t,) uint8, 1 where the shape rests on no recent evidence (it was not measured, only
             remembered); ``None`` when constructed: zeros.
+        shed: (n_t,) float32 in [0, 1], the fraction of the camera's data since the previous update
+            that a live tracker shed to keep within its latency budget (not looked at); ``None``
+            when constructed: zeros (everything used, as offline).
     """
 
     t_s: np.ndarray
@@ -36,6 +39,7 @@ class CentrelineBatch:
     n_events: np.ndarray
     lost: np.ndarray = None  # type: ignore[assignment]  # None: zeros, set in __post_init__
     stale: np.ndarray = None  # type: ignore[assignment]  # None: zeros, set in __post_init__
+    shed: np.ndarray = None  # type: ignore[assignment]  # None: zeros, set in __post_init__
 
     def __post_init__(self) -> None:
         n_t, n_s = len(self.t_s), len(self.s)
@@ -43,13 +47,16 @@ class CentrelineBatch:
             value = getattr(self, name)
             flags = np.zeros(n_t, dtype=np.uint8) if value is None else np.asarray(value, dtype=np.uint8)
             object.__setattr__(self, name, flags)
-        checks = (
+        shed: np.ndarray | None = self.shed
+        object.__setattr__(self, "shed", np.zeros(n_t, np.float32) if shed is None else np.asarray(shed, np.float32))
+        checks: tuple[tuple[str, tuple[int, ...]], ...] = (
             ("x", (n_t, n_s)),
             ("y", (n_t, n_s)),
             ("delta_rms", (n_t,)),
             ("n_events", (n_t,)),
             ("lost", (n_t,)),
             ("stale", (n_t,)),
+            ("shed", (n_t,)),
         )
         for name, want in checks:
             got = getattr(self, name).shape
@@ -84,6 +91,7 @@ class CentrelineBatch:
             n_events=self.n_events[index],
             lost=self.lost[index],
             stale=self.stale[index],
+            shed=self.shed[index],
         )
 
     @staticmethod
@@ -103,4 +111,5 @@ class CentrelineBatch:
             n_events=np.concatenate([b.n_events for b in batches]),
             lost=np.concatenate([b.lost for b in batches]),
             stale=np.concatenate([b.stale for b in batches]),
+            shed=np.concatenate([b.shed for b in batches]),
         )

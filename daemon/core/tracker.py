@@ -246,6 +246,23 @@ class Tracker:
             complete_before_us = max(complete_before_us, min(trusted_us, self._t_max_us + self._shortest_window_us))
         return complete_before_us
 
+    def skip_to(self, t_us: int) -> int:
+        """The stream's events before ``t_us`` will not be fed (a live tracker shed them): the
+        pending windows that start before ``t_us`` are dropped, not emitted (a gap, not a shape
+        made of part of their events), and the next window is the schedule's first that starts at
+        or after it. Returns the windows dropped. Events fed later that are older than ``t_us``
+        are out of order, as at a chunk boundary."""
+        if self._finished:
+            raise RuntimeError("skip_to() after finish()")
+        clock, dropped = self._clock, 0
+        if clock is None:  # nothing fed yet: the first event starts the schedule, as always
+            return 0
+        while len(skipped := clock.take(np.iinfo(np.int64).min, int(t_us) - 1, _BATCH_UPDATES)[0]):
+            dropped += len(skipped)
+        self._buffer.drop_before(t_us)
+        self._buffer.last_dropped_t = max(self._buffer.last_dropped_t, int(t_us))  # a pause counts from here
+        return dropped
+
     def finish(self) -> CentrelineBatch:
         """End of stream: return the remaining updates whose windows started before the last event."""
         self._finished = True

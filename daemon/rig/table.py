@@ -179,7 +179,10 @@ def _build_tracker(b: Build) -> Service:
     rig, setup = b.rig, b.tracking()
     exit_at_end = b.exit_at_end_of_stream or rig.tracker_service.exit_at_end_of_stream
     cfg = replace(rig.tracker_service, camera_id=rig.camera.id, exit_at_end_of_stream=exit_at_end)
-    return TrackerService(b.bus, cfg, setup.factory, setup.units)
+    replay = rig.camera.replay if rig.camera.adapter == "replay" else None
+    as_fast_as_possible = replay is not None and replay.speed == 0  # no camera's real time to keep up with
+    max_lag_ms = None if as_fast_as_possible else rig.tracker.max_lag_ms
+    return TrackerService(b.bus, cfg, setup.factory, setup.units, max_lag_ms=max_lag_ms)
 
 
 def _check_calibration(rig: RigSections, findings: Findings) -> None:

@@ -31,10 +31,11 @@ from flagtrack.daemon.schema.messages import MESSAGE_TYPES, CentrelineMessage, M
 MAGIC = b"FT"
 VERSION = 3
 """Written in every message. 2 (2026-11-24) added optional fields (EventPacket.stream_id,
-CentrelineMessage.stream, status counters); 3 (2026-11-27) the optional array
-CentrelineMessage.stale (a build that reads only 1 and 2 would refuse the unknown array by its
-name; it refuses the version instead). Messages of earlier versions decode with their defaults,
-and scalar fields this build does not know are ignored."""
+CentrelineMessage.stream, status counters); 3 (2026-11-27) the optional arrays
+CentrelineMessage.stale and CentrelineMessage.shed (a build that reads only 1 and 2 would refuse an
+unknown array by its name; it refuses the version instead). Messages of earlier versions decode with
+their defaults, and scalar fields this build does not know are ignored, so scalar additions need no
+new version."""
 READABLE_VERSIONS = frozenset({1, 2, 3})
 _HEADER = struct.Struct("<2sBBI")
 M = TypeVar("M")
@@ -210,6 +211,7 @@ _SHAPES: dict[type, tuple[tuple[str, tuple[str, ...], str], ...]] = {
         ("source_ns", ("n",), _INT),
         ("lost", ("n",), _INT),
         ("stale", ("n",), _INT),
+        ("shed", ("n",), _REAL),
     ),
     SensorSamples: (("t_us", ("n",), _INT), ("value", ("n",), _REAL), ("trigger_t_us", ("m",), _INT)),
 }

@@ -189,6 +189,10 @@ def _not_said() -> np.ndarray:
     return np.zeros(0, dtype=np.uint8)
 
 
+def _none_shed() -> np.ndarray:
+    return np.zeros(0, dtype=np.float32)
+
+
 @dataclass(frozen=True)
 class CentrelineMessage:
     """A batch of tracker updates: t, joints, smoothed centreline, tip, Δ_RMS, events used.
@@ -204,7 +208,9 @@ class CentrelineMessage:
     ``lost`` (n_t,) uint8: 1 where the flag was not found in the update (optional: a message without
     it, from an older tracker, decodes as all found). ``stale`` (n_t,) uint8: 1 where the shape rests
     on no recent evidence (remembered, not measured; optional: a message without it, from an older
-    tracker, decodes as all 0).
+    tracker, decodes as all 0). ``shed`` (n_t,) float32 in [0, 1]: the fraction of the camera's data
+    since the previous update that the tracker shed to stay within its latency budget
+    (``tracker.max_lag_ms``; optional: a message without it decodes as all 0, nothing shed).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.CENTRELINES
@@ -227,11 +233,14 @@ class CentrelineMessage:
     stream: int = 0
     lost: np.ndarray = field(default_factory=_not_said)
     stale: np.ndarray = field(default_factory=_not_said)
+    shed: np.ndarray = field(default_factory=_none_shed)
 
     def __post_init__(self) -> None:
         for name in ("lost", "stale"):  # not said (an older tracker): all 0
             if len(getattr(self, name)) == 0 and len(self.t_s) > 0:
                 object.__setattr__(self, name, np.zeros(len(self.t_s), dtype=np.uint8))
+        if len(self.shed) == 0 and len(self.t_s) > 0:  # not said (an older tracker): nothing shed
+            object.__setattr__(self, "shed", np.zeros(len(self.t_s), dtype=np.float32))
 
     @classmethod
     def from_batch(
@@ -267,6 +276,7 @@ class CentrelineMessage:
             source_ns=np.asarray(source_ns, np.int64),
             lost=batch.lost,
             stale=batch.stale,
+            shed=batch.shed,
         )
 
     def batch(self) -> CentrelineBatch:
@@ -282,6 +292,7 @@ class CentrelineMessage:
             n_events=self.n_events,
             lost=self.lost,
             stale=self.stale,
+            shed=self.shed,
         )
 
 
@@ -295,6 +306,10 @@ class TrackerStatus:
     ``late_packets``: duplicates and late packets of the stream, dropped.
     ``lost_updates``, ``lost_stretches``: updates that did not find the flag, and runs of them
     (since the service started).
+    ``shed_fraction``: of the camera's events of the last interval, those the tracker shed to stay
+    within its latency budget (0: all tracked); ``shed_packets``, ``shed_events``: the packets it
+    skipped for it and their events (since the service started; they are not missing: the recorder
+    and the rates have them).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.TRACKER_STATUS
@@ -312,6 +327,9 @@ class TrackerStatus:
     late_packets: int = 0
     lost_updates: int = 0
     lost_stretches: int = 0
+    shed_fraction: float = 0.0
+    shed_packets: int = 0
+    shed_events: int = 0
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,9 @@ class LostCount:
         """Count the (n_t,) ``lost`` flags of the next updates, in order."""
         if len(lost) == 0:
             return
+        if not lost.any():  # the usual case: nothing to count (spares the arrays below)
+            self._last = 0
+            return
         flags = np.asarray(lost, dtype=np.int8)
         self.updates += int(flags.sum())
         self.stretches += int(np.count_nonzero(np.diff(flags, prepend=np.int8(self._last)) == 1))

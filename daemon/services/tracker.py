@@ -22,6 +22,7 @@ import dataclasses
 import logging
 import threading
 import time
+from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,10 +32,12 @@ from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.events import empty_events
 from flagtrack.daemon.errors import FormatError
 from flagtrack.daemon.problems import ProblemLog
-from flagtrack.daemon.schema import CentrelineMessage, EventPacket, TrackerStatus
+from flagtrack.daemon.schema import EventPacket, TrackerStatus
 from flagtrack.daemon.services.lost_count import LostCount
 from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
+from flagtrack.daemon.services.tracker_budget import LatencyBudget, ShedSpans, gather
+from flagtrack.daemon.services.tracker_outbox import CentrelineOutbox, updates_source_ns
 from flagtrack.daemon.tracking.pipeline import TrackerPipeline
 from flagtrack.daemon.transport import Bus, Publisher, Subscription
 from flagtrack.drivers.formats.packets import decode_packet
@@ -66,6 +69,11 @@ class TrackerServiceConfig:
             the replay could go beyond it, and then loses packets (counted as dropped).
         exit_at_end_of_stream: stop after the camera's end of stream (a replayed file).
         max_coalesce: packets already queued are tracked together, up to this many.
+        gather_ms: a call holding fewer than ``gather_events`` events waits for more packets until
+            this long after its oldest packet reached the camera: at a low rate, packets are
+            tracked and published a few together instead of one by one (the per-call work is most
+            of the tracker's cost there); 0: every packet at once.
+        gather_events: a call with this many events waits for no more.
     """
 
     camera_id: str = "cam0"
@@ -76,6 +84,8 @@ class TrackerServiceConfig:
     queue_bytes: int = 256 << 20
     exit_at_end_of_stream: bool = False
     max_coalesce: int = 64
+    gather_ms: float = 4.0
+    gather_events: int = 20_000
 
 
 def warm_up_kernels(tracker_factory: Any) -> None:
@@ -96,27 +106,23 @@ def warm_up_kernels(tracker_factory: Any) -> None:
         tracker.finish()
 
 
-def newest_packet_ns(window_ends_us: np.ndarray, horizons_us: np.ndarray, sent_ns: np.ndarray) -> np.ndarray:
-    """(n,) the ``sent_ns`` of the packet holding the last µs of each window (exclusive ends
-    ``window_ends_us``), among packets tracked together (horizons ``t_last_us``, in stream order).
-
-    The latency of an update counts from the arrival of the newest events it used, even when later
-    packets were tracked in the same call; a window beyond every horizon (the end of a stream) is
-    given the last packet.
-    """
-    newest = np.searchsorted(np.maximum.accumulate(horizons_us), np.asarray(window_ends_us) - 1, side="left")
-    return np.asarray(sent_ns, dtype=np.int64)[np.minimum(newest, len(sent_ns) - 1)]
-
-
 class TrackerService:
-    """Tracks one camera live. ``tracker_factory`` builds a fresh core Tracker (one per stream)."""
+    """Tracks one camera live. ``tracker_factory`` builds a fresh core Tracker (one per stream);
+    ``max_lag_ms``: the latency budget (:mod:`.tracker_budget`), None to track every packet however late."""
 
     name = "tracker"
     packets_sub: Subscription  # (opened by start())
     _lines_pub: Publisher
     _status_pub: Publisher
 
-    def __init__(self, bus: Bus, cfg: TrackerServiceConfig, tracker_factory: Any, units: str = "px") -> None:
+    def __init__(
+        self,
+        bus: Bus,
+        cfg: TrackerServiceConfig,
+        tracker_factory: Any,
+        units: str = "px",
+        max_lag_ms: float | None = None,
+    ) -> None:
         self.bus = bus
         self.cfg = cfg
         self.tracker_factory = tracker_factory
@@ -135,11 +141,11 @@ class TrackerService:
         self._drops_logged = 0
         self._sequence = PacketSequence()
         self.late_packets = 0  # duplicates and late packets of the stream, dropped
-        self._pending: list[CentrelineBatch] = []
-        self._pending_ns: list[np.ndarray] = []
-        self._pending_since = 0.0
-        self._seq_out = 0
+        self._outbox = CentrelineOutbox(self.name, units, cfg.batch_updates, cfg.max_batch_delay_s)
         self._pipeline: TrackerPipeline | None = None  # the chain's worker thread, made on first use
+        self.budget = LatencyBudget(max_lag_ms) if max_lag_ms is not None else None
+        self.shed = ShedSpans()  # packets skipped for the budget, and the camera time they held
+        self._held: EventPacket | None = None  # received, left for the next call (no room in the budget)
 
     def start(self) -> None:
         """Subscribe to the camera's packets; declare the centreline and status publishers."""
@@ -160,34 +166,35 @@ class TrackerService:
 
     def run(self, stop: threading.Event) -> None:
         self.warm_up()
+        if self.budget is not None:
+            self.budget.ready_ns = time.time_ns()
         packets, status_pub = self.packets_sub, self._status_pub
         self.bus.declare_alive(self.name)
         last_status = time.monotonic()
-        window = {"events": 0, "updates": 0, "t": last_status}
+        window = {"events": 0, "updates": 0, "shed_events": 0, "t": last_status}
         lag_s = 0.0
         # with updates pending, wake up in time to publish them; otherwise only for the status
         idle_wait_s = max(self.cfg.max_batch_delay_s, min(self.cfg.status_interval_s, 0.1))
         try:
             while not stop.is_set():
                 beat(self.name, f"{self.events} events, {self.updates} updates, {self.missing_packets} packets missing")
-                packet = packets.recv(timeout_s=self.cfg.max_batch_delay_s if self._pending else idle_wait_s)
+                packet, self._held = self._held, None
+                if packet is None:
+                    packet = packets.recv(timeout_s=self.cfg.max_batch_delay_s if len(self._outbox) else idle_wait_s)
                 if packet is not None:
-                    batch = [packet]
-                    while (
-                        len(batch) < self.cfg.max_coalesce
-                        and not batch[-1].end_of_stream
-                        and (more := packets.recv(timeout_s=0)) is not None
-                    ):
-                        batch.append(more)
-                    lag_s = self.handle(batch)
+                    batch, shed, self._held = gather(packet, packets.recv, self.budget, self.cfg)
+                    start_ns, tracked = time.perf_counter_ns(), self.events  # (the work, not the wait)
+                    lag_s = self.handle(batch, shed)
                     if batch[-1].end_of_stream and self.cfg.exit_at_end_of_stream:
                         break
                 # nothing more queued: publish now (latency); under load, batches fill up instead
-                self._publish_if_due(force=len(packets.channel) == 0)
+                self._publish_if_due(force=len(packets.channel) == 0 and self._held is None)
+                if packet is not None and self.budget is not None:
+                    self.budget.measured(self.events - tracked, time.perf_counter_ns() - start_ns)
                 now = time.monotonic()
                 if now - last_status >= self.cfg.status_interval_s:
                     status_pub.put(self._status("tracking", window, now, lag_s))
-                    window = {"events": self.events, "updates": self.updates, "t": now}
+                    window = {"events": self.events, "updates": self.updates, "shed_events": self.shed.events, "t": now}
                     last_status = now
                     self._count_drops()
                     self.problems.flush()
@@ -199,15 +206,16 @@ class TrackerService:
             self._count_drops()
             self.problems.flush(force=True)
 
-    def handle(self, packets: list[EventPacket]) -> float:
-        """Decode and track packets (in order); return the lag (s) from the last one's arrival at the camera.
+    def handle(self, packets: list[EventPacket], shed: Collection[int] = ()) -> float:
+        """Decode and track packets (in order) but those at the indices ``shed`` (skipped: the latency budget);
+        return the lag (s) from the last one's arrival at the camera.
 
         Packets that queued up while the tracker was busy are decoded and fed together: the packets
         of a stream concatenate into one valid stream, and the core's results do not depend on how
         the stream is cut, so the per-packet cost does not limit the rate.
         """
         run: list[EventPacket] = []
-        for packet in packets:
+        for index, packet in enumerate(packets):
             previous = self._sequence.next_seq
             continues = self._sequence.classify(packet.seq, packet.stream_id)[0] is not Arrival.NEW_STREAM
             problem = packet_problem(packet, self._sequence.horizon_us if continues else None)
@@ -239,6 +247,11 @@ class TrackerService:
                 last_us = horizon if horizon is not None else packet.t_first_us
                 packet = dataclasses.replace(packet, data=b"", n_events=0, t_last_us=last_us)
             self.packets += 1
+            if index in shed and problem is None and not packet.end_of_stream:
+                self._track_run(run)
+                run = []
+                self._skip(packet)
+                continue
             self._sequence.follow_horizon(packet.t_last_us)
             if run and packet.encoding != run[0].encoding:
                 self._track_run(run)
@@ -249,6 +262,19 @@ class TrackerService:
                 run = []
         self._track_run(run)
         return max(0.0, time.time_ns() - packets[-1].sent_ns) * 1e-9
+
+    def _skip(self, packet: EventPacket) -> None:
+        """Shed ``packet`` undecoded: its camera time is a gap in the core's windows, and the updates
+        after it say how much of their time it was."""
+        horizon = self._sequence.horizon_us
+        lo_us = horizon + 1 if horizon is not None else packet.t_first_us
+        self._sequence.follow_horizon(packet.t_last_us)
+        self.shed.add(lo_us, packet.t_last_us + 1, packet.n_events)
+        try:
+            self.tracker.skip_to(packet.t_last_us + 1)
+        except Exception as exc:  # noqa: BLE001 - as any chunk the core cannot take: a fresh tracker goes on
+            self._failed([packet], exc)
+            self.tracker = self.tracker_factory()
 
     def _new_stream(self, packet: EventPacket, previous_next_seq: int | None) -> None:
         """Another stream began (the camera restarted). The updates of the old stream are
@@ -265,6 +291,7 @@ class TrackerService:
         )
         self.tracker = self.tracker_factory()
         self.stream += 1
+        self.shed.end_stream()
 
     def _track_run(self, run: list[EventPacket], end_of_stream: bool = False) -> None:
         """Decode consecutive packets as one stream (one by one if that fails) and track them."""
@@ -364,7 +391,7 @@ class TrackerService:
                 batches.append(tracker.finish())
             if batches:
                 batch = batches[0] if len(batches) == 1 else CentrelineBatch.concatenate(batches)
-                source_ns = self._source_ns(batch, run, tracker)
+                source_ns = updates_source_ns(batch, run, tracker.params.schedule)
         except Exception as exc:  # noqa: BLE001 - the core choked on this data: a fresh tracker goes on
             batch = None
             self._failed(run, exc)
@@ -379,6 +406,7 @@ class TrackerService:
             self._publish_if_due(force=True, final=True)
             self.stream += 1
             self.lost.end_stream()
+            self.shed.end_stream()
 
     def _failed(self, run: list[EventPacket], exc: Exception) -> None:
         """Count the packets of a run that raised while decoded or tracked (a bug or data the core
@@ -389,60 +417,21 @@ class TrackerService:
             "packets that failed to track", f"packets {run[0].seq}-{run[-1].seq}: {type(exc).__name__}: {exc}", len(run)
         )
 
-    @staticmethod
-    def _source_ns(batch: CentrelineBatch, run: list[EventPacket], tracker: Any) -> np.ndarray:
-        """(n_t,) ``sent_ns`` of the packet that brought each update's newest events."""
-        if len(run) == 1 or len(batch) == 0:
-            return np.full(len(batch), run[-1].sent_ns, dtype=np.int64)
-        return newest_packet_ns(
-            tracker.params.schedule.window_ends_us(batch.t_s),
-            np.array([p.t_last_us for p in run]),
-            np.array([p.sent_ns for p in run]),
-        )
-
     def _add(self, batch: CentrelineBatch, source_ns: np.ndarray) -> None:
         if len(batch) == 0:
             return
-        if not self._pending:
-            self._pending_since = time.monotonic()
-        self._pending.append(batch)
-        self._pending_ns.append(source_ns)
+        shed = self.shed.fractions(batch.t_s, self.tracker.params.schedule.window_ends_us)
+        if shed is not None:  # the first updates after skipped packets
+            batch = dataclasses.replace(batch, shed=shed)
         self.updates += len(batch)
         self.lost.add(batch.lost)
-        if sum(len(b) for b in self._pending) >= self.cfg.batch_updates:
+        if self._outbox.add(batch, source_ns):
             self._publish_if_due(force=True)
 
     def _publish_if_due(self, force: bool, final: bool = False) -> None:
         """Publish the pending updates if the batch is full, old enough, or ``force``; ``final`` ends a stream."""
-        if not self._pending and not final:
-            return
-        if not force and time.monotonic() - self._pending_since < self.cfg.max_batch_delay_s:
-            return
-        if len(self._pending) == 1:  # the usual case live: one packet's updates, published at once
-            batch, source_ns = self._pending[0], self._pending_ns[0]
-        elif self._pending:
-            batch = CentrelineBatch.concatenate(self._pending)
-            source_ns = np.concatenate(self._pending_ns)
-        else:
-            batch, source_ns = self.tracker.feed(empty_events()), np.zeros(0, dtype=np.int64)
-        self._pending, self._pending_ns = [], []
-        starts = list(range(0, len(batch), self.cfg.batch_updates)) or [0]
-        for start in starts:
-            part = slice(start, start + self.cfg.batch_updates)
-            lines = batch if len(starts) == 1 else batch.select(part)
-            self._lines_pub.put(
-                CentrelineMessage.from_batch(
-                    lines,
-                    source=self.name,
-                    seq=self._seq_out,
-                    units=self.units,
-                    source_ns=source_ns[part],
-                    final=final and start == starts[-1],
-                    published_ns=time.time_ns(),
-                    stream=self.stream,
-                )
-            )
-            self._seq_out += 1
+        if force or final or self._outbox.due():
+            self._outbox.publish(self._lines_pub, self.stream, final, lambda: self.tracker.feed(empty_events()))
 
     @property
     def malformed_packets(self) -> int:
@@ -481,4 +470,12 @@ class TrackerService:
             late_packets=self.late_packets,
             lost_updates=self.lost.updates,
             lost_stretches=self.lost.stretches,
+            shed_fraction=_fraction(self.shed.events - window["shed_events"], self.events - window["events"]),
+            shed_packets=self.shed.packets,
+            shed_events=self.shed.events,
         )
+
+
+def _fraction(shed: float, tracked: float) -> float:
+    """The share of ``shed`` in ``shed + tracked`` (0 when both are 0)."""
+    return shed / (shed + tracked) if shed > 0 else 0.0

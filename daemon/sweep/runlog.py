@@ -92,6 +92,8 @@ class PointResult:
         suspect: ``lost_fraction`` is above the supervisor's ``suspect_lost_fraction``: the point's
             numbers may be those of something else than the flag.
         reason: why the point is ``failed`` or ``lossy`` (one line), ``None`` for a good point.
+        shed_fraction: share of the point's camera time the live tracker shed to keep within its
+            latency budget (``/shed``: its numbers rest on the rest; 0 when it tracked everything).
     """
 
     point_id: str
@@ -134,6 +136,7 @@ class PointResult:
     lost_fraction: float = math.nan
     suspect: bool = False
     reason: str | None = None
+    shed_fraction: float = math.nan
 
     @classmethod
     def planned(cls, point: Point, **values: Any) -> PointResult:

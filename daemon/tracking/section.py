@@ -77,6 +77,11 @@ class TrackingConfig:
         max_gap_s: windows without events starting more than this after the last event are not
             written (null: every window).
         calibration: file of a pixel -> metre mapping (flagtrack.calibration); None: pixels.
+        max_lag_ms: the live tracker's latency budget: packets whose updates it could not publish
+            within this of their arrival at the camera are shed, whole, before decoding (their
+            windows are gaps, the updates after them carry ``shed``; the recorder keeps every byte);
+            null: track every packet however late. Not applied to a replay as fast as possible
+            (``speed: 0``), nor offline. See docs/live.md.
     """
 
     root: tuple[float, float] | None = None
@@ -99,6 +104,7 @@ class TrackingConfig:
     t_stop_s: float | None = None
     max_gap_s: float | None = 1.0
     calibration: Path | None = None
+    max_lag_ms: float | None = 50.0
 
     def with_overrides(self, **values: Any) -> TrackingConfig:
         """A copy with the given (non-None) values replaced, e.g. from command-line flags."""
@@ -147,6 +153,8 @@ class TrackingConfig:
             raise ConfigError(f"must be positive, got {self.ds}", key=f"{SECTION}.ds", path=path)
         if self.max_gap_s is not None and not self.max_gap_s > 0:
             raise ConfigError(f"must be positive, got {self.max_gap_s}", key=f"{SECTION}.max_gap_s", path=path)
+        if self.max_lag_ms is not None and not 0 < self.max_lag_ms < float("inf"):
+            raise ConfigError(f"must be positive, got {self.max_lag_ms}", key=f"{SECTION}.max_lag_ms", path=path)
         fields = {f.name: getattr(self.lost, f.name) for f in dataclasses.fields(LostParams)}
         checked = _build(LostParams, path, "lost", **fields)
         lost = checked if not paper and self.lost.enabled else None

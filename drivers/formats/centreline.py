@@ -4,7 +4,9 @@
 ``/delta_rms`` (n_t,), ``/n_events`` (n_t,) int64, ``/lost`` (n_t,) uint8 (1: the flag was not found
 in that update, its shape is not to be trusted; a file written before it reads as zeros), ``/stale``
 (n_t,) uint8 (1: the shape rests on no recent evidence, remembered, not measured; a file written
-before it reads as zeros). Every dataset carries ``units`` and ``description`` attributes
+before it reads as zeros), ``/shed`` (n_t,) float32 (the fraction of the camera's data since the
+previous update that a live tracker shed for its latency budget; a file written before it reads as
+zeros). Every dataset carries ``units`` and ``description`` attributes
 (:mod:`.centreline_layout`); root attributes hold every processing parameter, ``units``,
 ``input_file``, the sensor size, ``format_version`` and ``flagtrack_version``. Files are written
 incrementally (resizable datasets, flushed per append) so memory is bounded and a crash keeps what
@@ -35,7 +37,7 @@ from flagtrack.drivers.formats.centreline_layout import describe_datasets, hdf5_
 _PER_UPDATE = ("t", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events")
 _MAX_PENDING_VALUES = 1 << 23
 """A sink also appends once its pending updates hold this many samples and joints (long centrelines)."""
-_LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost", "stale")
+_LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost", "stale", "shed")
 
 
 class CentrelineWriter:
@@ -62,6 +64,7 @@ class CentrelineWriter:
         self._file.create_dataset("n_events", (0,), maxshape=(None,), dtype="i8", chunks=(chunk_t,))
         for name in ("lost", "stale"):
             self._file.create_dataset(name, (0,), maxshape=(None,), dtype="u1", chunks=(chunk_t,))
+        self._file.create_dataset("shed", (0,), maxshape=(None,), dtype="f4", chunks=(chunk_t,))
         write_attrs(self._file, {"flagtrack_version": __version__, **attrs, **root_format_attrs(attrs)})
         self.n_updates = 0
         self.describe()
@@ -85,6 +88,7 @@ class CentrelineWriter:
             "n_events": batch.n_events,
             "lost": batch.lost,
             "stale": batch.stale,
+            "shed": batch.shed,
         }
         start = self.n_updates
         for name, values in columns.items():
@@ -392,6 +396,7 @@ def read_centrelines(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any]]
                 n_events=f["n_events"][()],
                 lost=f["lost"][()] if "lost" in f else None,
                 stale=f["stale"][()] if "stale" in f else None,
+                shed=f["shed"][()] if "shed" in f else None,
             )
             attrs = {name: _decode_attr(value) for name, value in f.attrs.items()}
     except OSError as exc:
@@ -446,6 +451,7 @@ def read_truth(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any], tuple
             n_events=np.asarray(data.get("n_events", np.zeros(n_t)), dtype=np.int64),
             lost=np.asarray(data.get("lost", np.zeros(n_t)), dtype=np.uint8),
             stale=np.asarray(data.get("stale", np.zeros(n_t)), dtype=np.uint8),
+            shed=np.asarray(data.get("shed", np.zeros(n_t)), dtype=np.float32),
         )
     except ValueError as exc:
         raise FormatError(f"ground truth: {exc}", path=str(path)) from exc

@@ -12,7 +12,7 @@ import pytest
 
 
 @pytest.mark.slow
-def test_bench_live_reports_rate_latency_and_cpu_without_loss(tmp_path: Path) -> None:
+def test_bench_live_reports_rate_latency_cpu_shedding_and_the_record(tmp_path: Path) -> None:
     out = subprocess.run(
         [
             sys.executable,
@@ -30,6 +30,7 @@ def test_bench_live_reports_rate_latency_and_cpu_without_loss(tmp_path: Path) ->
             "1.0",
             "--cache",
             str(tmp_path),
+            "--record",
             "--json",
         ],
         capture_output=True,
@@ -40,18 +41,21 @@ def test_bench_live_reports_rate_latency_and_cpu_without_loss(tmp_path: Path) ->
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result["events"] > 1_000_000  # 0.3 s of a flapping line at ~6 Mev/s
     assert result["throughput_missing_packets"] == 0 and result["latency_missing_packets"] == 0
-    assert result["realtime_missing_packets"] == 0 and result["realtime_updates"] > 800  # 0.3 s: 1200 windows
-    assert result["realtime_kept_up"] is True  # 6 Mev/s at its own pace: far below what the tracker takes
+    assert result["realtime_missing_packets"] == 0 and result["realtime_updates"] > 0
+    if result["realtime_shed_packets"] == 0:  # 6 Mev/s at its own pace: below what the tracker takes on a free machine
+        assert result["realtime_updates"] > 800  # 0.3 s: 1200 windows
+    assert result["realtime_kept_up"] is True  # (by shedding, on a machine too busy for 6 Mev/s)
     assert 0 < result["realtime_publish_latency_p50_ms"] <= result["realtime_publish_latency_p99_ms"]
     assert 0.7 < result["latency_file_rate_mev_s"] < 1.3  # the latency run's own recording, at ~1 Mev/s
     assert result["sustained_mev_s"] > 0.5
-    assert result["latency_updates"] > 3000  # 1 s of a 1 Mev/s recording at its own pace: 4000 updates of 250 us
+    if result["latency_shed_fraction"] == 0:  # (a machine too busy for 1 Mev/s sheds some)
+        assert result["latency_updates"] > 3000  # 1 s of a 1 Mev/s recording at its own pace: 4000 updates of 250 us
     assert 0 < result["publish_latency_p50_ms"] <= result["publish_latency_p99_ms"]
     assert 0 <= result["wakeup_late_p50_ms"] <= result["wakeup_late_p99_ms"] < 1000
     assert result["publish_latency_p50_ms"] < result["latency_p50_ms"]  # the hop back to a subscriber
     for run in ("throughput_cpu_cores", "realtime_cpu_cores", "latency_cpu_cores"):
         cores = result[run]
-        assert set(cores) == {"camera", "tracker", "bench"}
+        assert {"camera", "tracker", "bench"} <= set(cores) <= {"camera", "tracker", "bench", "recorder"}
         assert 0 < cores["tracker"] <= 4 and all(0 <= value <= 4 for value in cores.values())
     assert result["latency_cpu_cores"]["camera"] > 0  # (as fast as possible, it may be done before the first line)
     # the bus alone: 1 s of the latency recording, packets of 1 ms, each timed from the adapter to here
@@ -65,5 +69,15 @@ def test_bench_live_reports_rate_latency_and_cpu_without_loss(tmp_path: Path) ->
     # the tracker's cores over the sustained rate: the same figure as CPU ns per event
     tracker_ns = result["throughput_cpu_cores"]["tracker"] * 1e3 / result["sustained_mev_s"]
     assert per_event["tracker"] == pytest.approx(tracker_ns)
+    # the latency budget: what it shed and how close the live updates stayed to the offline ones
+    assert result["max_lag_ms"] == 50.0 and result["throughput_shed_packets"] == 0  # as fast as possible: never shed
+    assert 0 <= result["realtime_shed_fraction"] <= 1 and 0 <= result["latency_shed_fraction"] <= 1
+    accuracy = result["realtime_accuracy_vs_offline_max_over_l"]
+    assert accuracy is not None and result["realtime_offline_updates"] >= result["realtime_updates"]
+    if result["realtime_shed_packets"] == 0:  # nothing shed (the usual case at 6 Mev/s): the offline updates
+        assert accuracy < 1e-9 and result["realtime_updates"] == result["realtime_offline_updates"]
+    assert result["recorded_equal_source"] is True  # the recorder's file: every event of the source
+    assert result["latency_tracker_cores"] == result["latency_cpu_cores"]["tracker"] > 0
+    assert len(result["load_average_start"]) == 3 and len(result["load_average_end"]) == 3
     # (no comparison of the runs' shares: the throughput run lasts a fifth of a second, a few clock
     # ticks, and at 1 Mev/s the tracker's 4000 updates a second cost it as much as in that run)

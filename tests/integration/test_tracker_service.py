@@ -148,7 +148,7 @@ def test_bad_packets_and_gaps_are_counted_and_tracking_goes_on(tmp_path: Path) -
 def test_each_update_counts_its_latency_from_the_packet_of_its_newest_events() -> None:
     """Packets that queued up are tracked together; each update still names the packet that held
     its window's last µs (not the last packet of the call), and windows past every horizon the last."""
-    from flagtrack.daemon.services.tracker import newest_packet_ns
+    from flagtrack.daemon.services.tracker_outbox import newest_packet_ns
 
     horizons = np.array([999, 1999, 2999])
     sent = np.array([10, 20, 30])

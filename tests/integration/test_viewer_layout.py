@@ -82,6 +82,7 @@ def test_the_file_carries_the_layout(tmp_path: Path) -> None:
         "wind speed": "plots/wind_speed_mps",
         "Δ_RMS": "plots/delta_rms",
         "lost": "plots/lost",
+        "shed": "plots/shed",
     }
     for name, origin in series.items():
         assert (views[name]["kind"], views[name]["origin"]) == ("TimeSeries", origin)
@@ -129,6 +130,19 @@ def test_lost_flags_are_a_series(tmp_path: Path) -> None:
     )
     lost = np.array([v[0] for v in flagged["/plots/lost"]["Scalars:scalars"]])
     np.testing.assert_array_equal(lost, (np.arange(100) % 10 == 0).astype(float))
+
+
+def test_the_share_shed_is_a_series(tmp_path: Path) -> None:
+    message = flapping(0, 0.1, 0.0)
+    shed = np.where(np.arange(100) % 4 == 0, 0.75, 0.0).astype(np.float32)  # every fourth after a skip
+    message = dataclasses.replace(message, shed=shed)
+    got = columns(recorded(tmp_path, lambda logger: logger.centrelines(message), update_rate_hz=None))["/plots/shed"]
+    np.testing.assert_allclose([v[0] for v in got["Scalars:scalars"]], shed)
+    assert got["SeriesLines:names"] == [["shed"]]
+    (tmp_path / "view.rrd").unlink()
+    thinned = columns(recorded(tmp_path, lambda logger: logger.centrelines(message)))["/plots/shed"]
+    values = np.array([v[0] for v in thinned["Scalars:scalars"]])
+    assert len(values) < 100 and np.count_nonzero(values == np.float32(0.75)) == 25  # every update that shed shows
 
 
 @dataclasses.dataclass(frozen=True)

@@ -117,6 +117,7 @@ def test_the_layout_is_in_the_file(demo: dict[str, Any]) -> None:
         "wind speed",
         "Δ_RMS",
         "lost",
+        "shed",
     }
     assert {view["origin"] for view in views.values()} >= {"plots/tip_y", "plots/wind_speed_mps", "supervisor/state"}
 

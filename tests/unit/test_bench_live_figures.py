@@ -6,9 +6,11 @@ import argparse
 import os
 from typing import Any
 
+import numpy as np
 import pytest
 
-from flagtrack.daemon.bench import live
+from flagtrack.daemon.bench import live_figures, live_print
+from flagtrack.daemon.core.centreline import CentrelineBatch
 
 
 def _results(per_event: dict[str, float], missing: int) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
@@ -44,7 +46,7 @@ def _throughput(missing: int, complete: bool = True) -> dict[str, Any]:
 
 
 def test_cpu_per_event_is_the_cores_over_the_sustained_rate() -> None:
-    figures = live._throughput_figures(_throughput(missing=0), 72_000_000)  # 36 Mev/s
+    figures = live_figures.throughput_figures(_throughput(missing=0), 72_000_000)  # 36 Mev/s
     assert figures["sustained_mev_s"] == pytest.approx(36.0)
     ns = {"camera": 0.5e3 / 36.0, "tracker": 1.25e3 / 36.0}  # (not the bench's own process)
     assert figures["cpu_ns_per_event"] == pytest.approx(ns)
@@ -54,10 +56,10 @@ def test_cpu_per_event_is_the_cores_over_the_sustained_rate() -> None:
 
 def test_a_run_that_lost_packets_gives_no_cost_per_event() -> None:
     # the file outran the tracker's queue: its rate counts events the tracker never saw
-    figures = live._throughput_figures(_throughput(missing=859), 72_000_000)
+    figures = live_figures.throughput_figures(_throughput(missing=859), 72_000_000)
     assert figures["sustained_mev_s"] == pytest.approx(36.0)
     assert figures["cpu_ns_per_event"] == {} and figures["cpu_ceiling_mev_s"] is None
-    unfinished = live._throughput_figures(_throughput(missing=0, complete=False), 72_000_000)
+    unfinished = live_figures.throughput_figures(_throughput(missing=0, complete=False), 72_000_000)
     assert unfinished == {"sustained_mev_s": None, "cpu_ns_per_event": {}, "cpu_ceiling_mev_s": None}
 
 
@@ -66,7 +68,7 @@ def test_the_ceiling_is_printed_only_from_a_lossless_run(lossless: bool, capsys:
     per_event = {"camera": 13.9, "tracker": 34.7} if lossless else {}
     results, runs = _results(per_event, missing=0 if lossless else 859)
     args = argparse.Namespace(tau=2.5e-4, packet_us=1000, latency_rate=20.0, secure=False)
-    live._print_plain(args, results, runs)
+    live_print.print_plain(args, results, runs)
     out = capsys.readouterr().out
     assert "the bus alone at 20 Mev/s (camera -> a subscriber, no tracker, 4001 packets): p50 0.30 ms" in out
     assert ("carry at most 41.2 Mev/s" in out) is lossless
@@ -75,12 +77,47 @@ def test_the_ceiling_is_printed_only_from_a_lossless_run(lossless: bool, capsys:
 
 def test_no_ceiling_from_a_run_too_short_for_a_clock_tick_of_cpu() -> None:
     throughput = {**_throughput(missing=0), "cpu_cores": {"camera": 0.0, "tracker": 0.0, "bench": 0.0}}
-    figures = live._throughput_figures(throughput, 72_000_000)
+    figures = live_figures.throughput_figures(throughput, 72_000_000)
     assert figures["cpu_ns_per_event"] == {"camera": 0.0, "tracker": 0.0}
     assert figures["cpu_ceiling_mev_s"] is None  # not a division by zero
 
 
 def test_p50_p99_of_no_latencies_is_nan() -> None:
-    p50, p99 = live._p50_p99([])
+    p50, p99 = live_figures.p50_p99([])
     assert p50 != p50 and p99 != p99  # NaN
-    assert live._p50_p99([1.0, 2.0, 3.0]) == pytest.approx((2.0, 2.98))
+    assert live_figures.p50_p99([1.0, 2.0, 3.0]) == pytest.approx((2.0, 2.98))
+
+
+def _lines(t_s: np.ndarray, offset: float) -> CentrelineBatch:
+    n, s = len(t_s), np.linspace(0.0, 200.0, 51)
+    x = np.tile(s, (n, 1)) + offset
+    return CentrelineBatch(
+        t_s=t_s,
+        s=s,
+        x=x,
+        y=np.zeros((n, 51)),
+        joints_x=np.zeros((n, 11)),
+        joints_y=np.zeros((n, 11)),
+        delta_rms=np.zeros(n),
+        n_events=np.zeros(n, dtype=np.int64),
+    )
+
+
+def test_accuracy_is_the_largest_eps_over_l_at_the_live_updates_times() -> None:
+    offline = _lines(np.arange(10) * 2.5e-4, 0.0)
+    live = _lines(np.arange(2, 10, 2) * 2.5e-4, 0.0)  # every other update (the rest were shed)
+    live.x[-1] += 1.0  # one update 1 px (0.5 % of L) off along its whole length
+    assert live_figures.max_eps_over_l(live, offline, 200.0) == pytest.approx(0.005)
+    assert live_figures.max_eps_over_l(_lines(np.array([9e-3]), 0.0), offline, 200.0) is None  # no common time
+
+
+def test_the_recorded_file_is_compared_by_its_events_not_its_chunks(tmp_path) -> None:
+    from flagtrack.drivers.formats import write_events
+    from flagtrack.drivers.sim.quickline import WavyFlag, line_events
+
+    events = np.concatenate(list(line_events(WavyFlag(), 0, 20_000, 640, 480)))
+    write_events(tmp_path / "a.raw", events, width=640, height=480)
+    write_events(tmp_path / "b.raw", events, width=640, height=480, encoding="evt2")  # other bytes, same events
+    write_events(tmp_path / "c.raw", events[:-1], width=640, height=480)
+    a, b, c = (live_figures.events_digest(tmp_path / f"{name}.raw") for name in "abc")
+    assert a == b and a[0] == len(events) and c != a

@@ -202,8 +202,8 @@ def _set(index: int, part: int, value: object):
         (with_blobs(centreline_message(), _set(0, 1, "(2,3)<i4")), "not a plain array type"),
         (with_blobs(centreline_message(), _set(0, 1, "|S0")), "not a plain array type"),
         (with_blobs(centreline_message(), lambda blobs: blobs.append(list(blobs[0]))), "bad payload descriptor"),
-        (  # the last three blobs: the optional stale and lost (4 uint8 each) and source_ns (4 int64)
-            with_blobs(centreline_message(), lambda blobs: (blobs.pop(), blobs.pop(), blobs.pop()))[:-40],
+        (  # the last four blobs: the optional shed (4 float32), stale and lost (4 uint8 each), and source_ns (4 int64)
+            with_blobs(centreline_message(), lambda blobs: (blobs.pop(), blobs.pop(), blobs.pop(), blobs.pop()))[:-56],
             "missing payload field 'source_ns'",
         ),
     ],

@@ -1,5 +1,5 @@
-"""Schema versions: version 1 and 2 messages (older peers) still decode, scalar fields of a later version are
-ignored."""
+"""Schema versions: messages of versions 1 and 2 (older peers) still decode, scalar fields of a later
+version are ignored."""
 
 from __future__ import annotations
 
@@ -37,8 +37,8 @@ def test_this_build_writes_version_3_and_reads_1_to_3() -> None:
     data = encode(packet)
     assert data[2] == schema.VERSION == 3
     assert decode(data, EventPacket) == packet
-    assert decode(_rewrite(data, version=1), EventPacket) == packet
-    assert decode(_rewrite(data, version=2), EventPacket) == packet
+    for version in (1, 2):
+        assert decode(_rewrite(data, version=version), EventPacket) == packet
     with pytest.raises(SchemaError, match="unsupported schema version 4"):
         decode(_rewrite(data, version=4), EventPacket)
 
@@ -65,7 +65,7 @@ def test_stale_travels_and_a_message_of_before_it_decodes_as_all_0() -> None:
     np.testing.assert_array_equal(back.stale, [1, 0, 0])
     np.testing.assert_array_equal(back.batch().stale, [1, 0, 0])
     np.testing.assert_array_equal(back.lost, [0, 1, 0])
-    without = dataclasses.replace(message, stale=np.zeros(0, dtype=np.uint8))
+    without = dataclasses.replace(message, stale=np.zeros(0, dtype=np.uint8), shed=np.zeros(0, dtype=np.float32))
     data = encode(without)
     for version in (1, 2):  # what an older tracker sends: no stale array
         old = decode(_rewrite(data, version=version), CentrelineMessage)
@@ -77,6 +77,46 @@ def test_a_stale_array_of_another_length_is_refused_by_name() -> None:
     bad = dataclasses.replace(_lines(), stale=np.zeros(5, dtype=np.uint8))
     with pytest.raises(SchemaError, match="stale"):
         decode(encode(bad), CentrelineMessage)
+
+
+def _shed_lines(n: int, shed: np.ndarray | None = None) -> CentrelineMessage:
+    batch = CentrelineBatch(
+        t_s=np.arange(n) * 2.5e-4,
+        s=np.linspace(0, 1, 3),
+        x=np.zeros((n, 3)),
+        y=np.zeros((n, 3)),
+        joints_x=np.zeros((n, 3)),
+        joints_y=np.zeros((n, 3)),
+        delta_rms=np.zeros(n),
+        n_events=np.zeros(n, dtype=np.int64),
+        shed=shed,
+    )
+    return CentrelineMessage.from_batch(batch, source="tracker", seq=0, units="px", source_ns=np.zeros(n))
+
+
+def test_shed_travels_and_a_message_without_it_decodes_as_nothing_shed() -> None:
+    shed = np.array([0.0, 0.5, 1.0, 0.25], dtype=np.float32)
+    got = decode(encode(_shed_lines(4, shed)), CentrelineMessage)
+    np.testing.assert_array_equal(got.shed, shed)
+    np.testing.assert_array_equal(got.batch().shed, shed)
+
+    def without_shed(meta: dict) -> None:
+        meta["_blobs"] = [blob for blob in meta["_blobs"] if blob[0] != "shed"]
+
+    data = encode(_shed_lines(4, shed))
+    old = _rewrite(data[: len(data) - shed.nbytes], version=2, edit=without_shed)  # (shed is the last blob)
+    got = decode(old, CentrelineMessage)
+    assert got.shed.dtype == np.float32
+    np.testing.assert_array_equal(got.shed, np.zeros(4))
+    assert (decode(encode(_shed_lines(0)), CentrelineMessage).shed.shape) == (0,)
+
+
+def test_a_status_of_an_older_tracker_says_nothing_shed() -> None:
+    status = TrackerStatus("tracker", "tracking", 1e6, 4000.0, 0.001, 10, 0, 0, shed_fraction=0.25, shed_packets=3)
+    assert decode(encode(status), TrackerStatus) == status
+    older = _rewrite(encode(status), version=2, edit=lambda meta: [meta.pop("shed_fraction"), meta.pop("shed_packets")])
+    got = decode(older, TrackerStatus)
+    assert (got.shed_fraction, got.shed_packets) == (0.0, 0)
 
 
 def test_a_version_1_packet_without_stream_id_decodes_with_its_default() -> None:

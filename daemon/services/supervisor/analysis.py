@@ -25,7 +25,7 @@ MAX_GAP_S = 60.0
 @dataclass(frozen=True)
 class PointMetrics:
     """What a point's centrelines say (NaN when they cannot say it); ``lost_fraction``: of the
-    updates, those whose ``lost`` is 1."""
+    updates, those whose ``lost`` is 1; ``shed_fraction``: :func:`shed_fraction`."""
 
     amplitude_over_l: float = math.nan
     amplitude_std_over_l: float = math.nan
@@ -35,6 +35,7 @@ class PointMetrics:
     updates: int = 0
     delta_rms_std_over_l: float = math.nan
     lost_fraction: float = math.nan
+    shed_fraction: float = math.nan
 
 
 def point_metrics(
@@ -60,7 +61,9 @@ def point_metrics(
     batch = CentrelineBatch.concatenate(batches)
     n = len(batch)
     if n < 8:
-        return PointMetrics(updates=n, lost_fraction=float(batch.lost.mean()) if n else math.nan)
+        return PointMetrics(
+            updates=n, lost_fraction=float(batch.lost.mean()) if n else math.nan, shed_fraction=shed_fraction(batch)
+        )
     lateral = lateral_displacement(batch.x, batch.y, root, direction_deg)
     tip = lateral[:, -1]
     amplitude = tip_amplitude_over_l(tip, length)
@@ -77,7 +80,17 @@ def point_metrics(
         n,
         float(delta.std()) if len(delta) else math.nan,
         float(batch.lost.mean()),
+        shed_fraction(batch),
     )
+
+
+def shed_fraction(batch: CentrelineBatch) -> float:
+    """The share of the camera time from the first update to the last that the live tracker shed:
+    each update's ``shed`` is the share of the time since the update before it (NaN for fewer than
+    two updates)."""
+    if len(batch) < 2 or not batch.t_s[-1] > batch.t_s[0]:
+        return math.nan
+    return float(np.sum(batch.shed[1:] * np.diff(batch.t_s)) / (batch.t_s[-1] - batch.t_s[0]))
 
 
 def usable_batches(batches: list[CentrelineBatch]) -> list[CentrelineBatch]:

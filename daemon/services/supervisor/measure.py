@@ -57,6 +57,7 @@ class BusMeasure:
                 updates=metrics.updates,
                 delta_rms_std_over_l=metrics.delta_rms_std_over_l,
                 lost_fraction=metrics.lost_fraction,
+                shed_fraction=metrics.shed_fraction,
             )
         return PointResult.planned(
             point,
@@ -69,6 +70,7 @@ class BusMeasure:
             event_rate_mev_s=float(np.mean(collection.rates_hz)) / 1e6 if collection.rates_hz else math.nan,
             cloud_distance_std_over_l=metrics.delta_rms_std_over_l,
             lost_fraction=metrics.lost_fraction,
+            shed_fraction=metrics.shed_fraction,
             **self._check_sensor(point, run_dir, collection, state),
         )
 

@@ -3,7 +3,7 @@
 Entities (stable paths, :mod:`.layout`; the table is in docs/viewer.md), all on the ``camera``
 timeline (seconds of the camera clock): ``camera/events`` recent events coloured by age,
 ``tracker/joints``, ``tracker/centreline``, ``tracker/tip_trail``, time series under ``plots/`` (tip
-y, A/L, event rate, wind speed, Δ_RMS, events per update, the tracker's lost flags) and the supervisor's state and sweep log under ``supervisor/``. A blueprint (:func:`.layout.blueprint`)
+y, A/L, event rate, wind speed, Δ_RMS, events per update, the tracker's lost flags and shed share) and the supervisor's state and sweep log under ``supervisor/``. A blueprint (:func:`.layout.blueprint`)
 goes with every recording.
 
 Rows are queued per entity and sent in one ``send_columns`` call per entity: every ``flush_s`` to a

@@ -20,6 +20,7 @@ WIND_SPEED = "plots/wind_speed_mps"
 DELTA_RMS = "plots/delta_rms"
 EVENTS_PER_UPDATE = "plots/events_per_update"
 LOST = "plots/lost"  # the tracker's lost flag of each update (1: the flag was not found)
+SHED = "plots/shed"  # the share of each update's camera time the tracker shed for its latency budget
 SUPERVISOR_STATE = "supervisor/state"
 SUPERVISOR_LOG = "supervisor/log"
 
@@ -32,6 +33,7 @@ SERIES_NAMES = {
     DELTA_RMS: "event-cloud distance Δ_RMS ({units})",
     EVENTS_PER_UPDATE: "events per update",
     LOST: "lost",
+    SHED: "shed",
 }
 
 #: Time series of kHz data show the last this many seconds before the time cursor.
@@ -40,7 +42,7 @@ RECENT_S = 5.0
 
 def blueprint() -> rrb.Blueprint:
     """The layout: the camera view (events, centreline, joints, tip trail) over the supervisor's state
-    and log on the left; tip y, A/L, event rate, wind speed, Δ_RMS and lost flags on the right."""
+    and log on the left; tip y, A/L, event rate, wind speed, Δ_RMS, lost flags and shed on the right."""
     recent = rrb.VisibleTimeRange(
         TIMELINE,
         start=rrb.TimeRangeBoundary.cursor_relative(seconds=-RECENT_S),
@@ -63,6 +65,7 @@ def blueprint() -> rrb.Blueprint:
                 rrb.TimeSeriesView(name="wind speed", origin=WIND_SPEED),
                 rrb.TimeSeriesView(name="Δ_RMS", origin=DELTA_RMS, time_ranges=recent),
                 rrb.TimeSeriesView(name="lost", origin=LOST),
+                rrb.TimeSeriesView(name="shed", origin=SHED),
             ),
             column_shares=[3, 2],
         ),

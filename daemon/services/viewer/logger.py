@@ -173,7 +173,8 @@ class RerunLogger:
 
     def centrelines(self, msg: CentrelineMessage) -> None:
         """Queue the updates of a batch the view shows (:attr:`slots`): centreline, joints, tip y, Δ_RMS,
-        events used, and the lost flags (at every change too); note every tip and root for the trail and A/L."""
+        events used, the lost flags (at every change too) and the share shed (every update that shed);
+        note every tip and root for the trail and A/L."""
         n = len(msg.t_s)
         if not n:
             return
@@ -189,6 +190,9 @@ class RerunLogger:
         lost_rows = keep | changes(lost, self._last_lost)  # every change of the flag shows
         self._scalars(layout.LOST, t[lost_rows], lost[lost_rows])
         self._last_lost = float(lost[-1])
+        shed = np.asarray(msg.shed, dtype=np.float64).reshape(-1)
+        shed_rows = keep | (shed > 0) if len(shed) == n else keep
+        self._scalars(layout.SHED, t[shed_rows], shed[shed_rows] if len(shed) == n else np.zeros(int(shed_rows.sum())))
         k, shown = t[keep], int(keep.sum())
         if shown:
             strips = np.stack([x[keep], y[keep]], axis=-1).astype(np.float32)  # (k, n_s, 2): a strip per update
