@@ -25,7 +25,7 @@ from flagtrack.calibration.errors import CalibrationError
 from flagtrack.calibration.frame import GridFrame
 from flagtrack.calibration.mapping import PolynomialMapping
 from flagtrack.calibration.polynomial import Polynomial2D, exponents
-from flagtrack.calibration.pseudo_image import BlinkSearch, BlinkTiming, detect_blink, pseudo_image
+from flagtrack.calibration.pseudo_image import BlinkSearch, BlinkSummary, BlinkTiming, detect_blink, pseudo_image
 
 log = logging.getLogger(__name__)
 
@@ -99,7 +99,7 @@ class Calibration:
     plane_m: np.ndarray
     residuals: Residuals
     residual_m: np.ndarray
-    blink: dict[str, object] | None = None
+    blink: BlinkSummary | None = None
     source: str | None = None
     created: str = field(default_factory=lambda: datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"))
 

@@ -10,7 +10,7 @@ vectorises.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -44,6 +44,8 @@ class Polynomial2D:
     scale: float
     coef_x: tuple[float, ...]
     coef_y: tuple[float, ...]
+    _ax: np.ndarray = field(init=False, repr=False, compare=False)  # coef_x in the kernels' padded layout
+    _ay: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         n = len(exponents(self.degree))
@@ -108,7 +110,7 @@ class Polynomial2D:
             self.centre[1],
             1.0 / self.scale,
             self._ax,
-            self._ay,  # type: ignore[attr-defined]
+            self._ay,
             out_x,
             out_y,
         )

@@ -28,6 +28,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import TypedDict
 
 import numpy as np
 
@@ -64,6 +65,18 @@ class BlinkSearch:
             raise ValueError("BlinkSearch.period_us must be > 0")
 
 
+class BlinkSummary(TypedDict):
+    """:meth:`BlinkTiming.to_attrs`: the blink as the calibration file records it."""
+
+    period_us: float
+    n_on: int
+    n_off: int
+    half_window_us: float
+    strength: float
+    step_snr: float | None
+    first_on_us: float | None
+
+
 @dataclass(frozen=True)
 class BlinkTiming:
     """The blink found in a recording.
@@ -84,7 +97,7 @@ class BlinkTiming:
     strength: float
     step_snr: float = math.inf
 
-    def to_attrs(self) -> dict[str, float | int]:
+    def to_attrs(self) -> BlinkSummary:
         """Summary for the calibration file."""
         return {
             "period_us": round(float(self.period_us), 3),
@@ -217,9 +230,9 @@ def detect_blink(t_us: np.ndarray, p: np.ndarray, search: BlinkSearch = BlinkSea
     gap = float(np.median([(t - on[0]) % period_us for t in off])) if on and off else period_us / 2
     half = 0.5 * min(gap, period_us - gap)
     first, last = float(t_us[0]) + half, float(t_us[-1]) - half
-    on = tuple(float(t0 + t) for t in on if first <= t0 + t <= last)
-    off = tuple(float(t0 + t) for t in off if first <= t0 + t <= last)
-    if not on or not off:
+    on_us = tuple(float(t0 + t) for t in on if first <= t0 + t <= last)
+    off_us = tuple(float(t0 + t) for t in off if first <= t0 + t <= last)
+    if not on_us or not off_us:
         raise CalibrationError(
             f"recording of {duration_us / 1e6:.3f} s holds no full blink period of "
             f"{period_us / 1e6:.4f} s (record at least 2 periods)"
@@ -229,10 +242,10 @@ def detect_blink(t_us: np.ndarray, p: np.ndarray, search: BlinkSearch = BlinkSea
         period_us,
         strength,
         snr,
-        len(on),
-        len(off),
+        len(on_us),
+        len(off_us),
     )
-    return BlinkTiming(float(period_us), on, off, float(half), float(strength), float(snr))
+    return BlinkTiming(float(period_us), on_us, off_us, float(half), float(strength), float(snr))
 
 
 def _step_snr(level: np.ndarray, bin_us: float, on_us: list[float], off_us: list[float], margin: int) -> float:

@@ -82,14 +82,8 @@ def _configure_logging(verbose: int) -> None:
 def _print_warnings_as_lines(command: str) -> None:
     """Warnings (a damaged file's words skipped, a truncated end) print as one line, as errors do."""
 
-    def show(
-        message: Warning | str,
-        _category: type[Warning],
-        _filename: str,
-        _lineno: int,
-        _file: Any = None,
-        _line: str | None = None,
-    ) -> None:
+    def show(message: Warning | str, *_where: Any, **_named: Any) -> None:
+        """``warnings.showwarning``: the category, file, line and stream are left out."""
         print(f"flagtrack {command}: warning: {message}", file=sys.stderr)
 
     warnings.showwarning = show

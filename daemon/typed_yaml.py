@@ -68,7 +68,8 @@ def from_mapping(cls: type[T], data: Any, *, path: str | None = None, key: str =
         data = {}
     if not isinstance(data, Mapping):
         raise ConfigError(f"expected a mapping, got {type(data).__name__}", key=key or None, path=path)
-    hints, fields = _describe(cls)
+    described: type = cls  # a plain type: mypy does not count type[T] as Hashable, as the cache needs
+    hints, fields = _describe(described)
     unknown = sorted(set(map(str, data)) - set(fields))
     if unknown:
         name = _join(key, unknown[0])
@@ -228,14 +229,14 @@ def _convert(hint: Any, value: Any, *, path: str | None, key: str) -> Any:  # no
         if value in args:
             return value
         raise ConfigError(f"must be one of {', '.join(map(repr, args))}, got {value!r}", key=key, path=path)
-    if dataclasses.is_dataclass(hint):
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint):
         return from_mapping(hint, value, path=path, key=key)
     if isinstance(hint, type) and issubclass(hint, enum.Enum):
         try:
             return hint(value)
         except ValueError:
-            options = ", ".join(repr(m.value) for m in hint)
-            raise ConfigError(f"must be one of {options}, got {value!r}", key=key, path=path) from None
+            members = ", ".join(repr(m.value) for m in hint)
+            raise ConfigError(f"must be one of {members}, got {value!r}", key=key, path=path) from None
     if origin in (tuple, list):
         if not isinstance(value, list | tuple):
             raise ConfigError(f"expected a list, got {value!r}", key=key, path=path)

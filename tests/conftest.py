@@ -12,7 +12,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 SHARED_REAL = Path(os.environ.get("FLAGTRACK_SHARED_DATA", REPO.parent / "shared" / "data" / "real"))
 
-pytest_plugins = ["tests.fakes.fixtures"]
+pytest_plugins = ["tests.fakes.fixtures", "tests.fakes.tunnel"]
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

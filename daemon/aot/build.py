@@ -62,15 +62,15 @@ def run_workload(folder: Path) -> None:
         for packet in packets + cutter.push(b"".join(p.data for p in packets)) + cutter.flush():
             decode_packet(encoding, packet.data, packet.t_offset_us)
     files = [folder / "w3.raw", folder / "w2.raw", folder / "w.npy", folder / "w.dat"]
-    for path, encoding in zip(files, ("evt3", "evt2", None, None)):
-        write_events(path, events, width=128, height=128, encoding=encoding)
+    for path, file_encoding in zip(files, ("evt3", "evt2", None, None)):
+        write_events(path, events, width=128, height=128, encoding=file_encoding)
     for method in (Method.ROBUST, Method.PAPER):
         config = TrackingConfig(root=(40.0, 64.0), length=60.0, tau_s=2.5e-4, method=method)
         setup = tracking_setup(config)
         for path in files:
             reconstruct_file(path, folder / "out.h5", setup)
         tracker = Tracker(config.tracker_params())
-        tracker.feed(make_events([0, 10], [40, 41], [64, 64], [1, 0]), 20)
+        tracker.feed(make_events(np.array([0, 10]), np.array([40, 41]), np.array([64, 64]), np.array([1, 0])), 20)
         tracker.finish()
 
 
@@ -114,12 +114,14 @@ def _flags_patch(options: dict[Any, dict[str, Any]]) -> Any:
 
     original = pycc_compiler.compile_extra
 
-    def compile_extra(typing_ctx: Any, target_ctx: Any, func: Any, args: Any, ret: Any, flags: Any, **kw: Any) -> Any:
+    def compile_extra(  # numba's own parameter names, so that it can be called as numba's is
+        typingctx: Any, targetctx: Any, func: Any, args: Any, return_type: Any, flags: Any, *rest: Any, **kw: Any
+    ) -> Any:
         kept = {k: v for k, v in options.get(func, {}).items() if k not in ("cache", "inline")}
-        own = Flags()  # pycc shares one Flags object between its exports
+        own: Any = Flags()  # pycc shares one Flags object between its exports; its options are descriptors
         CPUTargetOptions.parse_as_flags(own, kept)
         own.no_compile, own.nrt = True, flags.nrt
-        return original(typing_ctx, target_ctx, func, args, ret, own, **kw)
+        return original(typingctx, targetctx, func, args, return_type, own, *rest, **kw)
 
     pycc_compiler.compile_extra = compile_extra
     return original
@@ -148,21 +150,7 @@ def build(progress: Any = None, workload: Any = run_workload) -> BuildResult:
     cc.output_dir = str(staging)
     cc.target_cpu = llvm.get_host_cpu_name()
     cc.verbose = False
-    exports, options, skipped, kernels = [], {}, 0, 0
-    for kernel in jit.all_kernels():
-        dispatcher = kernel._dispatcher
-        if dispatcher is None or not dispatcher.signatures:
-            continue
-        kernels += 1
-        options[kernel.py_func] = dict(kernel.options)
-        for i, args in enumerate(dispatcher.signatures):
-            specs = [_arg_spec(a) for a in args]
-            if any(s is None for s in specs):
-                skipped += 1
-                continue
-            name = f"k{len(exports)}_{kernel.py_func.__name__.lstrip('_')}_{i}"
-            cc.export(name, _any_alignment(dispatcher.overloads[args].signature))(kernel.py_func)
-            exports.append({"kernel": kernel.name, "export": name, "args": specs})
+    exports, options, skipped, kernels = _export_signatures(cc)
     say(f"compiling {len(exports)} signatures of {kernels} kernels ...")
     original = _flags_patch(options)
     compile_started = time.perf_counter()
@@ -190,6 +178,29 @@ def build(progress: Any = None, workload: Any = run_workload) -> BuildResult:
         shutil.rmtree(target)
     staging.replace(target)
     return BuildResult(target, len(exports), kernels, skipped, workload_s, compile_s)
+
+
+def _export_signatures(cc: Any) -> tuple[list[dict[str, Any]], dict[Any, dict[str, Any]], int, int]:
+    """Export to ``cc`` every signature numba compiled: (the manifest's exports, each kernel's options,
+    signatures skipped, kernels)."""
+    exports: list[dict[str, Any]] = []
+    options: dict[Any, dict[str, Any]] = {}
+    skipped = kernels = 0
+    for kernel in jit.all_kernels():
+        dispatcher = kernel._dispatcher
+        if dispatcher is None or not dispatcher.signatures:
+            continue
+        kernels += 1
+        options[kernel.py_func] = dict(kernel.options)
+        for i, args in enumerate(dispatcher.signatures):
+            specs = [_arg_spec(a) for a in args]
+            if any(s is None for s in specs):
+                skipped += 1
+                continue
+            name = f"k{len(exports)}_{kernel.py_func.__name__.lstrip('_')}_{i}"
+            cc.export(name, _any_alignment(dispatcher.overloads[args].signature))(kernel.py_func)
+            exports.append({"kernel": kernel.name, "export": name, "args": specs})
+    return exports, options, skipped, kernels
 
 
 def _ensure(folder: Path) -> Path:

@@ -12,6 +12,10 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.bench.accuracy_suite.runner import RunSettings
 
 COMMAND = "accuracy"
 HELP = "accuracy of the tracker on simulated recordings (paper section 3): tables, figures, report"
@@ -62,7 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def settings_from_args(args: argparse.Namespace) -> object:
+def settings_from_args(args: argparse.Namespace) -> RunSettings:
     """The :class:`~flagtrack.daemon.bench.accuracy_suite.runner.RunSettings` of the command line."""
     from dataclasses import replace
 
@@ -71,7 +75,7 @@ def settings_from_args(args: argparse.Namespace) -> object:
     from flagtrack.daemon.errors import ConfigError
 
     preset = PRESETS["quick" if args.quick else "full"]
-    changes: dict[str, object] = {}
+    changes: dict[str, Any] = {}  # Preset fields from the command line
     if args.n is not None:
         changes["n_family"] = args.n
     if args.sweep_kinematics is not None:
@@ -89,7 +93,7 @@ def settings_from_args(args: argparse.Namespace) -> object:
     if unknown or not parts:
         raise ConfigError(f"unknown parts {sorted(unknown)}; choose from {', '.join(PART_CHOICES)}", key="parts")
     for key in ("n_family", "n_sweep"):
-        if int(changes.get(key, 1)) < 0:  # type: ignore[call-overload]
+        if int(changes.get(key, 1)) < 0:
             raise ConfigError(f"{key} must be >= 0", key=key)
     methods = tuple(dict.fromkeys(args.method)) if args.method else METHOD_CHOICES
     return RunSettings(
@@ -118,11 +122,11 @@ def run(args: argparse.Namespace) -> int:
         else "flagtrack bench accuracy"
     )
     started = time.perf_counter()
-    result = run_benchmark(settings)  # type: ignore[arg-type]
-    headline = write_results(args.output, result, settings, command)  # type: ignore[arg-type]
-    if not settings.keep_recordings:  # type: ignore[attr-defined]
+    result = run_benchmark(settings)
+    headline = write_results(args.output, result, settings, command)
+    if not settings.keep_recordings:
         try:
-            settings.work_dir.rmdir()  # type: ignore[attr-defined]
+            settings.work_dir.rmdir()
         except OSError:
             pass
     for entry in headline["family"]:
@@ -138,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _report_only(out: Path, settings: object) -> int:
+def _report_only(out: Path, settings: RunSettings) -> int:
     """Rewrite the report of an earlier run (same command line recorded)."""
     from dataclasses import replace
 
@@ -149,8 +153,8 @@ def _report_only(out: Path, settings: object) -> int:
     if not (out / "run.json").is_file():
         raise ConfigError(f"no run.json in {out}: nothing to rewrite", key="output")
     result, run = rows_from_folder(out)
-    methods = tuple(sorted(dict.fromkeys(r["method"] for r in result.rows), key=method_rank)) or settings.methods  # type: ignore[attr-defined]
+    methods = tuple(sorted(dict.fromkeys(r["method"] for r in result.rows), key=method_rank)) or settings.methods
     jobs = run.get("settings", {}).get("jobs", 0)
-    write_results(out, result, replace(settings, methods=methods, jobs=jobs), run["command"])  # type: ignore[type-var]
+    write_results(out, result, replace(settings, methods=methods, jobs=jobs), run["command"])
     print(f"rewrote {out / 'report.md'} from {len(result.rows)} rows")
     return 0

@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
         r["speedup_over_loop"] = loop_s / r["wall_s"]
     for c in costs.values():
         c["per_file_s"] = (c["many_s"] - c["fixed_s"]) / (args.tiny - 1)
-    events = results["pool:1"]["events"]
+    events = int(results["pool:1"]["events"])
     load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
     result = {
         "files": len(files),

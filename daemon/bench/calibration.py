@@ -115,7 +115,7 @@ def _tracker_rates(seconds: float, degree: int) -> dict[str, float]:
     total = sum(len(c) for c in chunks)
     params = TrackingConfig(root=ROOT, length=LENGTH, tau_s=TAU_S).tracker_params()
     mapping = _TimedMapping(_fit(degree, near_identity=True))
-    out = {"events": total}
+    out: dict[str, float] = {"events": total}
     for name, m in (("none", None), ("polynomial", mapping)):
         Tracker(params, mapping=m).feed(chunks[0][:200_000])  # warm-up (numba)
         best, share = float("inf"), 0.0

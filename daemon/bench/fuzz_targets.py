@@ -39,7 +39,7 @@ def originals(folder: str) -> dict[str, bytes]:
     for name in FILE_FORMATS[:-1]:
         path = Path(folder) / f"ok.{name}"
         encoding = {"evt3.raw": "evt3", "evt2.raw": "evt2"}.get(name)
-        write_events(path, events, width=640, height=480, **({"encoding": encoding} if encoding else {}))
+        write_events(path, events, width=640, height=480, encoding=encoding)
         files[name] = path.read_bytes()
     sample = REAL / "tonic_sample.aedat4"
     if sample.is_file():

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 
 COMMAND = "onset"
 HELP = "false alarms and delays of the flag-state detector on synthetic event-rate traces (about a minute)"
@@ -23,9 +22,8 @@ def run(args: argparse.Namespace) -> int:
     from flagtrack.daemon.bench.onset_traces import GRID, report
     from flagtrack.daemon.core.onset import OnsetParams
 
-    variants = GRID if args.grid else {"defaults": {}}
-    for name, changes in variants.items():
-        params = dataclasses.replace(OnsetParams(), **changes)
+    variants = GRID if args.grid else {"defaults": OnsetParams()}
+    for name, params in variants.items():
         print(f"== {name}: {params}")
         for row in report(params, args.hours, args.trials):
             print(row)

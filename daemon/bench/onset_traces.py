@@ -153,14 +153,14 @@ def report(params: OnsetParams, hours: float = 20.0, trials: int = 40, seed: int
     return rows
 
 
-GRID = {
-    "defaults": {},
-    "window 0.5 s": {"window_s": 0.5},
-    "window 2 s": {"window_s": 2.0},
-    "dwell_on 0.5 s": {"dwell_on_s": 0.5},
-    "dwell_on 1 s": {"dwell_on_s": 1.0},
-    "dwell_on 3 s": {"dwell_on_s": 3.0},
-    "dwell_off 0.5 s": {"dwell_off_s": 0.5},
-    "on x3 / off x1.5": {"on_ratio": 3.0, "off_ratio": 1.5},
-    "on x6 / off x3": {"on_ratio": 6.0, "off_ratio": 3.0},
+GRID: dict[str, OnsetParams] = {
+    "defaults": OnsetParams(),
+    "window 0.5 s": OnsetParams(window_s=0.5),
+    "window 2 s": OnsetParams(window_s=2.0),
+    "dwell_on 0.5 s": OnsetParams(dwell_on_s=0.5),
+    "dwell_on 1 s": OnsetParams(dwell_on_s=1.0),
+    "dwell_on 3 s": OnsetParams(dwell_on_s=3.0),
+    "dwell_off 0.5 s": OnsetParams(dwell_off_s=0.5),
+    "on x3 / off x1.5": OnsetParams(on_ratio=3.0, off_ratio=1.5),
+    "on x6 / off x3": OnsetParams(on_ratio=6.0, off_ratio=3.0),
 }

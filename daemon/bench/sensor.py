@@ -13,7 +13,7 @@ import argparse
 import json
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 if TYPE_CHECKING:  # NumPy is imported when the benchmark runs (fast --help)
     import numpy as np
@@ -21,7 +21,22 @@ if TYPE_CHECKING:  # NumPy is imported when the benchmark runs (fast --help)
 COMMAND = "sensor"
 HELP = "point-sensor check on the twin (e/L, both clock syncs) and the sensor drivers' sample rates"
 
-BEAM = {"x_over_l": 0.73, "units_per_reading": 1 / 0.6, "zero_reading": 100.0, "direction": -1}  # mm, +y side
+
+class BeamValues(TypedDict):
+    """:class:`~flagtrack.daemon.core.pointsensor.BeamParams`' keyword arguments (NumPy-free at import)."""
+
+    x_over_l: float
+    units_per_reading: float
+    zero_reading: float
+    direction: int
+
+
+BEAM: BeamValues = {
+    "x_over_l": 0.73,
+    "units_per_reading": 1 / 0.6,
+    "zero_reading": 100.0,
+    "direction": -1,
+}  # mm, +y side
 L_PX = 300.0
 
 
@@ -173,7 +188,7 @@ def _drivers(duration_s: float) -> list[dict[str, Any]]:
     from flagtrack.drivers.sensor.device import DeviceParams, SimulatedSensorDevice
     from flagtrack.drivers.sensor.setup import SensorConfig, open_sensor
 
-    cases = [
+    cases: list[tuple[str, DeviceParams, dict[str, Any]]] = [
         ("ascii poll", DeviceParams(), {"driver": "ascii"}),
         ("ascii stream", DeviceParams(rate_hz=1000), {"driver": "ascii", "ascii": {"mode": "stream"}}),
         ("modbus", DeviceParams(protocol="modbus"), {"driver": "modbus", "modbus": {"scale": 0.01}}),

@@ -51,7 +51,7 @@ class Outcome:
 class _SerialExecutor(Executor):
     """Runs each submitted call at once in this process (``--jobs 1``)."""
 
-    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:  # type: ignore[override]
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
         future: Future = Future()
         try:
             future.set_result(fn(*args, **kwargs))

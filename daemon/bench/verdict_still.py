@@ -148,7 +148,8 @@ def evaluate(folder: Path, profile_name: str = "full", seed: int = 0) -> dict[st
     t_s = centrelines.t_s
     stale = np.asarray(getattr(centrelines, "stale", np.zeros(len(t_s))), bool)
     lost = np.asarray(centrelines.lost, bool)
-    points, settled = [], {}
+    points = []
+    settled: dict[str, np.ndarray] = {}
     for k, (name, mps, kind) in enumerate(profile.points):
         rows = (t_s >= k * profile.point_s + profile.settle_s) & (t_s < (k + 1) * profile.point_s)
         settled[kind] = settled.get(kind, np.zeros(len(t_s), bool)) | rows

@@ -73,9 +73,8 @@ def open_source(
         if not sized and sensor is None:
             raise ConfigError(f"--replay {replay}: the recording does not give the sensor size: give --sensor W H")
         width, height = sensor if sensor is not None else (None, None)
-        cfg = ReplayConfig(replay, speed=speed, native=False, width=width, height=height)
-        camera: Any = ReplayCamera(cfg)
-        return Source(camera, camera.open(), f"recording {replay}", live=False)
+        recording = ReplayCamera(ReplayConfig(replay, speed=speed, native=False, width=width, height=height))
+        return Source(recording, recording.open(), f"recording {replay}", live=False)
     if rig is None:
         raise ConfigError("give a rig config (-c RIG.yaml) or a recording (--replay REC)")
     from flagtrack.daemon.rig.build import open_camera, open_hardware_camera

@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
             f"({info.days_left():6.0f} days)  {state}"
         )
     if bad:
-        names = ", ".join(f"{r.info.path.name} ({r.problem})" for r in bad)
-        print(f"flagtrack certs check: {len(bad)} to act on: {names}", file=sys.stderr)
+        listed = ", ".join(f"{r.info.path.name} ({r.problem})" for r in bad)
+        print(f"flagtrack certs check: {len(bad)} to act on: {listed}", file=sys.stderr)
         return 1
     return 0

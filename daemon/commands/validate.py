@@ -7,8 +7,13 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from flagtrack.daemon.commands._tracking_args import add_tracking_arguments
+
+if TYPE_CHECKING:  # imported where the command runs (fast --help)
+    from flagtrack.daemon.sweep.runlog import RunRecord
+    from flagtrack.daemon.tracking.setup import TrackingSetup
 
 COMMAND = "validate"
 HELP = "recompute the point-sensor comparison of a finished sweep (figures and table)"
@@ -87,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _tracking_setup(args: argparse.Namespace, record) -> object:  # noqa: ANN001
+def _tracking_setup(args: argparse.Namespace, record: RunRecord) -> TrackingSetup:
     """The tracking set-up of ``--reconstruct``: the ``-c`` file's or the run's own, with the flags applied."""
     from flagtrack.daemon.commands._tracking_args import apply_tracking_arguments
     from flagtrack.daemon.tracking.setup import tracking_setup

@@ -89,7 +89,7 @@ def auto_roi(
         from flagtrack.calibration.calfile import load_mapping
 
         mapping = load_mapping(tracker.calibration)
-        image_size, units = tuple(mapping.image_size), mapping.units
+        image_size, units = mapping.image_size, mapping.units
     radius = chain_reach(tracker.length, tracker.link_lengths, tracker.joints, tracker.alpha)
     try:
         reach = Reach(tracker.root, radius, tracker.direction_deg, half_angle_deg, margin_over_l * tracker.length)

@@ -262,7 +262,9 @@ def _assemble(
 def _point_from_json(record: dict[str, Any], path: Path, offset: int) -> PointResult:
     names = {f.name for f in dataclasses.fields(PointResult)}
     record = {**{new: record[old] for old, new in POINT_ALIASES.items() if old in record}, **record}
-    values = {k: (math.nan if v is None and k in _FLOAT_FIELDS else v) for k, v in record.items() if k in names}
+    values: dict[str, Any] = {  # JSON values: PointResult(**values) below says which field is wrong
+        k: (math.nan if v is None and k in _FLOAT_FIELDS else v) for k, v in record.items() if k in names
+    }
     problem = identifier_problem(values.get("point_id"), "point_id")  # it names files (validate, resume)
     for name in ("raw_file", "centreline_file"):  # paths inside the run folder
         file = values.get(name)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TypedDict
 
 import numpy as np
 
@@ -30,6 +31,25 @@ class FlagFrame:
     length: float
     root: tuple[float, float]
     direction_deg: float
+
+
+class SensorFields(TypedDict):
+    """The sensor fields of a :class:`~flagtrack.daemon.sweep.runlog.PointResult` (same names and types)."""
+
+    sensor_status: str
+    sensor_error_rms_over_l: float
+    sensor_error_max_over_l: float
+    sensor_error_mean_over_l: float
+    sensor_error_std_over_l: float
+    sensor_sync: str
+    sensor_offset_us: float
+    sensor_offset_unc_us: float
+    sensor_drift_ppm: float
+    sensor_xcorr_offset_us: float
+    sensor_xcorr_unc_us: float
+    sensor_samples: int
+    sensor_missing: int
+    sensor_compared: int
 
 
 @dataclass(frozen=True)
@@ -74,7 +94,7 @@ class PointValidation:
         finite = self.delta_rms[np.isfinite(self.delta_rms)] / self.frame.length
         return (float(finite.mean()), float(finite.std())) if len(finite) else (math.nan, math.nan)
 
-    def fields(self) -> dict[str, object]:
+    def fields(self) -> SensorFields:
         """The sensor fields of a :class:`~flagtrack.daemon.sweep.runlog.PointResult`."""
         c = self.comparison
         nan = math.nan

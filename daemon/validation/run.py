@@ -148,14 +148,15 @@ def _validate_one(
         window_s,
     )
     d_mean, d_std = validation.cloud_distance_over_l
-    fields = {
+    checked = dataclasses.replace(
+        point,
         **validation.fields(),
-        "cloud_distance_mean_over_l": d_mean,
-        "cloud_distance_std_over_l": d_std,
-        "centreline_file": _relative(lines_path, run_dir),
-        "sensor_figure": _relative(figure, run_dir),
-    }
-    return dataclasses.replace(point, **fields), figure
+        cloud_distance_mean_over_l=d_mean,
+        cloud_distance_std_over_l=d_std,
+        centreline_file=_relative(lines_path, run_dir),
+        sensor_figure=_relative(figure, run_dir),
+    )
+    return checked, figure
 
 
 def point_validation(

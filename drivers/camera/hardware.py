@@ -89,7 +89,7 @@ def check_serial(serial: object) -> None:
         )
 
 
-def device_label(serial: str | None) -> str:
+def device_label(serial: str | int | None) -> str:
     """How errors name the device: ``camera 'SERIAL'`` or ``first camera``."""
     return f"camera '{serial}'" if serial else "first camera"
 

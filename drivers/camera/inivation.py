@@ -217,7 +217,8 @@ class InivationCamera:
 
     def _apply(self, camera: Any, width: int, height: int) -> dict[str, Any]:
         """Apply the configured settings; return them as read back from the camera."""
-        cfg, out = self.cfg, {}
+        cfg = self.cfg
+        out: dict[str, Any] = {}
         if cfg.roi is not None:
             r = cfg.roi.on_sensor(width, height)
             _set(camera, "setCropArea", "roi", (r.x, r.y, r.width, r.height))

@@ -145,7 +145,7 @@ class MetavisionCamera:
             serial = str(call_or_none(hw, "get_serial") or self.cfg.serial)
             self.label = device_label(serial)
             native = str(call_or_none(hw, "get_current_data_encoding_format") or self.cfg.format or "")
-            settings = {
+            settings: dict[str, Any] = {
                 "driver": "openeb",
                 "driver_version": sdk_version("metavision-hal", hal),
                 "serial": serial,

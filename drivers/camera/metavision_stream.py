@@ -28,10 +28,15 @@ from flagtrack.drivers.camera.hardware import RawStream, call_or_none
 class HalStream(Protocol):
     """Camera data from the events stream's buffers (one of the classes below)."""
 
-    published: str
-    """Encoding of the packets the camera service makes (``evt3`` or ``evt2``)."""
-    bytes: int
-    """Bytes of the device's stream taken so far."""
+    @property
+    def published(self) -> str:
+        """Encoding of the packets the camera service makes (``evt3`` or ``evt2``)."""
+        ...
+
+    @property
+    def bytes(self) -> int:
+        """Bytes of the device's stream taken so far."""
+        ...
 
     def take(self, buffer: Any) -> CameraData | None:
         """The data of one buffer of ``get_latest_raw_data``, or None if it is empty."""

@@ -7,7 +7,6 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -60,6 +59,10 @@ class ReplayConfig:
             )
 
 
+_Slice = tuple[np.ndarray | bytes | Packet, np.ndarray, int]
+"""(events, triggers, t_until_us): decoded events, or a native replay's bytes as read or cut packet."""
+
+
 class ReplayCamera:
     """A :class:`~flagtrack.drivers.camera.base.Camera` reading a file.
 
@@ -70,11 +73,11 @@ class ReplayCamera:
 
     def __init__(self, cfg: ReplayConfig) -> None:
         self.cfg = cfg
-        self._slices: Iterator[tuple[np.ndarray, np.ndarray, int]] | None = None
+        self._slices: Iterator[_Slice] | None = None
         self.native = False
         self.t_offset_us = 0  # a native file's % t_offset_us (its times start there)
         self._body_offset = 0
-        self._pending: tuple[np.ndarray, np.ndarray, int] | None = None
+        self._pending: _Slice | None = None
         self._wall0 = 0.0
         self._t0_us: int | None = None
         self.loops = 0
@@ -131,9 +134,10 @@ class ReplayCamera:
             if wait > 0:
                 time.sleep(wait)
         self._pending = None
-        if self.native:  # events holds the file's bytes, or the packet a paced replay cut
-            if isinstance(events, Packet):
-                return CameraData(empty_events(), empty_triggers(), time.time_ns(), t_until, packets=[events])
+        # a native replay hands over the file's bytes, or the packet a paced replay cut
+        if isinstance(events, Packet):
+            return CameraData(empty_events(), empty_triggers(), time.time_ns(), t_until, packets=[events])
+        if isinstance(events, bytes):
             until = t_until if t_until >= 0 else None
             return CameraData(empty_events(), empty_triggers(), time.time_ns(), t_until_us=until, raw=events)
         return CameraData(events, triggers, time.time_ns(), t_until_us=t_until)
@@ -141,7 +145,7 @@ class ReplayCamera:
     def close(self) -> None:
         self._slices = None
 
-    def _native_slices(self, path: Path, encoding: str) -> Iterator[tuple[Any, np.ndarray, int]]:
+    def _native_slices(self, path: Path, encoding: str) -> Iterator[_Slice]:
         """(bytes, no triggers, -1) of the file's body as read (as fast as possible), or (packet, no
         triggers, t_until_us) per ``slice_us`` of camera time (paced; cut by a word scan, nothing
         decoded: the packets go to the service as cut)."""
@@ -161,10 +165,11 @@ class ReplayCamera:
                 for piece in cutter.flush():
                     yield piece, no_triggers, piece.t_last_us + 1
 
-    def _loop_slices(self, path: Path) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
+    def _loop_slices(self, path: Path) -> Iterator[_Slice]:
         shift = 0
         while True:
-            t_first = t_last = None
+            t_first: int | None = None
+            t_last = 0
             for events, triggers, t_until in self._file_slices(path):
                 if shift:  # the slices are the decoder's own arrays: shifted in place
                     events["t"] += shift

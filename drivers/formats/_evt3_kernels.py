@@ -224,7 +224,7 @@ def encode_evt3(ev_t, ev_x, ev_y, ev_p, i, tr_t, tr_c, tr_e, j, state, out, t_of
             last_y = y
         run = _vector_run(ev_t, ev_x, ev_y, ev_p, i, n_ev)
         if run >= 3:
-            mask = 0
+            mask = np.int64(0)
             for q in range(i, i + run):
                 mask |= 1 << (np.int64(ev_x[q]) - x)
             out[k] = 0x3000 | (p << 11) | x

@@ -363,8 +363,8 @@ class Encoder:
 
     def encode(self, events: np.ndarray, triggers: np.ndarray | None = None) -> bytes:
         """Return the stream bytes for ``events`` (EVENT_DTYPE) and ``triggers`` (TRIGGER_DTYPE)."""
-        ev = _columns(events, ("t", "x", "y", "p"), EVENT_DTYPE)
-        return self.encode_columns(*ev, triggers=triggers)
+        t, x, y, p = _columns(events, ("t", "x", "y", "p"), EVENT_DTYPE)
+        return self.encode_columns(t, x, y, p, triggers=triggers)
 
     def encode_columns(
         self, t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, triggers: np.ndarray | None = None

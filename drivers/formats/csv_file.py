@@ -59,7 +59,8 @@ class CsvReader(EventReader):
         self.order = [(names or COLUMNS).index(c) for c in COLUMNS]
         size = next((m.groups() for m in map(_SIZE.search, comments) if m), None)
         header = {"comments": comments, "columns": ",".join(names or COLUMNS)}
-        self.info = RecordingInfo(self.path, "csv", None, *(map(int, size) if size else (None, None)), header)
+        width, height = (int(size[0]), int(size[1])) if size else (None, None)
+        self.info = RecordingInfo(self.path, "csv", None, width, height, header)
 
     def _chunks(self) -> Iterator[EventChunk]:
         rows = np.empty((max(self.chunk_bytes // 16, 1024), 4), dtype=np.int64)

@@ -143,7 +143,7 @@ class NpyWriter:
         array = np.asarray(events)
         if array.dtype != EVENT_DTYPE:
             converted = np.empty(len(array), dtype=EVENT_DTYPE)
-            for name in EVENT_DTYPE.names:
+            for name in ("t", "x", "y", "p"):  # EVENT_DTYPE's fields
                 converted[name] = array[name]
             array = converted
         self._file.write(np.ascontiguousarray(array).tobytes())

@@ -258,7 +258,12 @@ class _HeldColumns:
     are dropped in place."""
 
     def __init__(self) -> None:
-        self._buffers = (np.empty(0, np.int64), np.empty(0, np.uint16), np.empty(0, np.uint16), np.empty(0, np.uint8))
+        self._buffers: tuple[np.ndarray, ...] = (
+            np.empty(0, np.int64),
+            np.empty(0, np.uint16),
+            np.empty(0, np.uint16),
+            np.empty(0, np.uint8),
+        )
         self.n = 0
 
     @property

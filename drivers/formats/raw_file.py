@@ -73,7 +73,13 @@ class RawWriter:
     """
 
     def __init__(
-        self, path: str | Path, *, width: int, height: int, encoding: str | None = None, simulated: bool = False
+        self,
+        path: str | Path,
+        *,
+        width: int | None,
+        height: int | None,
+        encoding: str | None = None,
+        simulated: bool = False,
     ) -> None:
         self.path = Path(path)
         self.simulated = simulated

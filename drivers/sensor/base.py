@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
@@ -54,9 +55,9 @@ class SensorReading:
 
 
 def reading(
-    t_us: list[int] | np.ndarray = (),
-    value: list[float] | np.ndarray = (),
-    trigger_t_us: list[int] | np.ndarray = (),
+    t_us: Sequence[int] | np.ndarray = (),
+    value: Sequence[float] | np.ndarray = (),
+    trigger_t_us: Sequence[int] | np.ndarray = (),
     missing: int = 0,
     wall_ns: int | None = None,
 ) -> SensorReading:

@@ -67,8 +67,8 @@ class SimulatedSensorDevice:
         self._out_of_range = False
         self._streaming = False
         self._buffer = b""
-        self._next_sample_us = 0
-        self._next_pulse_us = 0
+        self._next_sample_us = 0.0  # float: the sample period need not be whole microseconds
+        self._next_pulse_us = 0.0
         self.requests = 0
         self._mono0_ns = time.monotonic_ns()
         self._link = PtyLink()

@@ -159,7 +159,8 @@ def disrupted(
         obj = CrossingObject(start_us, start_us + 150 * ms, at(0.6, -1.0), at(0.6, 1.0), radius_px=0.125 * length)
         return crossing(events, obj, rng, width, height), (start_us, start_us + 150 * ms)
 
-    offset, spans = 0.0, ()
+    offset = 0.0
+    spans: tuple[tuple[int, int], ...] = ()
     if name == "occlusion":
         events, spans = occlusion(events, t0 + 150 * ms, t0 + 250 * ms), ((t0 + 150 * ms, t0 + 250 * ms),)
     elif name == "crossing":

@@ -21,7 +21,10 @@ from flagtrack.daemon.core.jit import njit
 class LineKinematics(Protocol):
     """A moving inextensible line: positions at arc lengths ``s`` and times ``t_s``."""
 
-    length: float
+    @property
+    def length(self) -> float:
+        """The line's length (read-only, so frozen dataclasses and properties satisfy it)."""
+        ...
 
     def positions(self, t_s: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return x, y of shape (len(t_s), len(s)) in the events' length unit."""

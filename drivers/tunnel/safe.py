@@ -25,6 +25,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from types import TracebackType
 from typing import Any, TypeVar
 
@@ -322,7 +323,7 @@ class SafeTunnel:
                 raise TunnelAborted("set-point change aborted", device=self.device)
             elapsed = time.monotonic() - t0
             value = target_mps if elapsed >= duration_s else start_mps + direction * rate * elapsed
-            self._exchange(lambda v=value: self.link.write_setpoint_mps(v))
+            self._exchange(partial(self.link.write_setpoint_mps, value))
             self._setpoint_mps = value
             self._beat_if_watched()
             if value == target_mps:

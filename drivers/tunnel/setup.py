@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Literal, TypedDict
 
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.typed_yaml import from_mapping, load_yaml
@@ -77,9 +77,19 @@ def load_tunnel_config(path: str | Path, section: str = "tunnel") -> TunnelConfi
     return from_mapping(TunnelConfig, data[section], path=str(path), key=section)
 
 
+class _SerialSettings(TypedDict):
+    """The serial line's settings, as both protocol drivers' ``open`` take them."""
+
+    baudrate: int
+    timeout_s: float
+    parity: str
+    stopbits: int
+    bytesize: int
+
+
 def open_link(cfg: TunnelConfig, protocol: str, port: str) -> TunnelLink:
     """Open the protocol driver (``ascii`` or ``modbus``) of ``cfg`` on ``port``."""
-    serial_kwargs = {"baudrate": cfg.baudrate, "timeout_s": cfg.timeout_s, "parity": cfg.parity,
+    serial_kwargs: _SerialSettings = {"baudrate": cfg.baudrate, "timeout_s": cfg.timeout_s, "parity": cfg.parity,
                      "stopbits": cfg.stopbits, "bytesize": cfg.bytesize}  # fmt: skip
     if protocol == "modbus":
         return ModbusTunnel.open(port, cfg.modbus, **serial_kwargs)

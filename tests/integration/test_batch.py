@@ -7,18 +7,13 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import fcntl
 import io
 import json
 import os
-import pty
-import select
 import shutil
 import signal
-import struct
 import subprocess
 import sys
-import termios
 import time
 from pathlib import Path
 
@@ -29,6 +24,8 @@ import pytest
 from flagtrack.daemon.cli import main
 from flagtrack.drivers.formats import write_events
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
+from tests.fakes.rig import SENSOR, simulated_rig
+from tests.fakes.terminal import run_on_a_terminal
 
 FLAG = WavyFlag(root=(120.0, 250.0), length=180.0)
 TRACK = ["--root", "120", "250", "--length", "180", "--tau", "0.0003"]
@@ -204,37 +201,7 @@ def test_bad_inputs_and_options_are_one_line_and_exit_2(campaign: Path, tmp_path
 
 def on_a_terminal(*args: str, timeout_s: float = 60.0) -> str:
     """``flagtrack ARGS`` with stderr on a real pseudo-terminal (100 x 24); what the terminal got."""
-    master, slave = pty.openpty()
-    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
-    try:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "flagtrack.daemon", *args],
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=slave,
-        )
-    finally:
-        os.close(slave)
-    received = bytearray()
-    deadline = time.monotonic() + timeout_s
-    try:
-        while time.monotonic() < deadline:
-            if not select.select([master], [], [], 0.5)[0]:
-                continue
-            try:
-                data = os.read(master, 4096)
-            except OSError:  # EIO: every process holding the terminal has closed it
-                break
-            if not data:
-                break
-            received += data
-    finally:
-        os.close(master)
-        if proc.poll() is None:
-            proc.kill()
-        code = proc.wait(timeout=10)
-    assert code == 0, received.decode(errors="replace")
-    return received.decode(errors="replace")
+    return run_on_a_terminal([sys.executable, "-m", "flagtrack.daemon", *args], columns=100, timeout_s=timeout_s)
 
 
 @pytest.mark.slow
@@ -319,26 +286,16 @@ def sweep_rig(tmp_path: Path) -> object:
     from flagtrack.daemon.rig.config import RigConfig
     from flagtrack.daemon.typed_yaml import from_mapping
 
-    return from_mapping(RigConfig, {
-        "rig": f"bval{time.monotonic_ns() % 10**9}",
-        "camera": {"adapter": "simulated", "packet_us": 4000,
-                   "simulated": {"events_per_px2": 0.5, "noise_rate_hz": 5000, "max_lag_s": 1.0, "time_scale": 0.5,
-                                 "trigger_period_ms": 50,
-                                 "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4, "tau_amp_s": 0.15}}},
-        "tracker": {"root": [150, 240], "length": 300, "tau_s": 0.001},
-        "recorder": {"directory": str(tmp_path / "rec")},
-        "tunnel": {"driver": "simulated",
-                   "safety": {"max_speed_mps": 8, "max_ramp_mps2": 4.0, "ramp_period_s": 0.05, "tolerance_mps": 0.15,
-                              "settle_timeout_s": 3.0, "poll_period_s": 0.05, "keepalive_s": 0.25, "watchdog_s": 1.0},
-                   "sim": {"tau_s": 0.1, "ramp_mps2": 6.0, "watchdog_s": 1.0}},
-        "supervisor": {"mode": "sweep", "runs_dir": str(tmp_path / "runs"), "run_name": "run",
-                       "onset": {"learn_s": 0.5}, "silence_timeout_s": 3.0,
-                       "sweep": {"speeds": [5.5], "branches": ["up"], "settle_s": 0.5, "record_s": 0.8}},
-        "sensor": {"id": "om70", "driver": "simulated", "units": "mm",
-                   "simulated": {"rate_hz": 1000, "noise_over_l": 0.002, "latency_ms": 2.0, "clock_offset_ms": 3.0},
-                   "beam": {"x_over_l": 0.73, "units_per_reading": 1 / 0.6, "zero_reading": 100.0, "direction": -1}},
-        "services": ["camera", "tracker", "recorder", "supervisor", "sensor"],
-    })  # fmt: skip
+    mapping = simulated_rig(
+        tmp_path,
+        f"bval{time.monotonic_ns() % 10**9}",
+        {"speeds": [5.5], "branches": ["up"], "settle_s": 0.5, "record_s": 0.8},
+        tau_s=0.001,
+        twin={"time_scale": 0.5, "trigger_period_ms": 50},
+        supervisor={"onset": {"learn_s": 0.5}, "silence_timeout_s": 3.0},
+        sensor=SENSOR,
+    )
+    return from_mapping(RigConfig, mapping)
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,6 @@ import json
 import shutil
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -19,6 +18,7 @@ from flagtrack.daemon.sweep.runlog import read_run
 from flagtrack.drivers.formats import read_events
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
+from tests.fakes.tunnel import SWEEP_SIM
 from tests.integration.test_restart_resumes import FLAGTRACK, rig_file
 
 
@@ -33,9 +33,8 @@ def _namespaces_work() -> str | None:
 
 
 @pytest.fixture
-def sim() -> Iterator[SimulatedTunnel]:
-    with SimulatedTunnel(SimParams(tau_s=0.1, ramp_mps2=6.0, watchdog_s=1.0)) as tunnel:
-        yield tunnel
+def sim_params() -> SimParams:
+    return SWEEP_SIM
 
 
 @pytest.mark.slow

@@ -11,22 +11,14 @@ import fcntl
 import signal
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.sweep.runlock import LOCK_FILE, RunLock
-from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
 from tests.integration.test_tunnel_cli import FLAGTRACK, rig_config, start_set
-
-
-@pytest.fixture
-def sim() -> Iterator[SimulatedTunnel]:
-    with SimulatedTunnel(SimParams(tau_s=0.05, ramp_mps2=100.0, watchdog_s=1.0)) as tunnel:
-        yield tunnel
 
 
 def test_a_second_tunnel_set_on_a_held_port_is_refused_naming_the_holder(sim: SimulatedTunnel, tmp_path: Path) -> None:

@@ -3,15 +3,7 @@ tracking options' effects, and the progress bar on a real pseudo-terminal."""
 
 from __future__ import annotations
 
-import fcntl
-import os
-import pty
-import select
-import struct
-import subprocess
 import sys
-import termios
-import time
 from pathlib import Path
 
 import h5py
@@ -26,6 +18,7 @@ from flagtrack.daemon.tracking.section import TrackingConfig
 from flagtrack.drivers.formats import write_events
 from flagtrack.drivers.formats.centreline import read_centrelines
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
+from tests.fakes.terminal import run_on_a_terminal
 
 FLAG = WavyFlag(root=(120.0, 250.0), length=180.0)
 T0_US = 5_000_000
@@ -261,47 +254,8 @@ def test_alpha_is_stored_and_changes_the_search_areas(raw_file: Path, tmp_path: 
 
 def _run_on_a_terminal(raw_file: Path, out: Path, *extra: str, timeout_s: float = 60.0) -> str:
     """Run the command with stderr on a real pseudo-terminal (80 x 24); return what the terminal got."""
-    master, slave = pty.openpty()
-    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))
-    try:
-        proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "flagtrack.daemon",
-                "reconstruct",
-                str(raw_file),
-                "-o",
-                str(out),
-                *TRACK_ARGS,
-                *extra,
-            ],
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=slave,
-        )
-    finally:
-        os.close(slave)
-    received = bytearray()
-    deadline = time.monotonic() + timeout_s
-    try:
-        while time.monotonic() < deadline:
-            if not select.select([master], [], [], 0.5)[0]:
-                continue
-            try:
-                data = os.read(master, 4096)
-            except OSError:  # EIO: the child closed the terminal
-                break
-            if not data:
-                break
-            received += data
-    finally:
-        os.close(master)
-        if proc.poll() is None and time.monotonic() >= deadline:
-            proc.kill()
-        code = proc.wait(timeout=10)
-    assert code == 0, received.decode(errors="replace")
-    return received.decode(errors="replace")
+    argv = [sys.executable, "-m", "flagtrack.daemon", "reconstruct", str(raw_file), "-o", str(out), *TRACK_ARGS, *extra]
+    return run_on_a_terminal(argv, timeout_s=timeout_s, exit_s=10)
 
 
 def test_progress_bar_on_a_terminal_and_not_with_no_progress(raw_file: Path, tmp_path: Path) -> None:

@@ -10,13 +10,11 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
 import pytest
-import yaml
 
 from flagtrack.daemon.errors import FormatError
 from flagtrack.daemon.sweep.plan import SweepConfig, plan_points
@@ -25,6 +23,8 @@ from flagtrack.daemon.sweep.runlog import RunLog, read_run
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
 from tests.fakes.helpers import wait_until
+from tests.fakes.rig import rig_yaml, simulated_rig
+from tests.fakes.tunnel import SWEEP_SIM
 
 FLAGTRACK = [sys.executable, "-m", "flagtrack.daemon"]
 
@@ -34,26 +34,17 @@ def rig_file(
 ) -> Path:
     """A whole simulated rig in one process, its tunnel a controller on ``port`` (``recorder``,
     ``supervisor``: more keys of their sections)."""
-    rig = {
-        "rig": f"restart{tmp_path.name[-12:]}".replace("-", "").replace("_", "").lower(),
-        "camera": {"adapter": "simulated", "packet_us": 4000,
-                   "simulated": {"events_per_px2": 0.5, "noise_rate_hz": 5000, "max_lag_s": 1.0}},
-        "tracker": {"root": [150, 240], "length": 300, "tau_s": 0.002},
-        "recorder": {"directory": str(tmp_path / "rec"), "allowed_dirs": [str(tmp_path / "runs")], **(recorder or {})},
-        "tunnel": {
-            "driver": "ascii",
-            "port": port,
-            "timeout_s": 0.3,
-            "safety": {"max_speed_mps": 8, "max_ramp_mps2": 4.0, "ramp_period_s": 0.05, "tolerance_mps": 0.15,
-                       "settle_timeout_s": 3.0, "poll_period_s": 0.05, "keepalive_s": 0.25, "watchdog_s": 1.0},
-        },
-        "supervisor": {"mode": "sweep", "runs_dir": str(tmp_path / "runs"), "run_name": "night",
-                       "onset": {"learn_s": 1.0}, "silence_timeout_s": 3.0, "sweep": sweep, **supervisor},
-        "services": ["camera", "tracker", "recorder", "supervisor"],
-    }  # fmt: skip
-    path = tmp_path / "rig.yaml"
-    path.write_text(yaml.safe_dump(rig))
-    return path
+    name = f"restart{tmp_path.name[-12:]}".replace("-", "").replace("_", "").lower()
+    rig = simulated_rig(
+        tmp_path,
+        name,
+        sweep,
+        flutter=False,
+        tunnel_port=port,
+        recorder={"allowed_dirs": [str(tmp_path / "runs")], **(recorder or {})},
+        supervisor={"run_name": "night", "silence_timeout_s": 3.0, **supervisor},
+    )
+    return rig_yaml(tmp_path, rig)
 
 
 def so_far(run_dir: Path) -> Any:
@@ -65,9 +56,8 @@ def so_far(run_dir: Path) -> Any:
 
 
 @pytest.fixture
-def sim() -> Iterator[SimulatedTunnel]:
-    with SimulatedTunnel(SimParams(tau_s=0.1, ramp_mps2=6.0, watchdog_s=1.0)) as tunnel:
-        yield tunnel
+def sim_params() -> SimParams:
+    return SWEEP_SIM
 
 
 @pytest.mark.slow

@@ -4,7 +4,6 @@ exclusive lock another program then takes), with the tunnel never commanded."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -16,17 +15,10 @@ from flagtrack.daemon.rig.config import load_rig
 from flagtrack.daemon.services.runner import StartError, run_services
 from flagtrack.daemon.transport import Bus
 from flagtrack.drivers.tunnel.setup import open_tunnel
-from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
 from tests.integration.test_transport import free_port
 
 NOWHERE = "192.0.2.1"  # TEST-NET-1 (RFC 5737): an address this host does not have
-
-
-@pytest.fixture
-def sim() -> Iterator[SimulatedTunnel]:
-    with SimulatedTunnel(SimParams(tau_s=0.05, ramp_mps2=100.0, watchdog_s=1.0)) as tunnel:
-        yield tunnel
 
 
 def rig_file(tmp_path: Path, port: str) -> Path:

@@ -25,53 +25,14 @@ from flagtrack.daemon.transport import Bus
 from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.drivers.formats import read_events
 from tests.fakes.helpers import wait_until
+from tests.fakes.rig import simulated_rig
 
-SPEEDS = [4.0, 5.5]
+SPEEDS = [4.0, 5.5]  # the simulated rig's sweep
 
 
 def rig(tmp_path: Path, **supervisor: Any) -> RigConfig:
-    return from_mapping(
-        RigConfig,
-        {
-            "rig": f"sup{time.monotonic_ns() % 10**9}",
-            "camera": {
-                "adapter": "simulated",
-                "packet_us": 4000,  # a light twin: the rig shares 2 cores with the tests
-                "simulated": {
-                    "events_per_px2": 0.5,
-                    "noise_rate_hz": 5000,
-                    "max_lag_s": 1.0,
-                    "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4, "tau_amp_s": 0.15},
-                },
-            },
-            "tracker": {"root": [150, 240], "length": 300, "tau_s": 0.002},
-            "recorder": {"directory": str(tmp_path / "rec")},
-            "tunnel": {
-                "driver": "simulated",
-                "safety": {
-                    "max_speed_mps": 8,
-                    "max_ramp_mps2": 4.0,
-                    "ramp_period_s": 0.05,
-                    "tolerance_mps": 0.15,
-                    "settle_timeout_s": 3.0,
-                    "poll_period_s": 0.05,
-                    "keepalive_s": 0.25,
-                    "watchdog_s": 1.0,
-                },
-                "sim": {"tau_s": 0.1, "ramp_mps2": 6.0, "watchdog_s": 1.0},
-            },
-            "supervisor": {
-                "mode": "sweep",
-                "runs_dir": str(tmp_path / "runs"),
-                "run_name": "run",
-                "onset": {"learn_s": 1.0},
-                "silence_timeout_s": 2.0,
-                "sweep": {"speeds": SPEEDS, "branches": ["up", "down"], "settle_s": 0.5, "record_s": 1.0},
-                **supervisor,
-            },
-            "services": ["camera", "tracker", "recorder", "supervisor"],
-        },
-    )
+    """The simulated rig sweeping SPEEDS up and the first down (``supervisor``: more keys of its section)."""
+    return from_mapping(RigConfig, simulated_rig(tmp_path, f"sup{time.monotonic_ns() % 10**9}", supervisor=supervisor))
 
 
 def run(config: RigConfig, during=None, resume_dir: Path | None = None, timeout_s: float = 90.0):

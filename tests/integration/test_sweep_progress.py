@@ -4,22 +4,15 @@ same per-point facts in the SupervisorState a remote subscriber receives, and a 
 
 from __future__ import annotations
 
-import fcntl
 import json
-import os
-import pty
 import re
-import select
-import struct
 import subprocess
 import sys
-import termios
 import time
 from pathlib import Path
 from typing import Any
 
 import pytest
-import yaml
 
 from flagtrack.daemon.rig.config import RigConfig
 from flagtrack.daemon.rig.run import run_rig
@@ -27,6 +20,8 @@ from flagtrack.daemon.schema import SupervisorState
 from flagtrack.daemon.sweep.runlog import read_run
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.daemon.typed_yaml import from_mapping
+from tests.fakes.rig import rig_yaml, simulated_rig
+from tests.fakes.terminal import run_on_a_terminal
 from tests.integration.test_transport import free_port
 
 pytestmark = pytest.mark.slow
@@ -37,86 +32,18 @@ POINTS = ["000-up-4.00", "001-up-5.50", "002-down-4.00"]
 def rig_mapping(tmp_path: Path, bus: dict[str, Any] | None = None) -> dict[str, Any]:
     """A small sweep (4.0, 5.5 m/s up, 4.0 down) on the light twin: the rig shares 2 cores with the tests."""
     name = f"prog{time.monotonic_ns() % 10**9}"
-    return {
-        "rig": name,
-        **({"bus": {"namespace": f"flagtrack/{name}", **bus}} if bus else {}),
-        "camera": {
-            "adapter": "simulated",
-            "packet_us": 4000,
-            "simulated": {
-                "events_per_px2": 0.5,
-                "noise_rate_hz": 5000,
-                "max_lag_s": 1.0,
-                "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4, "tau_amp_s": 0.15},
-            },
-        },
-        "tracker": {"root": [150, 240], "length": 300, "tau_s": 0.002},
-        "recorder": {"directory": str(tmp_path / "rec")},
-        "tunnel": {
-            "driver": "simulated",
-            "safety": {
-                "max_speed_mps": 8,
-                "max_ramp_mps2": 4.0,
-                "ramp_period_s": 0.05,
-                "tolerance_mps": 0.15,
-                "settle_timeout_s": 3.0,
-                "poll_period_s": 0.05,
-                "keepalive_s": 0.25,
-                "watchdog_s": 1.0,
-            },
-            "sim": {"tau_s": 0.1, "ramp_mps2": 6.0, "watchdog_s": 1.0},
-        },
-        "supervisor": {
-            "mode": "sweep",
-            "runs_dir": str(tmp_path / "runs"),
-            "run_name": "run",
-            "onset": {"learn_s": 1.0},
-            "silence_timeout_s": 2.0,
-            "sweep": {"speeds": [4.0, 5.5], "branches": ["up", "down"], "settle_s": 0.5, "record_s": 1.0},
-        },
-        "services": ["camera", "tracker", "recorder", "supervisor"],
-    }
+    rig = simulated_rig(tmp_path, name)
+    if bus:
+        rig["bus"] = {"namespace": f"flagtrack/{name}", **bus}
+    return rig
 
 
 def rig_file(tmp_path: Path) -> Path:
-    path = tmp_path / "rig.yaml"
-    path.write_text(yaml.safe_dump(rig_mapping(tmp_path)))
-    return path
+    return rig_yaml(tmp_path, rig_mapping(tmp_path))
 
 
 def flagtrack(*args: str) -> list[str]:
     return [sys.executable, "-m", "flagtrack.daemon", *args]
-
-
-def run_on_a_terminal(argv: list[str], timeout_s: float = 180.0) -> str:
-    """Run ``argv`` with stderr on a real pseudo-terminal (80 columns); return what it drew there."""
-    master, slave = pty.openpty()
-    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))
-    try:
-        proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=slave)
-    finally:
-        os.close(slave)
-    received = bytearray()
-    deadline = time.monotonic() + timeout_s
-    try:
-        while time.monotonic() < deadline:
-            if not select.select([master], [], [], 0.5)[0]:
-                continue
-            try:
-                data = os.read(master, 4096)
-            except OSError:  # EIO: the child closed the terminal
-                break
-            if not data:
-                break
-            received += data
-    finally:
-        os.close(master)
-        if proc.poll() is None:
-            proc.kill()
-        code = proc.wait(timeout=30)
-    shown = received.decode(errors="replace")
-    assert code == 0, shown
-    return shown
 
 
 def point_lines(text: str) -> list[str]:
@@ -126,7 +53,7 @@ def point_lines(text: str) -> list[str]:
 
 
 def test_sweep_on_a_terminal_shows_a_line_per_point_above_a_progress_bar(tmp_path: Path) -> None:
-    shown = run_on_a_terminal(flagtrack("sweep", "-c", str(rig_file(tmp_path))))
+    shown = run_on_a_terminal(flagtrack("sweep", "-c", str(rig_file(tmp_path))), timeout_s=180.0)
     lines = point_lines(shown)
     assert [line.split()[1] for line in lines] == ["1/3", "2/3", "3/3"], shown
     assert [line.split()[4] for line in lines] == ["up", "up", "down"]

@@ -15,14 +15,12 @@ from flagtrack.drivers.tunnel.ascii import AsciiProtocol, AsciiTunnel
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
 from tests.fakes.helpers import wait_until
-
-FAST_SIM = SimParams(tau_s=0.02, ramp_mps2=500.0, max_speed_mps=12.0, watchdog_s=1.0, tick_s=0.002)
+from tests.fakes.tunnel import FAST_SIM
 
 
 @pytest.fixture
-def sim() -> Iterator[SimulatedTunnel]:
-    with SimulatedTunnel(FAST_SIM) as tunnel:
-        yield tunnel
+def sim_params() -> SimParams:
+    return FAST_SIM
 
 
 @pytest.fixture

@@ -10,23 +10,17 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from flagtrack.drivers.tunnel.ascii import AsciiTunnel
-from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
 from tests.fakes.helpers import wait_until
+from tests.fakes.tunnel import RIG_SIM
 
 FLAGTRACK = [sys.executable, "-m", "flagtrack.daemon"]
-
-
-@pytest.fixture
-def sim() -> Iterator[SimulatedTunnel]:
-    with SimulatedTunnel(SimParams(tau_s=0.05, ramp_mps2=100.0, watchdog_s=1.0)) as tunnel:
-        yield tunnel
 
 
 def rig_config(tmp_path: Path, port: str) -> Path:
@@ -85,6 +79,8 @@ def test_set_beyond_bounds_is_one_line_error(sim: SimulatedTunnel, tmp_path: Pat
     assert sim.valid_commands == 0  # refused before anything was sent
 
 
+# the controller's watchdog waits out the seconds a loaded machine takes to start `flagtrack tunnel get`
+@pytest.mark.parametrize("sim_params", [replace(RIG_SIM, watchdog_s=30.0)], ids=["watchdog 30 s"])
 def test_get_and_stop(sim: SimulatedTunnel, tmp_path: Path) -> None:
     link = AsciiTunnel.open(sim.port, timeout_s=0.3)
     link.write_setpoint_mps(2.0)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 
 import pytest
 
@@ -12,10 +13,10 @@ from flagtrack.drivers.tunnel.modbus import ModbusMap, ModbusTunnel
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
 from tests.fakes.helpers import wait_until
+from tests.fakes.tunnel import FAST_SIM
 
 pytest.importorskip("pymodbus")
 
-FAST_SIM = SimParams(protocol="modbus", tau_s=0.02, ramp_mps2=500.0, max_speed_mps=12.0, watchdog_s=1.0, tick_s=0.002)
 MAP = ModbusMap(fault_codes={1: "communication loss"}, mps_per_hz=0.2, max_hz=50.0)
 
 
@@ -27,9 +28,13 @@ def modbus_map(request: pytest.FixtureRequest) -> ModbusMap:
 
 
 @pytest.fixture
-def sim(modbus_map: ModbusMap) -> Iterator[SimulatedTunnel]:
-    with SimulatedTunnel(FAST_SIM, modbus_map) as tunnel:
-        yield tunnel
+def sim_params() -> SimParams:
+    return replace(FAST_SIM, protocol="modbus")
+
+
+@pytest.fixture
+def sim_modbus_map(modbus_map: ModbusMap) -> ModbusMap:
+    return modbus_map
 
 
 @pytest.fixture

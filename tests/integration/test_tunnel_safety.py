@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterator
 
 import pytest
 
@@ -43,11 +42,8 @@ class RecordingLink:
 
 
 @pytest.fixture(params=["ascii", "modbus"])
-def sim(request: pytest.FixtureRequest) -> Iterator[SimulatedTunnel]:
-    if request.param == "modbus":
-        pytest.importorskip("pymodbus")
-    with SimulatedTunnel(SimParams(**{**SIM.__dict__, "protocol": request.param})) as tunnel:
-        yield tunnel
+def sim_params(request: pytest.FixtureRequest) -> SimParams:
+    return SimParams(**{**SIM.__dict__, "protocol": request.param})
 
 
 def make_tunnel(sim: SimulatedTunnel, params: SafetyParams = SAFETY) -> tuple[SafeTunnel, RecordingLink]:

@@ -22,68 +22,26 @@ from flagtrack.daemon.transport import Bus
 from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.validation.run import validate_run
 from tests.fakes.helpers import wait_until
+from tests.fakes.rig import SENSOR, SWEEP, simulated_rig
 
 OFFSET_US = 3000.0  # the sensor clock runs 3 ms ahead of the camera's
 TAU_S = 0.001
 
 
 def rig(tmp_path: Path) -> RigConfig:
-    return from_mapping(
-        RigConfig,
-        {
-            "rig": f"val{time.monotonic_ns() % 10**9}",
-            # a light twin at half real time: the rig shares 2 cores with other tests
-            "camera": {
-                "adapter": "simulated",
-                "packet_us": 4000,
-                "simulated": {
-                    "events_per_px2": 0.5,
-                    "noise_rate_hz": 5000,
-                    "max_lag_s": 1.0,
-                    "time_scale": 0.5,
-                    "trigger_period_ms": 50,
-                    "flutter": {"onset_speed_mps": 4.9, "decay_speed_mps": 4.4, "tau_amp_s": 0.15},
-                },
-            },
-            "tracker": {"root": [150, 240], "length": 300, "tau_s": TAU_S},
-            "recorder": {"directory": str(tmp_path / "rec")},
-            "tunnel": {
-                "driver": "simulated",
-                "safety": {
-                    "max_speed_mps": 8,
-                    "max_ramp_mps2": 4.0,
-                    "ramp_period_s": 0.05,
-                    "tolerance_mps": 0.15,
-                    "settle_timeout_s": 3.0,
-                    "poll_period_s": 0.05,
-                    "keepalive_s": 0.25,
-                    "watchdog_s": 1.0,
-                },
-                "sim": {"tau_s": 0.1, "ramp_mps2": 6.0, "watchdog_s": 1.0},
-            },
-            "supervisor": {
-                "mode": "sweep",
-                "runs_dir": str(tmp_path / "runs"),
-                "run_name": "run",
-                "onset": {"learn_s": 0.5},
-                "silence_timeout_s": 3.0,
-                "sweep": {"speeds": [4.0, 5.5], "branches": ["up", "down"], "settle_s": 0.5, "record_s": 1.2},
-            },
-            "sensor": {
-                "id": "om70",
-                "driver": "simulated",
-                "units": "mm",
-                "simulated": {
-                    "rate_hz": 1000,
-                    "noise_over_l": 0.002,
-                    "latency_ms": 2.0,
-                    "clock_offset_ms": OFFSET_US / 1000,
-                },
-                "beam": {"x_over_l": 0.73, "units_per_reading": 1 / 0.6, "zero_reading": 100.0, "direction": -1},
-            },
-            "services": ["camera", "tracker", "recorder", "supervisor", "sensor"],
-        },
+    """The simulated rig with its point sensor; a light twin at half real time (the rig shares 2 cores
+    with other tests) sending sync pulses."""
+    sensor = {**SENSOR, "simulated": {**SENSOR["simulated"], "clock_offset_ms": OFFSET_US / 1000}}
+    mapping = simulated_rig(
+        tmp_path,
+        f"val{time.monotonic_ns() % 10**9}",
+        {**SWEEP, "record_s": 1.2},
+        tau_s=TAU_S,
+        twin={"time_scale": 0.5, "trigger_period_ms": 50},
+        supervisor={"onset": {"learn_s": 0.5}, "silence_timeout_s": 3.0},
+        sensor=sensor,
     )
+    return from_mapping(RigConfig, mapping)
 
 
 @pytest.fixture(scope="module")

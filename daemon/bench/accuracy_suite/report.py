@@ -39,11 +39,11 @@ NOTES = """\
 """
 
 
-def _pct(value: float, digits: int = 2) -> str:
+def _pct(value: float | None, digits: int = 2) -> str:
     return "-" if value is None or not math.isfinite(value) else f"{100 * value:.{digits}f}"
 
 
-def _num(value: float, fmt: str = ".3g") -> str:
+def _num(value: float | None, fmt: str = ".3g") -> str:
     return "-" if value is None or not math.isfinite(value) else format(value, fmt)
 
 
@@ -157,7 +157,7 @@ def targets_section(
     leak: Sequence[dict[str, Any]], shot: Sequence[dict[str, Any]], family: Sequence[dict[str, Any]]
 ) -> str:
     """Beyond the paper: worst tip error at twice the paper's tolerated leak and shot noise; clean medians."""
-    methods = list(dict.fromkeys([e["method"] for e in family] + [e["method"] for e in leak + shot]))
+    methods = list(dict.fromkeys([e["method"] for e in [*family, *leak, *shot]]))
     rows = []
     for m in methods:
         cells = [m]

@@ -53,7 +53,7 @@ class RunResult:
 class _SerialExecutor(Executor):
     """Runs submitted calls at once in this process (``--jobs 1``: easy to profile and debug)."""
 
-    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:  # type: ignore[override]
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
         future: Future = Future()
         try:
             future.set_result(fn(*args, **kwargs))

@@ -12,7 +12,7 @@ import math
 from collections import defaultdict
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -52,7 +52,19 @@ RUN_COLUMNS = (
 COLUMNS = RECORDING_COLUMNS + RUN_COLUMNS
 SWEEP_COLUMNS = ("condition", "n_over_n0") + COLUMNS
 
-PAPER_FAMILY = {
+
+class PaperFamily(TypedDict):
+    """The paper's figures for the family (fractions): ranges (low, high), medians, bounds."""
+
+    delta_rms_over_l: tuple[float, float]
+    max_eps_rms_over_l: tuple[float, float]
+    twi_rel_error_median: float
+    twi_rel_error_p95: float
+    twi_abs_error_max: float
+    twi_abs_error_median: float
+
+
+PAPER_FAMILY: PaperFamily = {
     "delta_rms_over_l": (0.0036, 0.010),
     "max_eps_rms_over_l": (0.0053, 0.016),
     "twi_rel_error_median": 0.0109,
