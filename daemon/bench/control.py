@@ -161,7 +161,7 @@ def _configs(args: argparse.Namespace, folder: Path, ports: dict[str, int]) -> d
 
 def _run_processes(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
     """Run camera, tracker and control until the loop ends; the camera's rate and whether it kept up."""
-    from flagtrack.daemon.bench.live import _free_port
+    from flagtrack.daemon.bench.live_run import free_port as _free_port
 
     ports = {"camera": _free_port(), "tracker": _free_port()}
     paths = _configs(args, folder, ports)

@@ -73,7 +73,8 @@ def _read(path: Path, seconds: float | None) -> tuple[Any, tuple[int, int]]:
 
     from flagtrack.drivers.formats import open_events
 
-    parts, n = [], 0
+    parts: list[Any] = []
+    n = 0
     with open_events(path) as reader:
         size = (reader.info.width or 0, reader.info.height or 0)
         for chunk in reader:

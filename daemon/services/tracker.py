@@ -227,7 +227,7 @@ class TrackerService:
             if arrival is Arrival.LATE:  # a duplicate, or a packet of this stream already passed
                 self.late_packets += 1
                 self.problems.add(
-                    "late or duplicate packets", f"packet {packet.seq} came after {previous - 1}: dropped", 1
+                    "late or duplicate packets", f"packet {packet.seq} came after {(previous or 0) - 1}: dropped", 1
                 )
                 continue
             if arrival is not Arrival.NEXT or problem is not None:

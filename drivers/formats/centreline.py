@@ -347,7 +347,7 @@ class CentrelineSink:
         units = self._units if self._units is not None else self._attrs.get("units")
         if units is None:
             raise ValueError(f"{self.path}: the centrelines' units are not known (give them in attrs or to add)")
-        extra = {"source": self._source} if self._source is not None else {}
+        extra: dict[str, Any] = {"source": self._source} if self._source is not None else {}
         attrs = centreline_attrs(self._attrs, units=units, **extra)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         target = self.path
@@ -394,9 +394,9 @@ def read_centrelines(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any]]
                 joints_y=f["joints/y"][()],
                 delta_rms=f["delta_rms"][()],
                 n_events=f["n_events"][()],
-                lost=f["lost"][()] if "lost" in f else None,
-                stale=f["stale"][()] if "stale" in f else None,
-                shed=f["shed"][()] if "shed" in f else None,
+                lost=f["lost"][()] if "lost" in f else np.zeros(len(f["t"]), np.uint8),
+                stale=f["stale"][()] if "stale" in f else np.zeros(len(f["t"]), np.uint8),
+                shed=f["shed"][()] if "shed" in f else np.zeros(len(f["t"]), np.float32),
             )
             attrs = {name: _decode_attr(value) for name, value in f.attrs.items()}
     except OSError as exc:

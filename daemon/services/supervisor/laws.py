@@ -35,8 +35,10 @@ class Law:
 
     def setpoint(self) -> float:
         """What the law says it holds (its ``setpoint``), NaN when it says nothing."""
-        value = getattr(self.function, "setpoint", getattr(self.module, "setpoint", math.nan))
-        if isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(float(value)):
+        value: object = getattr(self.function, "setpoint", getattr(self.module, "setpoint", math.nan))
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            return math.nan
+        if math.isfinite(float(value)):
             return float(value)
         return math.nan
 
