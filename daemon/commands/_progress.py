@@ -38,10 +38,11 @@ def _number(value: float, fmt: str, width: int) -> str:
 
 def point_line(state: SupervisorState) -> str:
     """The line of the last finished point of ``state``, e.g.
-    ``point  3/17  4.50 m/s up    flapping  A/L 0.231  f  12.4 Hz  lost 0.0 %  e/L RMS 0.43 %  [0:42, ETA 1:38]``.
+    ``point  3/17  4.50 m/s up    flapping  A/L 0.231  f  12.4 Hz  lost 0.0 %  stale 0.0 %  e/L RMS 0.43 %  [0:42, ETA 1:38]``.
 
     Labels, units and digits are those of ``daemon/sweep/quantities.py`` (as README.txt shows them):
     ``lost`` is the % of the point's updates the tracker flagged lost (``-`` when the record has none),
+    ``stale`` the % whose shape rests on no recent events (shown when known),
     ``e/L RMS`` the RMS error against the point sensor in % of L, shown when the point has one.
     """
     from flagtrack.daemon.sweep.quantities import show
@@ -52,6 +53,8 @@ def point_line(state: SupervisorState) -> str:
     if state.last_status in ("failed", "lossy"):
         return f"{head}  {state.last_status.upper()} (the run log says why)  {times}"
     lost = show("lost_fraction", state.lost_fraction if state.lost_fraction >= 0 else None)
+    if state.stale_fraction >= 0:
+        lost += f"  {show('stale_fraction', state.stale_fraction)}"
     error = state.sensor_error_rms_over_l
     sensor = f"  {show('sensor_error_rms_over_l', error)}" if error >= 0 else ""
     return (

@@ -369,7 +369,8 @@ class SupervisorState:
       (1-based position), ``last_speed_mps``, ``last_branch``, ``last_state`` (still | flapping |
       unknown), ``last_status`` (done | failed), ``amplitude_over_l``, ``frequency_hz``,
       ``lost_fraction`` (updates the tracker flagged lost: -1 until the tracker has a lost flag),
-      ``sensor_error_rms_over_l`` (RMS |e|/L against the point sensor: -1 without one).
+      ``sensor_error_rms_over_l`` (RMS |e|/L against the point sensor: -1 without one),
+      ``stale_fraction`` (updates whose shape rests on no recent events: -1 when not known).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.SUPERVISOR_STATE
@@ -395,6 +396,7 @@ class SupervisorState:
     frequency_hz: float = -1.0
     lost_fraction: float = -1.0
     sensor_error_rms_over_l: float = -1.0
+    stale_fraction: float = -1.0
 
 
 @dataclass(frozen=True)

@@ -23,9 +23,20 @@ def lost_fraction(result: PointResult) -> float:
     return math.nan if value is None else float(value)
 
 
-def is_suspect(lost_fraction: float, bound: float) -> bool:
-    """Whether a point whose updates were lost this often (NaN: not known) is suspect (above ``bound``)."""
-    return math.isfinite(lost_fraction) and lost_fraction > bound
+def stale_fraction(result: PointResult) -> float:
+    """Fraction of the point's updates that were stale, or NaN when the record has none (a run log
+    written before ``/stale``)."""
+    value = getattr(result, "stale_fraction", None)
+    return math.nan if value is None else float(value)
+
+
+def is_suspect(lost_fraction: float, bound: float, stale_fraction: float = math.nan, state: str = "") -> bool:
+    """Whether a point is suspect: its updates were lost more often than ``bound``, or, for a flapping
+    point, stale more often (a still flag gives few events: a still point is not suspect for being
+    stale). NaN: not known, not suspect."""
+    if math.isfinite(lost_fraction) and lost_fraction > bound:
+        return True
+    return state == "flapping" and math.isfinite(stale_fraction) and stale_fraction > bound
 
 
 @dataclass(frozen=True)
@@ -38,7 +49,7 @@ class PointFacts:
         status: ``done``, ``failed`` or ``lossy``.
         state: flag state over the recording (``still``, ``flapping``, ``unknown``).
         amplitude_over_l, frequency_hz: tip amplitude A/L and flapping frequency (Hz), NaN if none.
-        lost_fraction: see :func:`lost_fraction`.
+        lost_fraction: see :func:`lost_fraction`; stale_fraction: :func:`stale_fraction`.
         sensor_error_rms_over_l: RMS of |e|/L against the point sensor, NaN without a comparison.
         error: why a failed point failed.
     """
@@ -54,6 +65,7 @@ class PointFacts:
     lost_fraction: float
     sensor_error_rms_over_l: float
     error: str = ""
+    stale_fraction: float = math.nan
 
     @classmethod
     def of(cls, result: PointResult) -> PointFacts:
@@ -70,6 +82,7 @@ class PointFacts:
             lost_fraction=lost_fraction(result),
             sensor_error_rms_over_l=result.sensor_error_rms_over_l,
             error=result.error or "",
+            stale_fraction=stale_fraction(result),
         )
 
 

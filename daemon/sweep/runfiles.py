@@ -222,10 +222,10 @@ def _plan_text(sweep: Any) -> str:
 
 #: The numbers of a point README.txt shows, in its columns' order (their labels and units: ``quantities``).
 README_COLUMNS = (
-    "speed_mps", "amplitude_over_l", "frequency_hz", "lost_fraction", "sensor_error_rms_over_l",
+    "speed_mps", "amplitude_over_l", "frequency_hz", "lost_fraction", "stale_fraction", "sensor_error_rms_over_l",
     "cloud_distance_mean_over_l",
 )  # fmt: skip
-_WIDTHS = {"speed_mps": 8, "amplitude_over_l": 6, "frequency_hz": 6, "lost_fraction": 8}
+_WIDTHS = {"speed_mps": 8, "amplitude_over_l": 6, "frequency_hz": 6, "lost_fraction": 8, "stale_fraction": 9}
 
 
 def _point_header() -> str:

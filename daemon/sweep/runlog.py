@@ -89,11 +89,15 @@ class PointResult:
         sensor_file, sensor_figure: the point's sensor record and figure, relative to the run folder.
         actions: how the point's actions went (``command ok; pause ok``), ``None`` without actions.
         lost_fraction: fraction of the point's updates that did not find the flag (``/lost``).
-        suspect: ``lost_fraction`` is above the supervisor's ``suspect_lost_fraction``: the point's
-            numbers may be those of something else than the flag.
+        suspect: ``lost_fraction`` (or, for a flapping point, ``stale_fraction``) is above the
+            supervisor's ``suspect_lost_fraction``: the point's numbers may be those of something
+            else than the flag, or of a shape the tracker only remembered.
         reason: why the point is ``failed`` or ``lossy`` (one line), ``None`` for a good point.
         shed_fraction: share of the point's camera time the live tracker shed to keep within its
             latency budget (``/shed``: its numbers rest on the rest; 0 when it tracked everything).
+        stale_fraction: fraction of the point's updates whose shape rests on no recent events
+            (``/stale``: remembered, not measured). A still flag gives few events, so a still point
+            is not suspect for it (its A/L of 0 stands).
     """
 
     point_id: str
@@ -137,6 +141,7 @@ class PointResult:
     suspect: bool = False
     reason: str | None = None
     shed_fraction: float = math.nan
+    stale_fraction: float = math.nan
 
     @classmethod
     def planned(cls, point: Point, **values: Any) -> PointResult:

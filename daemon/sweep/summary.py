@@ -34,7 +34,7 @@ SUMMARY_COLUMNS = (
     "t_stop_unix", "error", "cloud_distance_std_over_l", "sensor_status", "sensor_error_mean_over_l",
     "sensor_error_std_over_l", "sensor_sync", "sensor_offset_us", "sensor_offset_unc_us", "sensor_drift_ppm",
     "sensor_xcorr_offset_us", "sensor_xcorr_unc_us", "sensor_samples", "sensor_missing", "sensor_compared", "sensor_file",
-    "sensor_figure", "actions", "lost_fraction", "suspect", "reason", "shed_fraction",
+    "sensor_figure", "actions", "lost_fraction", "suspect", "reason", "stale_fraction", "shed_fraction",
     *POINT_ALIASES,  # the old names of the cloud distance, last, with the same values (for programs that read them)
 )  # fmt: skip
 

@@ -23,6 +23,7 @@ def test_a_point_tracked_off_the_flag_is_suspect(tmp_path: Path) -> None:
     assert supervisor.stop_reason == "finished" and not report.errors
     (point,) = read_run(tmp_path / "runs" / "run").latest_points().values()
     assert point.state == "flapping" and point.lost_fraction > 0.5 and point.suspect
+    assert 0 <= point.stale_fraction <= 1  # measured, not left unknown
     with open(tmp_path / "runs" / "run" / "summary.csv") as handle:
         (row,) = csv.DictReader(handle)
     assert row["suspect"] == "True" and float(row["lost_fraction"]) == pytest.approx(point.lost_fraction)

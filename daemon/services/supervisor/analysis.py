@@ -25,7 +25,8 @@ MAX_GAP_S = 60.0
 @dataclass(frozen=True)
 class PointMetrics:
     """What a point's centrelines say (NaN when they cannot say it); ``lost_fraction``: of the
-    updates, those whose ``lost`` is 1; ``shed_fraction``: :func:`shed_fraction`."""
+    updates, those whose ``lost`` is 1; ``stale_fraction``: those whose ``stale`` is 1 (a shape
+    remembered, not measured); ``shed_fraction``: :func:`shed_fraction`."""
 
     amplitude_over_l: float = math.nan
     amplitude_std_over_l: float = math.nan
@@ -36,6 +37,7 @@ class PointMetrics:
     delta_rms_std_over_l: float = math.nan
     lost_fraction: float = math.nan
     shed_fraction: float = math.nan
+    stale_fraction: float = math.nan
 
 
 def point_metrics(
@@ -62,7 +64,10 @@ def point_metrics(
     n = len(batch)
     if n < 8:
         return PointMetrics(
-            updates=n, lost_fraction=float(batch.lost.mean()) if n else math.nan, shed_fraction=shed_fraction(batch)
+            updates=n,
+            lost_fraction=float(batch.lost.mean()) if n else math.nan,
+            shed_fraction=shed_fraction(batch),
+            stale_fraction=float(batch.stale.mean()) if n else math.nan,
         )
     lateral = lateral_displacement(batch.x, batch.y, root, direction_deg)
     tip = lateral[:, -1]
@@ -81,6 +86,7 @@ def point_metrics(
         float(delta.std()) if len(delta) else math.nan,
         float(batch.lost.mean()),
         shed_fraction(batch),
+        float(batch.stale.mean()),
     )
 
 

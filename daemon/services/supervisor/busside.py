@@ -138,6 +138,7 @@ def progress_fields(progress: SweepProgress | None, now_s: float) -> dict[str, A
             amplitude_over_l=_known(last.amplitude_over_l),
             frequency_hz=_known(last.frequency_hz),
             lost_fraction=_known(last.lost_fraction),
+            stale_fraction=_known(last.stale_fraction),
             sensor_error_rms_over_l=_known(last.sensor_error_rms_over_l),
         )
     return fields

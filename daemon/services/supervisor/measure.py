@@ -58,6 +58,7 @@ class BusMeasure:
                 delta_rms_std_over_l=metrics.delta_rms_std_over_l,
                 lost_fraction=metrics.lost_fraction,
                 shed_fraction=metrics.shed_fraction,
+                stale_fraction=metrics.stale_fraction,
             )
         return PointResult.planned(
             point,
@@ -71,6 +72,7 @@ class BusMeasure:
             cloud_distance_std_over_l=metrics.delta_rms_std_over_l,
             lost_fraction=metrics.lost_fraction,
             shed_fraction=metrics.shed_fraction,
+            stale_fraction=metrics.stale_fraction,
             **self._check_sensor(point, run_dir, collection, state),
         )
 

@@ -105,7 +105,7 @@ class SupervisorConfig:
         publish_interval_s: period of the supervisor and tunnel state messages.
         recorder_timeout_s: how long the recorder may take to acknowledge a command.
         exit_when_done: end the service (and ``flagtrack up``) when the sweep or loop ends.
-        suspect_lost_fraction: a point whose updates are lost more often than this is marked
+        suspect_lost_fraction: a point whose updates are lost (or, flapping, stale) more often than this is marked
             ``suspect`` (run log, summary CSV, figure).
         readback_grace_s: during a point's settle and record, how long the tunnel's readback may stay
             out of ``tunnel.safety.tolerance_mps`` (or its link silent) before the point fails, s.
