@@ -61,15 +61,6 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from flagtrack.daemon.bench.live_figures import (
-    max_eps_over_l,
-    offline_centrelines,
-    throughput_figures,
-    wakeup_lateness_ms,
-)
-from flagtrack.daemon.bench.live_print import print_plain, secure_results
-from flagtrack.daemon.bench.live_run import bus_floor, measure
-
 COMMAND = "live"
 HELP = "sustained event rate and latency of camera -> Zenoh -> tracker on a replayed recording"
 DESCRIPTION = """\
@@ -119,6 +110,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the measurements and print them."""
+    from flagtrack.daemon.bench.live_figures import (
+        max_eps_over_l,
+        offline_centrelines,
+        throughput_figures,
+        wakeup_lateness_ms,
+    )
+    from flagtrack.daemon.bench.live_print import print_plain, secure_results
+    from flagtrack.daemon.bench.live_run import bus_floor
     from flagtrack.daemon.bench.reconstruct import LENGTH, ROOT
     from flagtrack.daemon.tracking.section import TrackingConfig
 
@@ -212,6 +211,8 @@ def _runs(
     args: argparse.Namespace, tracker: dict[str, Any], recording: Path, latency_recording: Path
 ) -> dict[str, dict[str, Any]]:
     """The throughput, real-time and latency runs (and their secured twins with ``--secure``)."""
+    from flagtrack.daemon.bench.live_run import measure
+
     runs: dict[str, dict[str, Any]] = {}
     plans = [
         ("throughput", recording, 0.0, None),

@@ -29,7 +29,6 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # NumPy is imported when the benchmark runs (fast --help)
     import numpy as np
 
-from flagtrack.daemon.bench.live_run import free_port as _free_port
 
 COMMAND = "soak"
 HELP = "camera -> tracker -> recorder (+ supervisor) as processes for M minutes at R Mev/s: loss, memory, latency"
@@ -144,7 +143,9 @@ def soak(minutes: float, rate_mev_s: float, tau_s: float, recording: Path, folde
     from flagtrack.drivers.formats import open_events
 
     file_rate = _event_rate(recording)
-    port = _free_port()
+    from flagtrack.daemon.bench.live_run import free_port
+
+    port = free_port()
     configs = _configs(folder, recording, rate_mev_s * 1e6 / file_rate, tau_s, port)
     procs: dict[str, subprocess.Popen] = {}
     try:

@@ -131,6 +131,14 @@ def sensor_line(rig: RigSections) -> str:
     return f"{sensor.id}: {sensor.driver} {where}, beam at x/L {sensor.beam.x_over_l:g}"
 
 
+def flagstate_line(rig: RigSections) -> str:
+    f = rig.flag_state
+    return (
+        f"the flag's amplitude, frequency and phase cycle by cycle from the centrelines, every {f.interval_s:g} s "
+        f"(cycles up to {f.max_cycle_s:g} s)"
+    )
+
+
 def tunnel_line(rig: RigSections) -> str:
     tunnel = rig.tunnel
     if tunnel is None:
@@ -150,6 +158,7 @@ DESCRIPTIONS: dict[str, Callable[[RigSections], str]] = {
     "supervisor": supervisor_line,
     "recorder": recorder_line,
     "tracker": tracker_line,
+    "flagstate": flagstate_line,
     "viewer": viewer_line,
     "sensor": sensor_line,
     "camera": camera_line,

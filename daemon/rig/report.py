@@ -23,7 +23,7 @@ from flagtrack.daemon.rig.plan import PlanEstimate, estimate_plan
 from flagtrack.daemon.rig.table import SERVICE_NAMES, SERVICES, in_table_order
 from flagtrack.daemon.typed_yaml import load_yaml
 
-READING_ORDER = ("camera", "tracker", "recorder", "viewer", "sensor", "supervisor")
+READING_ORDER = ("camera", "tracker", "flagstate", "recorder", "viewer", "sensor", "supervisor")
 """The order of the summary's lines: along the data, then what drives the tunnel."""
 
 

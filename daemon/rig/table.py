@@ -97,9 +97,11 @@ def _check_supervisor(rig: RigSections, findings: Findings) -> None:
 
     if rig.tunnel is None:  # `flagtrack sweep -c` adds the supervisor to a rig's services
         raise ConfigError("the supervisor needs a 'tunnel:' section (driver: simulated for no hardware)", path=rig.path)
-    unknown = [name for name in rig.supervisor.required if name not in SERVICE_NAMES]
+    from flagtrack.daemon.services.supervisor.monitor import SERVICE_KEYS
+
+    unknown = [name for name in rig.supervisor.required if name not in SERVICE_KEYS]
     if unknown:
-        known = ", ".join(SERVICE_NAMES)
+        known = ", ".join(SERVICE_KEYS)
         raise ConfigError(f"unknown service {unknown[0]!r} (known: {known})", key="supervisor.required", path=rig.path)
     check_speeds(rig)
     if rig.tunnel.driver != "simulated":

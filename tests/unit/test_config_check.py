@@ -88,6 +88,7 @@ def test_the_cli_prints_the_summary_and_exits_0(tmp_path: Path, capsys: pytest.C
         ({"supervisor": {"mode": "feedback", "feedback": {"max_speed_mps": 11}}, "services": ["camera", "supervisor"]},
          "supervisor.feedback.max_speed_mps", "above tunnel.safety.max_speed_mps"),
         ({"supervisor": {"sweep": SWEEP, "required": ["camera", "trakcer"]}}, "supervisor.required", "'trakcer'"),
+        ({"supervisor": {"sweep": SWEEP, "required": ["sensor"]}}, "supervisor.required", "'sensor'"),  # no token it waits for
         ({"supervisor": {"sweep": {**SWEEP, "record_s": 0}}}, "supervisor.sweep", "record_s > 0"),
         ({"camera": {"adapter": "prophesee", "hardware": {"biases": {"dif_on": 3}}}}, "camera.hardware.biases.dif_on",
          "no Prophesee-sensor camera has a bias"),

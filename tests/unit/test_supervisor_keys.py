@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from flagtrack.daemon.core.onset import OnsetParams
-from flagtrack.daemon.services.supervisor.section import FeedbackConfig, SupervisorConfig
+from flagtrack.daemon.services.supervisor.section import ControlConfig, FeedbackConfig, SupervisorConfig
 from flagtrack.daemon.sweep.plan import SweepConfig
 from flagtrack.daemon.typed_yaml import to_mapping
 
@@ -21,6 +21,7 @@ SECTIONS = {
     "supervisor.sweep:": SweepConfig,
     "supervisor.onset:": OnsetParams,
     "supervisor.feedback:": FeedbackConfig,
+    "supervisor.control:": ControlConfig,
 }
 
 
