@@ -1,7 +1,8 @@
-"""The wire schema: every key expression and message type on the bus (:mod:`.messages`), with a
+"""The wire schema: every key expression (:mod:`.keys`) and message type (:mod:`.messages`) on the bus, with a
 versioned encoding (:mod:`.codec`). It knows nothing of YAML or of the transport."""
 
 from flagtrack.daemon.schema.codec import MAGIC, READABLE_VERSIONS, VERSION, decode, encode
+from flagtrack.daemon.schema.keys import Keys
 from flagtrack.daemon.schema.messages import (
     MESSAGE_TYPES,
     CameraStatus,
@@ -9,7 +10,6 @@ from flagtrack.daemon.schema.messages import (
     EventPacket,
     EventRate,
     FlagState,
-    Keys,
     MessageType,
     RecorderCommand,
     RecorderStatus,

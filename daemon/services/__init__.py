@@ -1,1 +1,2 @@
-"""Services of the daemon (camera, tracker, recorder, viewer, supervisor) and the runner that hosts them."""
+"""Services of the daemon (camera, tracker, flag state, recorder, viewer, sensor, supervisor) and the runner
+that hosts them; which of them a rig runs, and how each is built, is the table of ``daemon/rig/table.py``."""

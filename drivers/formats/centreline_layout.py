@@ -61,8 +61,8 @@ DATASETS: tuple[DatasetSpec, ...] = (
                 "1 where the flag was not found in the update (its shape is not to be trusted), else 0"),
     DatasetSpec("stale", "(n_t,)", "uint8", "1",
                 "1 where the update rests on no events newer than tracker.lost.stale_after_s, else 0"),
-    DatasetSpec("shed", "(n_t,)", "float64", "1",
-                "fraction of the window's events the live tracker shed to stay within tracker.max_lag_ms"),
+    DatasetSpec("shed", "(n_t,)", "float32", "1",
+                "fraction of the camera time since the previous update that the live tracker skipped to stay within tracker.max_lag_ms"),
 )  # fmt: skip
 
 #: Root attributes a reader needs besides the processing parameters (docs/formats.md lists them all).
