@@ -45,7 +45,7 @@ def test_layout_attributes_and_times(raw_file: Path, tmp_path: Path, events: np.
     out = tmp_path / "out.h5"
     assert main(["reconstruct", str(raw_file), "-o", str(out), *ARGS]) == 0
     with h5py.File(out, "r") as f:
-        assert set(f) == {"t", "s", "x", "y", "joints", "delta_rms", "n_events", "lost", "stale"}
+        assert set(f) == {"t", "s", "x", "y", "joints", "delta_rms", "n_events", "lost", "stale", "shed"}
         assert f["lost"].dtype == np.uint8 and f["lost"].shape == (f["t"].shape[0],)
         assert set(f["joints"]) == {"x", "y"}
         n_t = f["t"].shape[0]
