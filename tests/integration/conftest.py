@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -20,3 +22,16 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     events = np.concatenate(list(line_events(FLAG, 0, 200_000, 640, 480, QuickLineParams(noise_rate_hz=1e5))))
     write_events(path, events, width=640, height=480, encoding="evt3")
     return path
+
+
+@pytest.fixture(scope="session")
+def quick_demo(tmp_path_factory: pytest.TempPathFactory) -> subprocess.CompletedProcess[str]:
+    """``flagtrack demo --quick --headless --json --out DIR``, run once for the tests that read it
+    (test_demo checks what it prints and writes, test_viewer_rrd its .rrd)."""
+    out = tmp_path_factory.mktemp("demo") / "demo"
+    return subprocess.run(
+        [sys.executable, "-m", "flagtrack.daemon", "demo", "--quick", "--headless", "--json", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )

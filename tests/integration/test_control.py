@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from flagtrack.daemon.cli import main
+from flagtrack.daemon.commands import _feedback_demo
 from flagtrack.daemon.schema import TunnelState
 from flagtrack.daemon.services.supervisor.analysis import point_metrics
 from flagtrack.daemon.transport import Bus, BusConfig
@@ -184,7 +185,11 @@ def test_a_missing_law_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.Cap
 
 @pytest.mark.slow
 @pytest.mark.timeout(300)
-def test_the_feedback_demo_holds_the_flag_through_the_step(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_the_feedback_demo_holds_the_flag_through_the_step(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(_feedback_demo, "STEP_AFTER_S", 12.0)  # (25 s each in the demo: the same law, shorter)
+    monkeypatch.setattr(_feedback_demo, "AFTER_S", 14.0)
     assert main(["demo", "--feedback", "--out", str(tmp_path), "--json", "-q"]) == 0
     found = json.loads(capsys.readouterr().out)
     assert found["amplitude_error_rms_over_l"] < 0.02 and found["amplitude_error_rms_over_l_before_step"] < 0.02

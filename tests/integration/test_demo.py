@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -29,23 +28,8 @@ KEYS = [
 
 
 @pytest.mark.slow
-def test_quick_demo_finds_onset_and_decay_within_one_step(tmp_path: Path) -> None:
-    result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "flagtrack.daemon",
-            "demo",
-            "--quick",
-            "--headless",
-            "--json",
-            "--out",
-            str(tmp_path / "demo"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=240,
-    )
+def test_quick_demo_finds_onset_and_decay_within_one_step(quick_demo: subprocess.CompletedProcess[str]) -> None:
+    result = quick_demo
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout.strip().splitlines()[-1])
     assert list(summary) == KEYS

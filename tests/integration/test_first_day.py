@@ -21,6 +21,7 @@ import pytest
 import yaml
 
 from tests.fakes.helpers import wait_until
+from tests.fakes.rig import TWIN
 from tests.unit.test_first_day_commands import COMMANDS, PENDING, SYSTEM, DocCommand
 
 REPO = Path(__file__).resolve().parents[2]
@@ -29,12 +30,12 @@ FLAGTRACK = [sys.executable, "-m", "flagtrack.daemon"]
 
 def write_twin(folder: Path) -> None:
     """deploy/rig-single-pc.yaml with the hardware simulated: the camera is the digital twin (its flag in
-    pixels where the tracker looks: the twin's flag is not seen through a calibrated camera; half its
-    default event rate, which a slow machine shared with the tests still makes in real time), the tunnel
+    pixels where the tracker looks: the twin's flag is not seen through a calibrated camera; the light
+    twin of the other end-to-end tests, which a machine shared with the tests still makes in real time), the tunnel
     runs on a pseudo-terminal with a faster ramp, the plan has two points, and the view goes nowhere
     (the tests' machine has no display, and a file of the view would only cost time)."""
     rig = yaml.safe_load((REPO / "deploy" / "rig-single-pc.yaml").read_text())
-    twin = {"root_px": [150, 240], "events_per_px2": 1.0}  # half the default rate: a CI machine keeps up
+    twin = {"root_px": [150, 240], **TWIN}
     rig["camera"] = {"id": rig["camera"]["id"], "adapter": "simulated", "simulated": twin}
     rig["tracker"] = {**rig["tracker"], "root": [150, 240], "length": 300}
     safety = {**rig["tunnel"]["safety"], "max_ramp_mps2": 2.0}

@@ -57,14 +57,8 @@ def dataframe_schema(rrd: Path) -> tuple[set[str], dict[str, set[str]]]:
 
 
 @pytest.fixture(scope="module")
-def demo(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    out = tmp_path_factory.mktemp("demo") / "demo"
-    result = subprocess.run(
-        [sys.executable, "-m", "flagtrack.daemon", "demo", "--quick", "--headless", "--json", "--out", str(out)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+def demo(quick_demo: subprocess.CompletedProcess[str]) -> dict[str, Any]:
+    result = quick_demo
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout.strip().splitlines()[-1])
     assert summary["rrd"] and Path(summary["rrd"]).is_file()
