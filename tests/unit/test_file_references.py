@@ -40,13 +40,9 @@ PLACEHOLDERS = frozenset(
     }
 )
 
-#: Known stale names, left to whoever edits these two pages (docs/architecture.md and docs/tracking.md
-#: are not this change's to edit): see the report of branch wip-help (issues 29 and 32), which lists
-#: what to change. Remove each entry once its page is fixed.
-KNOWN_EXCEPTIONS = {
-    "docs/architecture.md": {"../shared/DESIGN.md", "DESIGN.md", "daemon/config.py"},
-    "docs/tracking.md": {"DESIGN.md"},
-}
+#: Known stale names, per text, that a change leaves for another to fix (none now): add one only with
+#: the reason, and remove it once its text is fixed.
+KNOWN_EXCEPTIONS: dict[str, set[str]] = {}
 
 _NAME = r"[\w.@*+<>-]+"
 REFERENCE = re.compile(
