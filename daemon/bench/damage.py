@@ -1,7 +1,8 @@
 """``flagtrack bench damage``: how much of a recording with a few flipped bits the readers keep.
 
 Each try flips 1 to 3 random bits in the body of one of the recordings (round robin; by default the
-real ones in ``../shared/data/real``, else a simulated flag in EVT 3.0 and EVT 2.0), then reads it
+real recordings of the folder ``FLAGTRACK_SHARED_DATA`` names, where a developer has them, else a
+simulated flag in EVT 3.0 and EVT 2.0), then reads it
 twice: stopping at the first fault (``strict``, the events before it kept: the readers before issue 20)
 and as ``flagtrack reconstruct`` now reads it (resynchronised after a corrupt stretch). ``kept`` counts
 the events read back that are events of the intact file (same t, x, y, p), so an event with a wrong
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 import warnings
@@ -28,7 +30,8 @@ Flips 1-3 random bits in recordings and counts the events each way of reading ke
 first fault, or resynchronising as `flagtrack reconstruct` does. More: docs/reliability.md,
 docs/commands.md.
 """
-REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
+REAL = Path(os.environ.get("FLAGTRACK_SHARED_DATA", Path(__file__).resolve().parents[2].parent / "shared/data/real"))
+"""A developer's folder of real recordings (as the tests find it); absent in a user's clone."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
