@@ -21,7 +21,7 @@ import pytest
 import yaml
 
 from tests.fakes.helpers import wait_until
-from tests.fakes.rig import TWIN
+from tests.fakes.rig import TWIN as LIGHT_TWIN
 from tests.unit.test_first_day_commands import COMMANDS, PENDING, SYSTEM, DocCommand
 
 REPO = Path(__file__).resolve().parents[2]
@@ -35,7 +35,7 @@ def write_twin(folder: Path) -> None:
     runs on a pseudo-terminal with a faster ramp, the plan has two points, and the view goes nowhere
     (the tests' machine has no display, and a file of the view would only cost time)."""
     rig = yaml.safe_load((REPO / "deploy" / "rig-single-pc.yaml").read_text())
-    twin = {"root_px": [150, 240], **TWIN}
+    twin = {"root_px": [150, 240], **LIGHT_TWIN}
     rig["camera"] = {"id": rig["camera"]["id"], "adapter": "simulated", "simulated": twin}
     rig["tracker"] = {**rig["tracker"], "root": [150, 240], "length": 300}
     safety = {**rig["tunnel"]["safety"], "max_ramp_mps2": 2.0}
