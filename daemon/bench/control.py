@@ -99,6 +99,8 @@ def run(args: argparse.Namespace) -> int:
 def _configs(args: argparse.Namespace, folder: Path, ports: dict[str, int]) -> dict[str, Path]:
     """The three processes' rig files (one rig, each its own bus section: the camera and the tracker
     listen, each process connects to those before it) and the law's file."""
+    from flagtrack.daemon.rig.twin import simulated_tunnel
+
     common = {
         "rig": f"benchctl{ports['camera']}",
         "camera": {
@@ -113,21 +115,7 @@ def _configs(args: argparse.Namespace, folder: Path, ports: dict[str, int]) -> d
         },
         "tracker": {"root": [150, 240], "length": 300, "direction_deg": 0, "tau_s": 0.0005},
         "tracker_service": {"batch_updates": 64, "max_batch_delay_s": 0.002},
-        "tunnel": {
-            "driver": "simulated",
-            "timeout_s": 2.0,
-            "safety": {
-                "max_speed_mps": 10,
-                "max_ramp_mps2": 2.0,
-                "ramp_period_s": 0.05,
-                "tolerance_mps": 0.15,
-                "settle_timeout_s": 10,
-                "poll_period_s": 0.05,
-                "keepalive_s": 0.5,
-                "watchdog_s": 2.0,
-            },
-            "sim": {"tau_s": 0.2, "ramp_mps2": 3.0, "watchdog_s": 2.0},
-        },  # fmt: skip
+        "tunnel": simulated_tunnel(timeout_s=2.0),
         "services": [],
     }
     camera, tracker = (f"tcp/127.0.0.1:{ports[name]}" for name in ("camera", "tracker"))

@@ -17,6 +17,8 @@ STEP_AFTER_S, AFTER_S, SETTLE_S = 25.0, 25.0, 6.0
 def feedback_rig(out: Path) -> dict[str, Any]:
     """The rig of the feedback demo (the sections a user writes in YAML): a light twin, the tracker, the
     flag state, the recorder, and the supervisor running ``out/law.py`` for 50 s."""
+    from flagtrack.daemon.rig.twin import simulated_tunnel
+
     return {
         "rig": f"fbdemo{int(time.time() * 1000) % 100000}",
         "camera": {
@@ -33,21 +35,7 @@ def feedback_rig(out: Path) -> dict[str, Any]:
         "tracker": {"root": [150, 240], "length": 300, "direction_deg": 0, "tau_s": 0.001},
         "tracker_service": {"max_batch_delay_s": 0.005},
         "recorder": {"directory": str(out / "recordings")},
-        "tunnel": {
-            "driver": "simulated",
-            "timeout_s": 2.0,
-            "safety": {
-                "max_speed_mps": 10,
-                "max_ramp_mps2": 2.0,
-                "ramp_period_s": 0.05,
-                "tolerance_mps": 0.15,
-                "settle_timeout_s": 10,
-                "poll_period_s": 0.05,
-                "keepalive_s": 0.5,
-                "watchdog_s": 2.0,
-            },
-            "sim": {"tau_s": 0.2, "ramp_mps2": 3.0, "watchdog_s": 2.0},
-        },  # fmt: skip
+        "tunnel": simulated_tunnel(timeout_s=2.0),
         "supervisor": {
             "runs_dir": str(out),
             "run_name": "control",

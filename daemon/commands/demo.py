@@ -25,6 +25,8 @@ PAPER_ERROR_OVER_L = 0.015  # the paper's e(t) stays within 0-1.5 % of L (sectio
 
 def demo_rig(out: Path, headless: bool, quick: bool = False) -> dict[str, Any]:
     """The demo's rig config (the same sections a user writes in YAML); ``quick``: 5 points, not 17."""
+    from flagtrack.daemon.rig.twin import simulated_tunnel
+
     sweep = (
         {"range": {"start": 4.2, "stop": 5.2, "step": 0.5}, "settle_s": 1.0, "record_s": 1.5}
         if quick
@@ -59,20 +61,7 @@ def demo_rig(out: Path, headless: bool, quick: bool = False) -> dict[str, Any]:
             "max_points": 1000,
             "update_rate_hz": 200,
         },  # fmt: skip
-        "tunnel": {
-            "driver": "simulated",
-            "safety": {
-                "max_speed_mps": 10,
-                "max_ramp_mps2": 2.0,
-                "ramp_period_s": 0.1,
-                "tolerance_mps": 0.15,
-                "settle_timeout_s": 10,
-                "poll_period_s": 0.05,
-                "keepalive_s": 0.5,
-                "watchdog_s": 2.0,
-            },
-            "sim": {"tau_s": 0.2, "ramp_mps2": 3.0, "watchdog_s": 2.0},
-        },
+        "tunnel": simulated_tunnel(ramp_period_s=0.1),
         "supervisor": {
             "mode": "sweep",
             "runs_dir": str(out),

@@ -1,4 +1,5 @@
-"""Test helpers: waiting for a condition, and reading a hardware camera adapter backed by a fake SDK."""
+"""Test helpers: waiting for a condition, reading a hardware camera adapter backed by a fake SDK, and a
+rigid flapping flag's centrelines."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.events import empty_events, empty_triggers
 from flagtrack.drivers.camera.base import Camera
 
@@ -76,3 +78,13 @@ def read_until(
     else:
         raise AssertionError("the fake camera did not deliver its stream in time")
     return np.concatenate(events), np.concatenate(triggers), reads
+
+
+def rigid_flapping(t_s: np.ndarray, length: float = 100.0, **flags: np.ndarray) -> CentrelineBatch:
+    """A rigid flag of ``length`` rooted at (0, 0), flapping at 10 Hz (A/L = 0.2), at the times ``t_s``;
+    ``flags``: its ``lost``, ``stale`` or ``shed`` arrays."""
+    theta = 0.2 * np.sin(2 * np.pi * 10 * np.asarray(t_s))[:, None]
+    s = np.linspace(0, length, 11)[None, :]
+    x, y = s * np.cos(theta), s * np.sin(theta)
+    n = len(t_s)
+    return CentrelineBatch(t_s, s[0], x, y, x, y, np.full(n, 1.0), np.full(n, 50), **flags)

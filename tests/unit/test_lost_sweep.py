@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.services.supervisor.analysis import point_metrics
 from flagtrack.daemon.services.supervisor.feedback import ControllerState, control_step, measured_amplitude
@@ -20,24 +19,20 @@ from flagtrack.daemon.sweep.progress import PointFacts, is_suspect
 from flagtrack.daemon.sweep.runlog import PointResult, RunLog, read_run
 from flagtrack.daemon.sweep.summary import write_summary
 from flagtrack.daemon.typed_yaml import from_mapping
-
-
-def _flapping(lost: np.ndarray, length: float = 100.0) -> CentrelineBatch:
-    """A rigid flag flapping at 10 Hz, A/L = 0.2, sampled every ms, with the given lost flags."""
-    n = len(lost)
-    t = np.arange(n) * 1e-3
-    theta = 0.2 * np.sin(2 * np.pi * 10 * t)[:, None]
-    s = np.linspace(0, length, 11)[None, :]
-    x, y = s * np.cos(theta), s * np.sin(theta)
-    return CentrelineBatch(t, s[0], x, y, x, y, np.full(n, 1.0), np.full(n, 50), lost=lost)
+from tests.fakes.helpers import rigid_flapping
 
 
 def test_point_metrics_count_the_lost_updates() -> None:
     lost = np.zeros(1000, dtype=np.uint8)
     lost[100:180] = 1
-    metrics = point_metrics([_flapping(lost)], 100.0, (0.0, 0.0), 0.0)
+    metrics = point_metrics([rigid_flapping(np.arange(len(lost)) * 1e-3, lost=lost)], 100.0, (0.0, 0.0), 0.0)
     assert metrics.lost_fraction == pytest.approx(0.08) and metrics.amplitude_over_l == pytest.approx(0.2, rel=0.05)
-    assert point_metrics([_flapping(np.zeros(1000, np.uint8))], 100.0, (0.0, 0.0), 0.0).lost_fraction == 0.0
+    assert (
+        point_metrics(
+            [rigid_flapping(np.arange(1000) * 1e-3, lost=np.zeros(1000, np.uint8))], 100.0, (0.0, 0.0), 0.0
+        ).lost_fraction
+        == 0.0
+    )
 
 
 @pytest.mark.parametrize(

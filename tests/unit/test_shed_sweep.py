@@ -11,19 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.services.supervisor.analysis import point_metrics
 from flagtrack.daemon.sweep.plan import SpeedRange, SweepConfig, plan_points
 from flagtrack.daemon.sweep.runlog import PointResult, RunLog, read_run
 from flagtrack.daemon.sweep.summary import write_summary
-
-
-def _flapping(t_s: np.ndarray, shed: np.ndarray, length: float = 100.0) -> CentrelineBatch:
-    theta = 0.2 * np.sin(2 * np.pi * 10 * t_s)[:, None]
-    s = np.linspace(0, length, 11)[None, :]
-    x, y = s * np.cos(theta), s * np.sin(theta)
-    n = len(t_s)
-    return CentrelineBatch(t_s, s[0], x, y, x, y, np.full(n, 1.0), np.full(n, 50), shed=shed)
+from tests.fakes.helpers import rigid_flapping
 
 
 def test_the_share_shed_is_weighted_by_the_time_each_update_stands_for() -> None:
@@ -32,9 +24,9 @@ def test_the_share_shed_is_weighted_by_the_time_each_update_stands_for() -> None
     keep[100:200] = False  # ... but 100 ms of them skipped: the update after the gap says 100 of its 101 ms
     shed = np.zeros(1000, np.float32)
     shed[200] = 100 / 101
-    metrics = point_metrics([_flapping(t[keep], shed[keep])], 100.0, (0.0, 0.0), 0.0)
+    metrics = point_metrics([rigid_flapping(t[keep], shed=shed[keep])], 100.0, (0.0, 0.0), 0.0)
     assert metrics.shed_fraction == pytest.approx(0.1 / 0.999, rel=1e-6)
-    untouched = point_metrics([_flapping(t, np.zeros(1000, np.float32))], 100.0, (0.0, 0.0), 0.0)
+    untouched = point_metrics([rigid_flapping(t, shed=np.zeros(1000, np.float32))], 100.0, (0.0, 0.0), 0.0)
     assert untouched.shed_fraction == 0.0
     assert math.isnan(point_metrics([], 100.0, (0.0, 0.0), 0.0).shed_fraction)
 

@@ -12,29 +12,25 @@ import numpy as np
 import pytest
 
 from flagtrack.daemon.commands._progress import point_line
-from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.schema import SupervisorState
 from flagtrack.daemon.services.supervisor.analysis import point_metrics
 from flagtrack.daemon.sweep.plan import SpeedRange, SweepConfig, plan_points
 from flagtrack.daemon.sweep.progress import PointFacts, is_suspect
 from flagtrack.daemon.sweep.runlog import PointResult, RunLog, read_run
 from flagtrack.daemon.sweep.summary import write_summary
-
-
-def _flapping(stale: np.ndarray, length: float = 100.0) -> CentrelineBatch:
-    n = len(stale)
-    t = np.arange(n) * 1e-3
-    theta = 0.2 * np.sin(2 * np.pi * 10 * t)[:, None]
-    s = np.linspace(0, length, 11)[None, :]
-    x, y = s * np.cos(theta), s * np.sin(theta)
-    return CentrelineBatch(t, s[0], x, y, x, y, np.full(n, 1.0), np.full(n, 50), stale=stale)
+from tests.fakes.helpers import rigid_flapping
 
 
 def test_point_metrics_count_the_stale_updates() -> None:
     stale = np.zeros(1000, dtype=np.uint8)
     stale[:120] = 1  # a chain that had seen no event yet
-    assert point_metrics([_flapping(stale)], 100.0, (0.0, 0.0), 0.0).stale_fraction == pytest.approx(0.12)
-    assert point_metrics([_flapping(stale[:5])], 100.0, (0.0, 0.0), 0.0).stale_fraction == 1.0
+    assert point_metrics(
+        [rigid_flapping(np.arange(1000) * 1e-3, stale=stale)], 100.0, (0.0, 0.0), 0.0
+    ).stale_fraction == pytest.approx(0.12)
+    assert (
+        point_metrics([rigid_flapping(np.arange(5) * 1e-3, stale=stale[:5])], 100.0, (0.0, 0.0), 0.0).stale_fraction
+        == 1.0
+    )
     assert math.isnan(point_metrics([], 100.0, (0.0, 0.0), 0.0).stale_fraction)
 
 
