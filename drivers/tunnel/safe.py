@@ -85,6 +85,17 @@ class SafetyParams:
                 f"controller's watchdog_s ({self.watchdog_s})"
             )
 
+    def check_setpoint(self, speed_mps: float, device: str) -> None:
+        """Raise DriverError (naming ``device``) if ``speed_mps`` is outside the bounds (0 is always allowed)."""
+        if speed_mps == 0.0:
+            return
+        if not math.isfinite(speed_mps) or not self.min_speed_mps <= speed_mps <= self.max_speed_mps:
+            raise DriverError(
+                f"set-point {speed_mps:g} m/s outside the bounds [{self.min_speed_mps:g}, "
+                f"{self.max_speed_mps:g}] m/s (tunnel.safety); nothing sent",
+                device=device,
+            )
+
 
 class TunnelAborted(DriverError):
     """A set was interrupted by :meth:`SafeTunnel.abort` (SIGTERM); the tunnel was sent to zero."""
@@ -93,9 +104,8 @@ class TunnelAborted(DriverError):
 class SafeTunnel:
     """A :class:`WindTunnel` made of a protocol link and the safety rules of :class:`SafetyParams`.
 
-    Use it as a context manager: entering starts it (reads the current speed, starts the
-    keep-alive), leaving ramps it to zero and closes the port, whatever happened inside.
-    Not meant to be driven from several threads at once (the keep-alive thread is internal).
+    A context manager: entering starts it (reads the speed, starts the keep-alive), leaving ramps it
+    to zero and closes the port, whatever happened inside. One driving thread (the keep-alive's is its own).
 
     Attributes:
         simulator: the in-process simulated tunnel when the config asked for one (so a simulated
@@ -283,16 +293,8 @@ class SafeTunnel:
             self.close()
 
     def check_setpoint(self, speed_mps: float) -> None:
-        """Raise DriverError if ``speed_mps`` is outside the bounds (0 is always allowed)."""
-        p = self.params
-        if speed_mps == 0.0:
-            return
-        if not math.isfinite(speed_mps) or not p.min_speed_mps <= speed_mps <= p.max_speed_mps:
-            raise DriverError(
-                f"set-point {speed_mps:g} m/s outside the bounds [{p.min_speed_mps:g}, "
-                f"{p.max_speed_mps:g}] m/s (tunnel.safety); nothing sent",
-                device=self.device,
-            )
+        """Raise DriverError if ``speed_mps`` is outside the bounds (:meth:`SafetyParams.check_setpoint`)."""
+        self.params.check_setpoint(speed_mps, self.device)
 
     # -- internals -------------------------------------------------------------------------
 
