@@ -30,13 +30,19 @@ import numpy as np
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.events import empty_events
-from flagtrack.daemon.errors import FormatError
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import EventPacket, TrackerStatus
 from flagtrack.daemon.services.lost_count import LostCount
 from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.services.sequence import Arrival, PacketSequence, packet_problem
 from flagtrack.daemon.services.tracker_budget import LatencyBudget, ShedSpans, gather
+from flagtrack.daemon.services.tracker_decode import (
+    PIPELINE_MIN_PACKETS,
+    decode_run,
+    say_dropped,
+    say_failed,
+    track_on_two_threads,
+)
 from flagtrack.daemon.services.tracker_outbox import CentrelineOutbox, updates_source_ns
 from flagtrack.daemon.tracking.pipeline import TrackerPipeline
 from flagtrack.daemon.transport import Bus, Publisher, Subscription
@@ -44,11 +50,6 @@ from flagtrack.drivers.formats.packets import decode_packet
 
 log = logging.getLogger(__name__)
 _NO_NS = np.zeros(0, dtype=np.int64)
-PIPELINE_MIN_PACKETS = 8
-"""Runs of at least this many packets (queued while the tracker worked) are tracked on two threads;
-shorter ones, the usual case at a moderate rate, in this one (no hand-over between threads)."""
-PIPELINE_GROUP_PACKETS = 4
-"""Packets decoded and prepared together on the way to the chain's worker."""
 
 
 @dataclass(frozen=True)
@@ -193,7 +194,7 @@ class TrackerService:
                     self.budget.measured(self.events - tracked, time.perf_counter_ns() - start_ns)
                 now = time.monotonic()
                 if now - last_status >= self.cfg.status_interval_s:
-                    status_pub.put(self._status("tracking", window, now, lag_s))
+                    status_pub.put(tracker_status(self, "tracking", window, now, lag_s))
                     window = {"events": self.events, "updates": self.updates, "shed_events": self.shed.events, "t": now}
                     last_status = now
                     self._count_drops()
@@ -202,18 +203,15 @@ class TrackerService:
             if self._pipeline is not None:
                 self._pipeline.abandon()
             self._publish_if_due(force=True)
-            status_pub.put(self._status("stopped", window, time.monotonic(), lag_s))
+            status_pub.put(tracker_status(self, "stopped", window, time.monotonic(), lag_s))
             self._count_drops()
             self.problems.flush(force=True)
 
     def handle(self, packets: list[EventPacket], shed: Collection[int] = ()) -> float:
         """Decode and track packets (in order) but those at the indices ``shed`` (skipped: the latency budget);
-        return the lag (s) from the last one's arrival at the camera.
-
-        Packets that queued up while the tracker was busy are decoded and fed together: the packets
-        of a stream concatenate into one valid stream, and the core's results do not depend on how
-        the stream is cut, so the per-packet cost does not limit the rate.
-        """
+        return the lag (s) from the last one's arrival at the camera. Packets that queued up are decoded
+        and fed together (a stream's packets concatenate into one stream; the core's results do not
+        depend on how it is cut), so the per-packet cost does not limit the rate."""
         run: list[EventPacket] = []
         for index, packet in enumerate(packets):
             previous = self._sequence.next_seq
@@ -309,59 +307,25 @@ class TrackerService:
         self._track(chunks, run, end_of_stream)
 
     def _decode(self, run: list[EventPacket]) -> list[np.ndarray]:
-        """The events of a run: decoded at once, or packet by packet if that fails (those whose
-        bytes do not decode are counted and left out)."""
-        first = run[0]
-        try:
-            events, _ = decode_packet(
-                first.encoding,
-                b"".join(p.data for p in run),
-                first.t_offset_us,
-                source=f"packets {first.seq}-{run[-1].seq} of camera {first.camera_id}",
-            )
-            return [events]
-        except FormatError:
-            chunks = []
-            for packet in run:
-                try:
-                    chunks.append(
-                        decode_packet(
-                            packet.encoding,
-                            packet.data,
-                            packet.t_offset_us,
-                            source=f"packet {packet.seq} of camera {packet.camera_id}",
-                        )[0]
-                    )
-                except FormatError as exc:
-                    self.undecodable_packets += 1
-                    self.problems.add("undecodable packets", exc)
-            return chunks
+        """The events of a run (:func:`.tracker_decode.decode_run`); packets that do not decode are counted."""
+        chunks, undecodable = decode_run(run, self.problems)
+        self.undecodable_packets += undecodable
+        return chunks
 
     def _track_run_on_two_threads(self, run: list[EventPacket], end_of_stream: bool) -> None:
-        """Track a long run as :meth:`_track_run` does, with the work split: this thread decodes,
-        denoises and maps groups of ``PIPELINE_GROUP_PACKETS`` packets while a worker updates the
-        chain on the group before (:class:`.TrackerPipeline`: the same updates as ``feed``)."""
-        pipeline = self._pipeline_of(self.tracker)
-        batches: list[CentrelineBatch] = []
-        pipeline.emit_to(batches)
-        groups = [run[i : i + PIPELINE_GROUP_PACKETS] for i in range(0, len(run), PIPELINE_GROUP_PACKETS)]
+        """Track a long run as :meth:`_track_run` does, on two threads (:func:`.tracker_decode.track_on_two_threads`)."""
         try:
-            for g, group in enumerate(groups):
-                try:
-                    chunks = self._decode(group)
-                except Exception as exc:  # noqa: BLE001 - as in _track_run: counted, logged
-                    self._failed(group, exc)
-                    continue
-                self.events += sum(len(c) for c in chunks)
-                for i, events in enumerate(chunks):
-                    last = g == len(groups) - 1 and i == len(chunks) - 1
-                    pipeline.feed(events, run[-1].t_last_us if last else None)
-            pipeline.drain()
+            batches = track_on_two_threads(
+                self._pipeline_of(self.tracker), run, self._decode, self._failed, self._count
+            )
         except Exception as exc:  # noqa: BLE001 - the core choked on this data: a fresh tracker goes on
             self._failed(run, exc)
             self.tracker = self.tracker_factory()
             batches = []
         self._track(batches, run, end_of_stream, advanced=True)
+
+    def _count(self, events: int) -> None:
+        self.events += events
 
     def _pipeline_of(self, tracker: Any) -> TrackerPipeline:
         """The worker of ``tracker`` (a new tracker, after a restart or a failure, gets a new one)."""
@@ -409,13 +373,9 @@ class TrackerService:
             self.shed.end_stream()
 
     def _failed(self, run: list[EventPacket], exc: Exception) -> None:
-        """Count the packets of a run that raised while decoded or tracked (a bug or data the core
-        cannot take); the first such error is logged with its traceback at DEBUG."""
+        """Count the packets of a run that raised while decoded or tracked (:func:`.tracker_decode.say_failed`)."""
         self.undecodable_packets += len(run)
-        log.debug("tracker: packets %d-%d failed", run[0].seq, run[-1].seq, exc_info=exc)
-        self.problems.add(
-            "packets that failed to track", f"packets {run[0].seq}-{run[-1].seq}: {type(exc).__name__}: {exc}", len(run)
-        )
+        say_failed(self.problems, run, exc)
 
     def _add(self, batch: CentrelineBatch, source_ns: np.ndarray) -> None:
         if len(batch) == 0:
@@ -444,36 +404,33 @@ class TrackerService:
         return self.packets_sub.channel.dropped
 
     def _count_drops(self) -> None:
-        """Log the packets the queue dropped since the last call (a rate-limited summary)."""
-        dropped = self.dropped_packets
-        if dropped > self._drops_logged:
-            self.problems.add(
-                "packets dropped by the full queue",
-                f"the queue dropped {dropped} packet(s) in all (the tracker falls behind the camera)",
-                dropped - self._drops_logged,
-            )
-            self._drops_logged = dropped
+        """Say the packets the queue dropped since the last call (a rate-limited summary)."""
+        self._drops_logged = say_dropped(self.problems, self.dropped_packets, self._drops_logged)
 
-    def _status(self, state: str, window: dict[str, float], now: float, lag_s: float) -> TrackerStatus:
-        elapsed = max(now - window["t"], 1e-9)
-        return TrackerStatus(
-            source=self.name,
-            state=state,
-            events_per_s=(self.events - window["events"]) / elapsed,
-            updates_per_s=(self.updates - window["updates"]) / elapsed,
-            lag_s=lag_s,
-            packets=self.packets,
-            missing_packets=self.missing_packets,
-            malformed_packets=self.malformed_packets,
-            dropped_packets=self.dropped_packets,
-            restarts=self.restarts,
-            late_packets=self.late_packets,
-            lost_updates=self.lost.updates,
-            lost_stretches=self.lost.stretches,
-            shed_fraction=_fraction(self.shed.events - window["shed_events"], self.events - window["events"]),
-            shed_packets=self.shed.packets,
-            shed_events=self.shed.events,
-        )
+
+def tracker_status(
+    svc: TrackerService, state: str, window: dict[str, float], now: float, lag_s: float
+) -> TrackerStatus:
+    """The status message of ``svc``: its counters, and its rates over ``window`` (the counters then, and when)."""
+    elapsed = max(now - window["t"], 1e-9)
+    return TrackerStatus(
+        source=svc.name,
+        state=state,
+        events_per_s=(svc.events - window["events"]) / elapsed,
+        updates_per_s=(svc.updates - window["updates"]) / elapsed,
+        lag_s=lag_s,
+        packets=svc.packets,
+        missing_packets=svc.missing_packets,
+        malformed_packets=svc.malformed_packets,
+        dropped_packets=svc.dropped_packets,
+        restarts=svc.restarts,
+        late_packets=svc.late_packets,
+        lost_updates=svc.lost.updates,
+        lost_stretches=svc.lost.stretches,
+        shed_fraction=_fraction(svc.shed.events - window["shed_events"], svc.events - window["events"]),
+        shed_packets=svc.shed.packets,
+        shed_events=svc.shed.events,
+    )
 
 
 def _fraction(shed: float, tracked: float) -> float:
