@@ -35,7 +35,7 @@ SPEED = 0.1  # 0.8 s of camera time over 8 s: the sweep's point fits inside it
 def rig_body(tmp_path: Path, recording: Path) -> str:
     return f"""
 camera: {{id: cam0, adapter: replay, rate_interval_s: 0.02, replay: {{path: {recording}, speed: {SPEED}}}}}
-tracker: {{root: [100, 240], length: 200, tau_s: 0.0003}}
+tracker: {{root: [100, 240], length: 200, tau_s: 0.0003, max_lag_ms: null}}
 recorder: {{directory: {tmp_path / "rec"}}}
 tunnel:
   driver: simulated
@@ -101,7 +101,8 @@ def test_the_secured_rig_runs_end_to_end_each_service_with_its_identity(tmp_path
     messages, outs, codes = run_processes(path)
     assert codes == {"router": 0, "tracker": 130, "recorder": 130, "supervisor": 0, "camera": 0}, outs
 
-    # the tracker's centrelines, over TLS through the router, equal the offline reconstruction
+    # the tracker's centrelines, over TLS through the router, equal the offline reconstruction (its latency
+    # budget is off, max_lag_ms: null: on a machine busy with other tests it would shed, as it should)
     offline = tmp_path / "offline.h5"
     assert flagtrack("reconstruct", str(recording), "-o", str(offline), *TRACKER_ARGS, "--no-progress").returncode == 0
     live = CentrelineBatch.concatenate([m.batch() for m in messages if len(m.t_s)])

@@ -42,7 +42,7 @@ def test_each_service_alone_through_a_router(recording: Path, tmp_path: Path) ->
 rig: alone
 bus: {{mode: client, connect: ["tcp/127.0.0.1:{port}"]}}
 camera: {{adapter: replay, replay: {{path: {recording}, speed: {SPEED}}}}}
-tracker: {{root: [100, 240], length: 200, tau_s: {TAU_S}}}
+tracker: {{root: [100, 240], length: 200, tau_s: {TAU_S}, max_lag_ms: null}}
 recorder: {{directory: {tmp_path / "rec"}, path: run, centrelines: true}}
 viewer: {{sink: rrd, rrd_path: {tmp_path / "view.rrd"}}}
 """)
