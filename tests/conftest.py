@@ -20,11 +20,6 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Modules with slow tests first (each module kept whole, for its fixtures): run two at a time
-    (``-n 2``), the long end-to-end runs start early and the quick tests fill the gaps at the end.
-    Hardware tests are skipped unless a device is named."""
-    slow_modules = {item.module for item in items if item.get_closest_marker("slow") is not None}
-    items.sort(key=lambda item: item.module not in slow_modules)  # (a stable sort: file order within)
     if config.getoption("--device"):
         return
     skip = pytest.mark.skip(reason="hardware test: name a device with --device")

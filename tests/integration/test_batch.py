@@ -309,7 +309,7 @@ def sweep_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     with Bus(config.bus_config) as bus:
         group = ServiceGroup(build_services(config, bus, list(config.services)), stop_when_any_finishes=["supervisor"])
         group.start()
-        group.wait(60)
+        group.wait(240)  # (it ends with the sweep: the bound is for a busy machine)
         report = group.shutdown(30)
     assert not report.errors
     return tmp_path / "runs" / "run"

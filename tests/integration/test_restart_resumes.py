@@ -62,7 +62,9 @@ def sim_params() -> SimParams:
 
 @pytest.mark.slow
 def test_a_supervisor_killed_and_started_again_resumes_its_run(sim: SimulatedTunnel, tmp_path: Path) -> None:
-    sweep = {"speeds": [3.0, 4.0, 5.0], "branches": ["up"], "settle_s": 0.5, "record_s": 1.0}
+    # points of 3 s: the resumed run is still at work when the second supervisor, slow to start on a
+    # busy machine, asks for the tunnel (with 1 s points it sometimes found the run finished)
+    sweep = {"speeds": [3.0, 4.0, 5.0], "branches": ["up"], "settle_s": 0.5, "record_s": 3.0}
     command = [*FLAGTRACK, "up", "-c", str(rig_file(tmp_path, sim.port, sweep))]
     run_dir = tmp_path / "runs" / "night"
     first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
