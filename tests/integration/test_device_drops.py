@@ -121,9 +121,9 @@ def test_a_sweep_point_the_camera_dropped_data_in_is_lossy_with_the_reason(tmp_p
     from flagtrack.daemon.sweep.runlog import read_run
     from tests.integration.test_supervisor import rig, run
 
-    sweep = {"speeds": [4.0], "branches": ["up"], "settle_s": 0.5, "record_s": 2.0}
+    sweep = {"speeds": [4.0], "branches": ["up"], "settle_s": 0.5, "record_s": 3.0}  # (the hold ends within it)
     config = rig(tmp_path, sweep=sweep)
-    twin = dataclasses.replace(config.camera.simulated, max_lag_s=0.3)
+    twin = dataclasses.replace(config.camera.simulated, max_lag_s=1.0)  # (a busy CI host lags 0.3 s by itself)
     config = dataclasses.replace(config, camera=dataclasses.replace(config.camera, simulated=twin))
     point = "000-up-4.00"
 
@@ -136,7 +136,7 @@ def test_a_sweep_point_the_camera_dropped_data_in_is_lossy_with_the_reason(tmp_p
         def held_up(timeout_s: float) -> Any:
             if not held.is_set():
                 held.set()
-                time.sleep(0.8)  # the fault injected: a host too busy to read the camera
+                time.sleep(1.6)  # the fault injected: a host too busy to read the camera, past max_lag_s
             return read(timeout_s)
 
         camera.read = held_up
