@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 import sys
 import time
-from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,6 +13,7 @@ from typing import Any
 
 from flagtrack.daemon.bench import verdict_recordings as recordings
 from flagtrack.daemon.bench import verdict_runs as runs
+from flagtrack.daemon.bench.serial_executor import SerialExecutor
 
 
 @dataclass(frozen=True)
@@ -48,18 +48,6 @@ class Outcome:
     wall_s: float = 0.0
 
 
-class _SerialExecutor(Executor):
-    """Runs each submitted call at once in this process (``--jobs 1``)."""
-
-    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
-        future: Future = Future()
-        try:
-            future.set_result(fn(*args, **kwargs))
-        except BaseException as exc:  # noqa: BLE001 - handed to the caller through the future
-            future.set_exception(exc)
-        return future
-
-
 def run_all(settings: Settings) -> Outcome:
     """Make the recordings, run and score every run, evaluate the still case."""
     from tqdm import tqdm
@@ -74,7 +62,7 @@ def run_all(settings: Settings) -> Outcome:
     outcome = Outcome()
     total = len(needs) + len(specs) + ("still" in settings.cases)
     bar = tqdm(total=total, desc="bench verdicts", unit="task", file=sys.stderr, disable=not settings.progress)
-    pool: Executor = _SerialExecutor() if settings.jobs <= 1 else ProcessPoolExecutor(max_workers=settings.jobs)
+    pool: Executor = SerialExecutor() if settings.jobs <= 1 else ProcessPoolExecutor(max_workers=settings.jobs)
     with pool, bar:
         tasks: dict[Future, Any] = {}
         if "still" in settings.cases:  # the longest task: first

@@ -11,14 +11,14 @@ import logging
 import os
 import sys
 import time
-from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Executor, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from flagtrack.daemon.bench.accuracy_suite import plan
 from flagtrack.daemon.bench.accuracy_suite.evaluate import Outcome, run_task
+from flagtrack.daemon.bench.serial_executor import SerialExecutor
 
 log = logging.getLogger(__name__)
 
@@ -48,18 +48,6 @@ class RunResult:
     events: int = 0
     sim_wall_s: float = 0.0
     wall_s: float = 0.0
-
-
-class _SerialExecutor(Executor):
-    """Runs submitted calls at once in this process (``--jobs 1``: easy to profile and debug)."""
-
-    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
-        future: Future = Future()
-        try:
-            future.set_result(fn(*args, **kwargs))
-        except BaseException as exc:  # noqa: BLE001 - handed to the caller through the future
-            future.set_exception(exc)
-        return future
 
 
 def initial_tasks(settings: RunSettings) -> list[plan.Task]:
@@ -108,7 +96,7 @@ def run(settings: RunSettings) -> RunResult:
     bar = tqdm(
         total=expected, desc="bench accuracy", unit="rec", file=sys.stderr, miniters=1, disable=not settings.progress
     )
-    pool: Executor = _SerialExecutor() if jobs == 1 else ProcessPoolExecutor(max_workers=jobs)
+    pool: Executor = SerialExecutor() if jobs == 1 else ProcessPoolExecutor(max_workers=jobs)
     with pool, bar:
         pending = {pool.submit(run_task, t, str(settings.work_dir), settings.keep_recordings) for t in tasks}
         while pending:
