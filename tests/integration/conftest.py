@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import fcntl
+import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -27,11 +30,25 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="session")
 def quick_demo(tmp_path_factory: pytest.TempPathFactory) -> subprocess.CompletedProcess[str]:
     """``flagtrack demo --quick --headless --json --out DIR``, run once for the tests that read it
-    (test_demo checks what it prints and writes, test_viewer_rrd its .rrd)."""
-    out = tmp_path_factory.mktemp("demo") / "demo"
-    return subprocess.run(
-        [sys.executable, "-m", "flagtrack.daemon", "demo", "--quick", "--headless", "--json", "--out", str(out)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    (test_demo checks what it prints and writes, test_viewer_rrd its .rrd), also when pytest-xdist
+    runs them in two worker processes: the first to get here runs it, under a lock in the folder
+    the workers share, and leaves its outcome there for the other."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # (each worker's folder is in the run's one)
+    outcome = root / "quick_demo.json"
+    with open(root / "quick_demo.lock", "w") as lock:
+        fcntl.flock(lock.fileno(), fcntl.LOCK_EX)  # (released when the file closes)
+        if not outcome.exists():
+            out = root / "quick_demo" / "demo"
+            out.parent.mkdir(exist_ok=True)
+            demo = ["demo", "--quick", "--headless", "--json", "--out", str(out)]
+            done = subprocess.run(
+                [sys.executable, "-m", "flagtrack.daemon", *demo],
+                capture_output=True,
+                text=True,
+                timeout=300,
+            )
+            fields = {"args": done.args, "returncode": done.returncode, "stdout": done.stdout, "stderr": done.stderr}
+            outcome.write_text(json.dumps(fields))
+    return subprocess.CompletedProcess(**json.loads(outcome.read_text()))

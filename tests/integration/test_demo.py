@@ -28,7 +28,6 @@ KEYS = [
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("quick_demo")  # the worker that runs the viewer tests on the same demo
 def test_quick_demo_finds_onset_and_decay_within_one_step(quick_demo: subprocess.CompletedProcess[str]) -> None:
     result = quick_demo
     assert result.returncode == 0, result.stderr

@@ -18,7 +18,7 @@ import pytest
 from tests.conftest import REPO
 from tests.integration.test_viewer_layout import blueprint_views, columns
 
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("quick_demo")]  # one demo for both modules
+pytestmark = pytest.mark.slow  # (the quick demo, run once for this module and test_demo: conftest.py)
 
 
 def rerun_cli(*args: str) -> subprocess.CompletedProcess[str]:
