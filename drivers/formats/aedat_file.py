@@ -26,6 +26,32 @@ _TRIGGER_MAP = {1: (0, 1), 2: (0, 0), 3: (0, 1), 4: (1, 1), 5: (1, 0)}
 """dv TriggerType -> (channel, edge) for the external triggers."""
 
 
+def io_header_problem(header: bytes) -> str | None:
+    """What is wrong with an IOHeader (a flatbuffer: compression, data table position, the info node as
+    an XML string), or None: its tables and the string lie inside it and the string is UTF-8."""
+    try:
+        (table,) = struct.unpack_from("<I", header, 0)
+        (back,) = struct.unpack_from("<i", header, table)
+        vtable = table - back
+        vtable_size, _ = struct.unpack_from("<HH", header, vtable)
+        info = 0
+        if vtable_size >= 10:  # (the info node is the table's third field)
+            (info,) = struct.unpack_from("<H", header, vtable + 8)
+        if info == 0:
+            return None
+        string = table + info + struct.unpack_from("<I", header, table + info)[0]
+        (length,) = struct.unpack_from("<I", header, string)
+    except struct.error:
+        return "its tables point outside it"
+    if string + 4 + length > len(header):
+        return "its info node runs past its end"
+    try:
+        header[string + 4 : string + 4 + length].decode("utf-8")
+    except UnicodeDecodeError as exc:
+        return f"its info node is not UTF-8 text: {exc.reason} at byte {exc.start}"
+    return None
+
+
 class AedatReader(EventReader):
     """Streams an AEDAT 4.0 file packet by packet (events batched to about ``chunk_bytes``)."""
 
@@ -41,6 +67,11 @@ class AedatReader(EventReader):
             raise FormatError(
                 f"garbage AEDAT 4.0 header (IOHeader size {header_size})", path=str(self.path), offset=len(MAGIC)
             )
+        with self.path.open("rb") as f:
+            f.seek(len(MAGIC) + 4)
+            problem = io_header_problem(f.read(header_size))
+        if problem is not None:  # (the library aborts the process on some of these)
+            raise FormatError(f"garbage AEDAT 4.0 header ({problem})", path=str(self.path), offset=len(MAGIC) + 4)
         streams = self._open_library().id_to_stream()
         events = sorted(i for i, s in streams.items() if s.get("type") == "events")
         triggers = sorted(i for i, s in streams.items() if s.get("type") == "triggers")
