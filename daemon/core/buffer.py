@@ -50,11 +50,10 @@ class EventBuffer:
                 new = np.empty(cap, dtype=old.dtype)
                 new[:live] = old[:live]
                 setattr(self, name, new)
-            for name in ("cum_region", "cum_ring"):
-                old = getattr(self, name)
-                new = np.empty(cap + 1, dtype=np.int64)
-                new[: len(old)] = old
-                setattr(self, name, new)
+            # the prefix counts are made again where needed (most windows never need them): not copied
+            self.cum_region = np.empty(cap + 1, dtype=np.int64)
+            self.cum_ring = np.empty(cap + 1, dtype=np.int64)
+            self.forget_counts()
 
     def _compact(self) -> None:
         cut, live = self.start, self.n - self.start

@@ -155,7 +155,8 @@ class Tracker:
         self._t_max_us = np.iinfo(np.int64).min
         self._prepared_t_max_us = self._t_max_us  # the same, for the chunks prepare() has seen
         self._max_step_back_us = 0  # largest step back in time seen in the stream (sensor jitter)
-        self._look_back_us = 0.0 if params.stale_after_s is None else params.stale_after_s * 1e6
+        # (whole µs: the buffer's int64 times are searched with it, and a float would copy them as float64)
+        self._look_back_us = 0 if params.stale_after_s is None else round(params.stale_after_s * 1e6)
         # a window ending within this of the last event starts at or before it (see feed)
         self._shortest_window_us = math.floor(min(seg.tau_s for seg in params.schedule.segments) * 1e6)
         self._finished = False
