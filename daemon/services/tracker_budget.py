@@ -13,6 +13,7 @@ before it that was skipped. Below the budget nothing is shed, and the updates ar
 
 from __future__ import annotations
 
+import statistics
 import time
 from collections import deque
 from collections.abc import Callable
@@ -104,10 +105,10 @@ class LatencyBudget:
         """Learn from a call that tracked ``events`` and published them in ``elapsed_ns``."""
         if events >= _MIN_EVENTS_MEASURED:
             self._per_event.append(max(elapsed_ns - self.ns_per_call, 0) / events)
-            self.ns_per_event = float(np.median(self._per_event))
+            self.ns_per_event = float(statistics.median(self._per_event))  # (numpy's: 28 µs a call, this 2)
         else:
             self._per_call.append(max(elapsed_ns - self.ns_per_event * events, 0))
-            self.ns_per_call = float(np.median(self._per_call))
+            self.ns_per_call = float(statistics.median(self._per_call))
 
 
 @dataclass
