@@ -33,6 +33,8 @@ def io_header_problem(header: bytes) -> str | None:
         (table,) = struct.unpack_from("<I", header, 0)
         (back,) = struct.unpack_from("<i", header, table)
         vtable = table - back
+        if vtable < 0:  # (struct reads a negative offset from the end)
+            raise struct.error("negative offset")
         vtable_size, _ = struct.unpack_from("<HH", header, vtable)
         info = 0
         if vtable_size >= 10:  # (the info node is the table's third field)

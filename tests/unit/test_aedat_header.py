@@ -35,6 +35,7 @@ def test_a_well_formed_header_has_no_problem() -> None:
         (io_header(b"<dv/>")[:-4], "runs past its end"),
         (b"\xff\xff\x00\x00" + io_header(b"<dv/>")[4:], "point outside it"),
         (b"\x18\x00", "point outside it"),
+        (_LAYOUT[:24] + struct.pack("<i", 40) + _LAYOUT[28:] + bytes(8), "point outside it"),  # vtable before 0
     ],
 )
 def test_a_damaged_header_says_what_is_wrong(header: bytes, problem: str) -> None:
