@@ -361,7 +361,7 @@ def _fast_scalars_ok(cls: type, meta: dict[str, Any]) -> bool:
         return False
     for name, value in meta.items():
         expected = types_.get(name)  # (None for a name not a field: no value's type is None)
-        if type(value) is not expected or (expected is int and not _I64_MIN <= value <= _I64_MAX):
+        if type(value) is not expected or (expected is int and not _fits_int64(value)):
             return False
     return True
 
