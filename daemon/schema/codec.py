@@ -360,8 +360,8 @@ def _fast_scalars_ok(cls: type, meta: dict[str, Any]) -> bool:
     if types_ is None or len(meta) != len(types_):
         return False
     for name, value in meta.items():
-        expected = types_.get(name)  # (None for a name not a field: no value's type is None)
-        if type(value) is not expected or (expected is int and not _fits_int64(value)):
+        expected = types_.get(name)
+        if expected is None or type(value) is not expected or (expected is int and not _fits_int64(value)):
             return False
     return True
 
