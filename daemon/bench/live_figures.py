@@ -23,16 +23,23 @@ def p50_p99(values_ms: Any) -> tuple[float, float]:
     return float(np.percentile(values_ms, 50)), float(np.percentile(values_ms, 99))
 
 
+def tenths_ms(publish_ms: np.ndarray) -> tuple[float, float]:
+    """The median latency (ms) of the first and of the last tenth of the updates (NaN for none)."""
+    if not len(publish_ms):
+        return float("nan"), float("nan")
+    tenth = max(len(publish_ms) // 10, 1)
+    return float(np.median(publish_ms[:tenth])), float(np.median(publish_ms[-tenth:]))
+
+
 def kept_up(publish_ms: np.ndarray, missing: int, max_lag_ms: float | None = None) -> bool:
     """No packet lost, and the last tenth of the updates (median) at most :data:`KEPT_UP_MS` later
     than the first tenth (a tracker that falls behind adds its backlog to every update's latency),
     or within the tracker's latency budget ``max_lag_ms`` (it kept up by shedding: the shed
     fraction says how much)."""
-    tenth = max(len(publish_ms) // 10, 1)
     if not len(publish_ms) or missing:
         return False
-    last = np.median(publish_ms[-tenth:])
-    return bool(last <= np.median(publish_ms[:tenth]) + KEPT_UP_MS or (max_lag_ms is not None and last <= max_lag_ms))
+    first, last = tenths_ms(publish_ms)
+    return bool(last <= first + KEPT_UP_MS or (max_lag_ms is not None and last <= max_lag_ms))
 
 
 def throughput_figures(throughput: dict[str, Any], n_events: int) -> dict[str, Any]:

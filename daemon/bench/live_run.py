@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from flagtrack.daemon.bench.live_figures import cpu_snapshot, cpu_use, events_digest, kept_up, p50_p99
+from flagtrack.daemon.bench.live_figures import cpu_snapshot, cpu_use, events_digest, kept_up, p50_p99, tenths_ms
 
 _START_S = 120  # a service process starts within this (a first run compiles its kernels)
 
@@ -136,6 +136,7 @@ def _figures(got: dict[str, Any], final: Any, keep_lines: bool, max_lag_ms: floa
         "p99_ms": lat_p99,
         "publish_p50_ms": pub_p50,
         "publish_p99_ms": pub_p99,
+        "publish_end_ms": tenths_ms(pub_ms)[1],
     }
     if keep_lines:
         figures["lines"] = CentrelineBatch.concatenate([m.batch() for m in with_updates]) if with_updates else None

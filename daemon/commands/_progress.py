@@ -90,6 +90,7 @@ class SweepProgressView:
         self._bar: Any = None
         self._started = False
         self._finished = 0
+        self._records = 0
         self._last_draw = 0.0
         self._redirect: contextlib.ExitStack | None = None
 
@@ -107,13 +108,18 @@ class SweepProgressView:
         self.close()
 
     def __call__(self, state: SupervisorState) -> None:
-        """Take one state: a line when a point has finished since the last one, the bar redrawn."""
+        """Take one state: a line when a point has been recorded since the last one (a redone point
+        gets a line for each record), the bar redrawn."""
         if self.quiet or state.points_total <= 0:
             return
         with self._lock:
             if not self._started:
                 self._start(state)
-            new_point = state.points_done > self._finished and bool(state.last_point)
+            if state.point_records > 0:  # a line per point record (a redone point has two)
+                new_point = state.point_records > self._records and bool(state.last_point)
+                self._records = max(self._records, state.point_records)
+            else:  # a supervisor that does not count its records
+                new_point = state.points_done > self._finished and bool(state.last_point)
             self._finished = max(self._finished, state.points_done)
             if new_point:
                 self._write(point_line(state))

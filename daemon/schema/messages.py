@@ -287,11 +287,13 @@ class SupervisorState:
 
     - the plan: ``point_index`` the 1-based position in the plan of ``point``, the point being
       measured (0: none); ``points_total`` the plan's points (0: no sweep); ``points_done`` those
-      finished (done or failed), the ones of earlier sessions of a resumed run included;
+      finished (done, failed or lossy; a redone point counts once), the ones of earlier sessions
+      of a resumed run included; ``point_records`` the point records of this session (one per
+      finished point, two for a redone one: a view draws a line per record; 0 from an older peer);
       ``elapsed_s`` since this session's sweep began; ``eta_s`` estimated seconds to its end;
     - the last finished point (``last_point`` its id, ``""`` before the first): ``last_index``
       (1-based position), ``last_speed_mps``, ``last_branch``, ``last_state`` (still | flapping |
-      unknown), ``last_status`` (done | failed), ``amplitude_over_l``, ``frequency_hz``,
+      unknown), ``last_status`` (done | failed | lossy), ``amplitude_over_l``, ``frequency_hz``,
       ``lost_fraction`` (updates the tracker flagged lost: -1 until the tracker has a lost flag),
       ``sensor_error_rms_over_l`` (RMS |e|/L against the point sensor: -1 without one),
       ``stale_fraction`` (updates whose shape rests on no recent events: -1 when not known).
@@ -321,6 +323,7 @@ class SupervisorState:
     lost_fraction: float = -1.0
     sensor_error_rms_over_l: float = -1.0
     stale_fraction: float = -1.0
+    point_records: int = 0
 
 
 @dataclass(frozen=True)

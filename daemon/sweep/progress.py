@@ -89,6 +89,9 @@ class PointFacts:
 class SweepProgress:
     """Counts the finished points of a plan and estimates the time left.
 
+    ``done`` counts distinct points (a point redone after a lossy or failed record counts once);
+    ``records`` counts the point records of this session (a redone point has two).
+
     The estimate per point is the mean duration (start of the point to its record) of the points
     finished in this session, or ``planned_point_s`` before the first one (settle plus record time:
     the ramps and actions make the real figure larger). The time left is that times the points
@@ -103,7 +106,9 @@ class SweepProgress:
 
     def __init__(self, plan: Sequence[Point], done: Collection[str], planned_point_s: float, now_s: float) -> None:
         self.total = len(plan)
-        self.done = sum(1 for p in plan if p.point_id in done)
+        self._plan_ids = {p.point_id for p in plan}
+        self._done_ids = {p.point_id for p in plan if p.point_id in done}
+        self.records = 0
         self.planned_point_s = planned_point_s
         self.started_s = now_s
         self.current: Point | None = None
@@ -120,9 +125,16 @@ class SweepProgress:
         if self.current is not None and self.current.point_id == result.point_id:
             self._durations.append(now_s - self._current_since_s)
         self.current = None
-        self.done = min(self.total, self.done + 1)
+        if result.point_id in self._plan_ids:
+            self._done_ids.add(result.point_id)
+        self.records += 1
         self.last = PointFacts.of(result)
         return self.last
+
+    @property
+    def done(self) -> int:
+        """Distinct points of the plan finished (this session's and earlier ones)."""
+        return len(self._done_ids)
 
     @property
     def current_position(self) -> int:

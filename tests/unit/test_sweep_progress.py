@@ -45,6 +45,18 @@ def test_a_resumed_run_counts_the_points_done_before() -> None:
     assert progress.done == progress.total == 5 and progress.eta_s(1.0) == 0.0
 
 
+def test_a_redone_point_counts_once_in_done_and_twice_in_records() -> None:
+    progress = SweepProgress(PLAN, done=(), planned_point_s=1.0, now_s=0.0)
+    for point in PLAN[:-1]:
+        progress.finish_point(PointResult.planned(point), 1.0)
+    last = PLAN[-1]
+    progress.finish_point(dataclasses.replace(PointResult.planned(last), status="lossy"), 2.0)
+    assert progress.done == progress.total == 5 and progress.records == 5
+    progress.finish_point(PointResult.planned(last), 3.0)  # the lossy last point redone
+    assert progress.done == 5 and progress.records == 6 and progress.last is not None
+    assert progress.last.status == "done"
+
+
 def test_lost_fraction_is_nan_until_records_carry_one() -> None:
     assert math.isnan(lost_fraction(PointResult.planned(PLAN[0])))
     later_record = SimpleNamespace(lost_fraction=0.125)  # what a record with the tracker's lost flag will hold
@@ -121,6 +133,18 @@ def test_plain_lines_one_per_finished_point_when_not_on_a_terminal() -> None:
     lines = out.getvalue().splitlines()
     assert lines[0] == "sweep: 17 points, ETA 1:38"
     assert [line.split()[1] for line in lines[1:]] == ["1/17", "2/17"] and "\r" not in out.getvalue()
+
+
+def test_a_redone_last_point_gets_a_line_for_each_record() -> None:
+    out = io.StringIO()
+    last = dict(last_point="016-down-4.00", last_index=17, points_done=17)
+    with SweepProgressView(out) as view:
+        view(state(points_done=16, point_records=0, last_point="", last_index=0))
+        view(state(**last, point_records=1, last_status="lossy"))
+        view(state(**last, point_records=1, last_status="lossy"))  # the same record again: no line
+        view(state(**last, point_records=2, last_status="done"))  # points_done unchanged: still a line
+    lines = out.getvalue().splitlines()[1:]
+    assert len(lines) == 2 and "LOSSY" in lines[0] and "A/L 0.231" in lines[1]
 
 
 def test_quiet_shows_nothing_and_a_bar_is_drawn_when_asked() -> None:

@@ -123,6 +123,7 @@ def progress_fields(progress: SweepProgress | None, now_s: float) -> dict[str, A
         "point_index": progress.current_position,
         "points_total": progress.total,
         "points_done": progress.done,
+        "point_records": progress.records,
         "elapsed_s": progress.elapsed_s(now_s),
         "eta_s": _known(progress.eta_s(now_s)),
     }
