@@ -5,6 +5,10 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
+import tempfile
+import time
 from pathlib import Path
 
 import pytest
@@ -17,6 +21,24 @@ pytest_plugins = ["tests.fakes.fixtures", "tests.fakes.tunnel"]
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--device", action="append", default=[], help="run hardware tests against DEVICE")
+
+
+WARM_UP = "import sys; from pathlib import Path; from flagtrack.daemon.aot.build import run_workload; run_workload(Path(sys.argv[1]))"
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Under xdist, fill numba's cache once before the workers start: on a clean clone each worker (and
+    each command a test runs) would otherwise compile the same kernels itself, beside the others."""
+    config = session.config
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    reporter = config.pluginmanager.get_plugin("terminalreporter")
+    started = time.monotonic()
+    with tempfile.TemporaryDirectory() as folder:
+        done = subprocess.run([sys.executable, "-c", WARM_UP, folder], capture_output=True, text=True, timeout=600)
+    if reporter is not None:
+        outcome = "ready" if done.returncode == 0 else f"not warmed (exit {done.returncode}; tests compile as they go)"
+        reporter.write_line(f"numba kernels {outcome} in {time.monotonic() - started:.0f} s")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -121,3 +121,15 @@ def test_the_recorded_file_is_compared_by_its_events_not_its_chunks(tmp_path) ->
     write_events(tmp_path / "c.raw", events[:-1], width=640, height=480)
     a, b, c = (live_figures.events_digest(tmp_path / f"{name}.raw") for name in "abc")
     assert a == b and a[0] == len(events) and c != a
+
+
+def test_kept_up_compares_the_last_tenth_with_the_first_or_the_budget() -> None:
+    steady = np.full(100, 5.0)
+    growing = np.linspace(5.0, 500.0, 100)  # a backlog adds to every update
+    shedding = np.concatenate([np.full(50, 5.0), np.full(50, 45.0)])  # held under a 50 ms budget
+    assert live_figures.tenths_ms(growing) == (float(np.median(growing[:10])), float(np.median(growing[-10:])))
+    assert all(np.isnan(live_figures.tenths_ms(np.zeros(0))))
+    assert live_figures.kept_up(steady, missing=0) and not live_figures.kept_up(steady, missing=1)
+    assert not live_figures.kept_up(growing, missing=0, max_lag_ms=50.0)
+    assert not live_figures.kept_up(shedding, missing=0) and live_figures.kept_up(shedding, 0, max_lag_ms=50.0)
+    assert not live_figures.kept_up(np.zeros(0), missing=0)
