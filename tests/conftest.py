@@ -42,6 +42,9 @@ def pytest_sessionstart(session: pytest.Session) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    # the slow tests first (in their order): xdist's work stealing then ends the run on short tests
+    # instead of one worker finishing a long one alone
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
     if config.getoption("--device"):
         return
     skip = pytest.mark.skip(reason="hardware test: name a device with --device")
