@@ -8,7 +8,7 @@ import time
 
 
 class ProblemLog:
-    """Counts the repeated problems of one service by kind and logs them rarely (STYLE.md).
+    """Counts the repeated problems of one service by kind and logs them rarely.
 
     The first problem of a kind is logged at once with its detail; later ones are only counted, and
     summed up in one line at most every ``interval_s`` (by :meth:`add` as they come, or by

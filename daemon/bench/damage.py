@@ -36,7 +36,12 @@ REAL = Path(os.environ.get("FLAGTRACK_SHARED_DATA", Path(__file__).resolve().par
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of the damage benchmark."""
-    parser.add_argument("files", nargs="*", type=Path, help=f"RAW recordings (default: the .raw files of {REAL})")
+    parser.add_argument(
+        "files",
+        nargs="*",
+        type=Path,
+        help="RAW recordings (default: the .raw files of the folder of real recordings that $FLAGTRACK_SHARED_DATA names)",
+    )
     parser.add_argument("--tries", type=int, default=186, help="damaged copies read")
     parser.add_argument("--seed", type=int, default=0, help="random seed of the flips")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
