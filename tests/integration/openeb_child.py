@@ -80,6 +80,7 @@ def service(raw: Path, out: Path) -> None:
         packets_sub = sub_bus.subscribe(sub_bus.keys.camera_events("cam0"), EventPacket, capacity=1_000_000)
         wait_subscribed(cam_bus, cam_bus.keys.camera_events("cam0"))
         camera_service = CameraService(cam_bus, CameraStreamConfig(), FileCamera(raw))
+        camera_service.start()
         camera_service.run(threading.Event())  # returns at the end of the file
         packets = []
         while len(packets) < camera_service.packets and (msg := packets_sub.recv(timeout_s=10.0)) is not None:
