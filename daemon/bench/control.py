@@ -43,8 +43,9 @@ The simulated rig as three processes (twin camera at --rate Mev/s, tracker, cont
 A/L through a set-point step: the loop's latency p50/p99 (camera packet received to speed command
 written) and the A/L error once settled, with the twin's rate and the machine's load. More: docs/control.md.
 """
-EVENTS_PER_PX2_PER_MEV_S = 2.2
-"""The twin's event density per Mev/s asked, at A/L 0.22-0.26 (4.0-5.1 Mev/s at 10 px^-2, measured)."""
+EVENTS_PER_PX2_PER_MEV_S = 2.45
+"""The twin's event density per Mev/s asked, at A/L 0.22-0.26 (measured: 11.0 px^-2 gave 4.48 Mev/s
+while flapping, 12.5 gave 5.11)."""
 LAW = '''
 """Hold A/L at a set-point that steps once: each cycle the speed moves by GAIN x the A/L error."""
 
