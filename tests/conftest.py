@@ -1,5 +1,6 @@
 """Shared pytest fixtures: the real recordings in ../shared/data/real and the hardware switch; the fake
-camera SDKs' fixtures (``fake_nd``, ``fake_hal``, ``fake_dv``, ``no_sdk``) are a plugin of every test."""
+camera SDKs' fixtures (``fake_nd``, ``fake_hal``, ``fake_dv``, ``no_sdk``) are a plugin of every test.
+The session: slow tests run first, and under xdist numba's cache is filled before the workers start."""
 
 from __future__ import annotations
 
@@ -35,9 +36,12 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     reporter = config.pluginmanager.get_plugin("terminalreporter")
     started = time.monotonic()
     with tempfile.TemporaryDirectory() as folder:
-        done = subprocess.run([sys.executable, "-c", WARM_UP, folder], capture_output=True, text=True, timeout=600)
+        try:
+            code = subprocess.run([sys.executable, "-c", WARM_UP, folder], capture_output=True, timeout=600).returncode
+        except subprocess.TimeoutExpired:
+            code = None
     if reporter is not None:
-        outcome = "ready" if done.returncode == 0 else f"not warmed (exit {done.returncode}; tests compile as they go)"
+        outcome = "ready" if code == 0 else f"not warmed (exit {code}; the tests compile them as they go)"
         reporter.write_line(f"numba kernels {outcome} in {time.monotonic() - started:.0f} s")
 
 

@@ -144,6 +144,7 @@ class SweepProgressView:
     def _start(self, state: SupervisorState) -> None:
         self._started = True
         self._finished = state.points_done
+        self._records = state.point_records  # (a view that joins mid-sweep draws no line for the past)
         if self.terminal:
             from tqdm import tqdm
 

@@ -145,6 +145,11 @@ def test_a_redone_last_point_gets_a_line_for_each_record() -> None:
         view(state(**last, point_records=2, last_status="done"))  # points_done unchanged: still a line
     lines = out.getvalue().splitlines()[1:]
     assert len(lines) == 2 and "LOSSY" in lines[0] and "A/L 0.231" in lines[1]
+    joined = io.StringIO()  # a view that joins mid-sweep: no line for the records before it
+    with SweepProgressView(joined) as view:
+        view(state(**last, point_records=2))
+        view(state(**last, point_records=2))
+    assert [line for line in joined.getvalue().splitlines() if line.startswith("point")] == []
 
 
 def test_quiet_shows_nothing_and_a_bar_is_drawn_when_asked() -> None:
