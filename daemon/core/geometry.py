@@ -75,7 +75,8 @@ class FlagGeometry:
         length_spread: half the interquartile range of the windows' lengths (a spread, not an error).
         direction_se_deg: standard error of the rest direction from the axis fit.
         amplitude: peak-to-peak lateral motion of the tip.
-        frequency_hz: main frequency of the motion (None: fewer than two periods seen).
+        frequency_hz: main frequency of the motion (None only from older callers: a recording
+            where no motion repeats is refused as no flag).
         periods: flapping periods in the recording (duration x frequency).
         events_used: events of the flag after the defects were removed.
         hot_pixels: (x, y) pixels found hot and ignored.
@@ -164,6 +165,11 @@ def find_geometry(
     root = frame.point(u_root, float(np.interp(u_root, fit.centres, _filled(fit.mean, fit.centres))))
     frequency = _frequency_hz(refs)
     duration_s = (float(events["t"][-1]) - float(events["t"][0])) * 1e-6
+    if frequency is None:  # what moves does not move back and forth: no evidence of a flag
+        raise NoFlagError(
+            f"nothing flaps: no motion repeats within the {duration_s:.2g} s recording "
+            "(record the flag flapping, or tapped by hand, for at least a period)"
+        )
     return FlagGeometry(
         root=(float(root[0]), float(root[1])),
         direction_deg=frame.direction_deg,

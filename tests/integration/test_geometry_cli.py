@@ -137,6 +137,16 @@ def test_a_recording_without_a_flag_is_one_line_and_exit_2(folder: Path, name: s
     assert result.stdout == "" and not (folder / "none.yaml").exists()
 
 
+@pytest.mark.shared_data
+@pytest.mark.parametrize("name", ["tonic_sample.aedat4", "expelliarmus_evt3_sample.raw"])
+def test_real_recordings_of_other_scenes_are_no_flag(shared_real: Path, tmp_path: Path, name: str) -> None:
+    """Real sensors' recordings of other scenes (the team's reference files): nothing in them flaps."""
+    result = flagtrack("geometry", str(shared_real / name), "--json", cwd=tmp_path)
+    assert result.returncode == 2 and result.stdout == ""
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "no flag found" in lines[0] and name in lines[0], result.stderr
+
+
 def test_a_missing_file_is_one_line_and_exit_2(folder: Path) -> None:
     result = flagtrack("geometry", str(folder / "absent.raw"))
     assert result.returncode == 2

@@ -123,6 +123,15 @@ def test_noise_only_and_empty_are_no_flag() -> None:
         find_geometry(np.zeros(0, dtype=EVENT_DTYPE), SIZE)
 
 
+def test_a_motion_that_does_not_repeat_is_no_flag() -> None:
+    """Under one period of the 20 Hz flag (30 ms) nothing shows a flapping flag: refused, not guessed;
+    the same flag over three periods is found."""
+    kin = WavyFlag(length=200.0, root=(150.0, 240.0), amp_rad=0.8)
+    with pytest.raises(NoFlagError, match="nothing flaps"):
+        find_geometry(flag_events(kin, duration_us=30_000), SIZE)
+    assert find_geometry(flag_events(kin), SIZE).periods >= 2
+
+
 def test_hot_pixels_are_those_far_above_every_neighbour() -> None:
     counts = np.full((20, 20), 50)
     counts[5, 5] = 400  # hot
