@@ -32,6 +32,9 @@ from flagtrack.daemon.core.geometry_field import FieldFit, References, fit_field
 from flagtrack.daemon.core.geometry_root import length_estimates, root_along_axis
 from flagtrack.daemon.core.mapping import PointMapping
 
+_MAX_LENGTH_OVER_DIAGONAL = 1.2
+"""A flag seen whole is at most the sensor's diagonal long (20 % more: a calibration's pixel size varies)."""
+
 
 class NoFlagError(ValueError):
     """The events show no flag (empty, noise only, or nothing that flaps); the message says why."""
@@ -162,6 +165,12 @@ def find_geometry(
     if len(lengths) == 0:
         raise NoFlagError("no window shows the flag's tip: no flag")
     q1, q3 = np.percentile(lengths, [25, 75])
+    diagonal_px = math.hypot(width, height)
+    if q3 / scale > _MAX_LENGTH_OVER_DIAGONAL * diagonal_px:  # root and tip cannot both be in view
+        raise NoFlagError(
+            f"the moving line would be {q3 / scale:.0f} pixels long, longer than the {width} x {height} "
+            "sensor's diagonal: not one flag"
+        )
     root = frame.point(u_root, float(np.interp(u_root, fit.centres, _filled(fit.mean, fit.centres))))
     frequency = _frequency_hz(refs)
     duration_s = (float(events["t"][-1]) - float(events["t"][0])) * 1e-6

@@ -138,9 +138,12 @@ def test_a_recording_without_a_flag_is_one_line_and_exit_2(folder: Path, name: s
 
 
 @pytest.mark.shared_data
-@pytest.mark.parametrize("name", ["tonic_sample.aedat4", "expelliarmus_evt3_sample.raw"])
+@pytest.mark.parametrize(
+    "name", ["tonic_sample.aedat4", "expelliarmus_evt3_sample.raw", "expelliarmus_evt2_test_sparklers.raw"]
+)
 def test_real_recordings_of_other_scenes_are_no_flag(shared_real: Path, tmp_path: Path, name: str) -> None:
-    """Real sensors' recordings of other scenes (the team's reference files): nothing in them flaps."""
+    """Real sensors' recordings of other scenes (the team's reference files): nothing in them flaps, or
+    what moves would be a flag longer than the sensor's diagonal."""
     result = flagtrack("geometry", str(shared_real / name), "--json", cwd=tmp_path)
     assert result.returncode == 2 and result.stdout == ""
     lines = result.stderr.strip().splitlines()
