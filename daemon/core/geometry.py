@@ -78,8 +78,8 @@ class FlagGeometry:
         length_spread: half the interquartile range of the windows' lengths (a spread, not an error).
         direction_se_deg: standard error of the rest direction from the axis fit.
         amplitude: peak-to-peak lateral motion of the tip.
-        frequency_hz: main frequency of the motion (None only from older callers: a recording
-            where no motion repeats is refused as no flag).
+        frequency_hz: main frequency of the motion (:func:`find_geometry` refuses a recording
+            where no motion repeats, so it never gives None).
         periods: flapping periods in the recording (duration x frequency).
         events_used: events of the flag after the defects were removed.
         hot_pixels: (x, y) pixels found hot and ignored.
@@ -158,20 +158,6 @@ def find_geometry(
         frame = frame.flipped()
     frame, direction_se = frame.refined(_motion(frame, sample, params)[0])
     fit, refs = _motion(frame, seen, params)
-    noise = noise_hz * (end_us - every.t_us[0]) * 1e-6 / scale**2  # noise events per unit area
-    u_root, u_first = root_along_axis(*frame.uv(every.x, every.y), fit, scale, params.onset_px * scale, noise)
-    u, v = frame.uv(seen.x, seen.y)
-    lengths = length_estimates(u, v, seen.t_us, fit, refs, u_root)
-    if len(lengths) == 0:
-        raise NoFlagError("no window shows the flag's tip: no flag")
-    q1, q3 = np.percentile(lengths, [25, 75])
-    diagonal_px = math.hypot(width, height)
-    if q3 / scale > _MAX_LENGTH_OVER_DIAGONAL * diagonal_px:  # root and tip cannot both be in view
-        raise NoFlagError(
-            f"the moving line would be {q3 / scale:.0f} pixels long, longer than the {width} x {height} "
-            "sensor's diagonal: not one flag"
-        )
-    root = frame.point(u_root, float(np.interp(u_root, fit.centres, _filled(fit.mean, fit.centres))))
     frequency = _frequency_hz(refs)
     duration_s = (float(events["t"][-1]) - float(events["t"][0])) * 1e-6
     if frequency is None:  # what moves does not move back and forth: no evidence of a flag
@@ -179,6 +165,20 @@ def find_geometry(
             f"nothing flaps: no motion repeats within the {duration_s:.2g} s recording "
             "(record the flag flapping, or tapped by hand, for at least a period)"
         )
+    noise = noise_hz * (end_us - every.t_us[0]) * 1e-6 / scale**2  # noise events per unit area
+    u_root, u_first = root_along_axis(*frame.uv(every.x, every.y), fit, scale, params.onset_px * scale, noise)
+    u, v = frame.uv(seen.x, seen.y)
+    lengths = length_estimates(u, v, seen.t_us, fit, refs, u_root)
+    if len(lengths) == 0:
+        raise NoFlagError("no window shows the flag's tip: no flag")
+    q1, q3 = np.percentile(lengths, [25, 75])
+    length_px = q3 / scale
+    if length_px > _MAX_LENGTH_OVER_DIAGONAL * math.hypot(width, height):  # root and tip cannot both be in view
+        raise NoFlagError(
+            f"the moving line would be {length_px:.0f} pixels long, longer than the {width} x {height} "
+            "sensor's diagonal: not one flag"
+        )
+    root = frame.point(u_root, float(np.interp(u_root, fit.centres, _filled(fit.mean, fit.centres))))
     return FlagGeometry(
         root=(float(root[0]), float(root[1])),
         direction_deg=frame.direction_deg,
