@@ -276,7 +276,9 @@ def run_updates(
     lost_cfg: np.ndarray,
     lost_prev: np.ndarray,
     out_lost: np.ndarray,
-    back_idx: np.ndarray,
+    t: np.ndarray,
+    first: int,
+    look_back_us: int,
     end_us: np.ndarray,
     cum_region: np.ndarray,
     cum_ring: np.ndarray,
@@ -304,8 +306,9 @@ def run_updates(
             length of the current lost stretch (:func:`.lost.hold`), and the tip's support
             (:func:`.lost.tip_support`), carried in place.
         out_lost: (K,) uint8 written: 1 where the flag was not found.
-        back_idx: (K,) first buffer index of the events within ``stale_after_s`` of each window's end
-            (the look-back of :mod:`.evidence`); end_us: (K,) each window's end, µs.
+        t: (n,) int64 event times, µs; first: the buffer's first live index; look_back_us: how far
+            before a window's end its look-back starts (``stale_after_s``, :mod:`.evidence`; searched
+            only for the windows that need it); end_us: (K,) each window's end, µs.
         cum_region, cum_ring, cls: the buffer's prefix counts and their valid range (:func:`.evidence.classify`).
         out_stale: (K,) uint8 written: 1 where the region held less than min_events of evidence over
             the whole look-back (the shape was not measured); such an update is not lost.
@@ -340,8 +343,9 @@ def run_updates(
         bucket_sort(x, y, lo, hi, root_x, root_y, inv_width, xs, ys, bucket, offsets)
         stale, start = 0, lo
         if stale_on and offsets[region_end] - (offsets[n_buckets - 1] - offsets[region_end]) * ring_ratio < target:
+            back = first + np.searchsorted(t[first:lo], end_us[w] - look_back_us)
             stale, start = look_back(
-                x, y, back_idx[w], lo, hi, root_x, root_y, inv_width, region_end, n_buckets - 1, cum_region, cum_ring,
+                x, y, back, lo, hi, root_x, root_y, inv_width, region_end, n_buckets - 1, cum_region, cum_ring,
                 cls, ring_ratio, need, target, gathers,
             )  # fmt: skip
         if start < lo:  # a quiet window gathers its events from further back

@@ -342,7 +342,6 @@ class Tracker:
             if gap.any():
                 keep = ~gap
                 t_us, lo_idx, hi_idx, hi_us = t_us[keep], lo_idx[keep], hi_idx[keep], hi_us[keep]
-        back_idx = np.minimum(np.searchsorted(times, hi_us - self._look_back_us, side="left"), lo_idx) + buf.start
         lo_idx, hi_idx = lo_idx + buf.start, hi_idx + buf.start
         k, n_j, n_s = len(t_us), chain.n_joints, len(self.s)
         jx, jy = np.empty((k, n_j + 1)), np.empty((k, n_j + 1))
@@ -378,7 +377,9 @@ class Tracker:
             self._lost_cfg,
             self._lost_prev,
             lost,
-            back_idx,
+            buf.t,
+            buf.start,
+            self._look_back_us,
             hi_us,
             buf.cum_region,
             buf.cum_ring,
