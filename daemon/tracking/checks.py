@@ -84,7 +84,7 @@ def _check_times(config: Any, fail: Any) -> None:
         if value is not None and not (_finite(value) and abs(value) <= MAX_ABS_TIME_S):
             fail(key, f"must be a finite time within +-{MAX_ABS_TIME_S:g} s, got {value}")
     if config.t_start_s is not None and config.t_stop_s is not None and not config.t_start_s < config.t_stop_s:
-        fail("t_start_s", f"must be before t_stop_s, got {config.t_start_s} >= {config.t_stop_s}")
+        fail("t_start_s", f"must be before the stop time, got {config.t_start_s} >= {config.t_stop_s}")
 
 
 def _finite(value: Any) -> bool:

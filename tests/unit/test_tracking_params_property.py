@@ -146,7 +146,7 @@ def test_the_core_api_refuses_with_a_value_error_or_tracks(
         (["--root", "nan", "nan"], "--root: must be two finite numbers"),
         (["--joints", "1000000"], "--joints: must be 1-1000 links"),
         (["--direction", "nan"], "--direction: must be a finite number"),
-        (["--t-start", "0.5", "--t-stop", "0.1"], "--t-start: must be before"),
+        (["--t-start", "0.5", "--t-stop", "0.1"], "--t-start: must be before the stop time, got 0.5 >= 0.1"),
         (["--alpha", "1"], "--alpha: must be in (0, 1)"),
         (["--tau", "0"], "--tau: must be in [1e-06, 3600] s"),
         (["--dt", "-1"], "--dt: must be in [1e-06, 3600] s"),
