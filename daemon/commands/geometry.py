@@ -112,7 +112,7 @@ def as_json(found: Any, units: str) -> dict[str, Any]:
         "length_spread": _round(found.length_spread),
         "direction_se_deg": _round(found.direction_se_deg),
         "amplitude": _round(found.amplitude),
-        "frequency_hz": None if found.frequency_hz is None else _round(found.frequency_hz),
+        "frequency_hz": _round(found.frequency_hz),
         "periods": _round(found.periods),
         "events_used": found.events_used,
         "hot_pixels": [list(p) for p in found.hot_pixels],
@@ -157,7 +157,7 @@ def _str(path: Path | None) -> str | None:
 def _plain(path: Path, found: Any, units: str, calibration: Path | None, output: Path | None) -> str:
     """A few lines a person reads, and the reconstruct options to use."""
     ratio = found.amplitude / found.length if found.length > 0 else math.nan
-    motion = f"{found.frequency_hz:.1f} Hz over {found.periods:.1f} periods" if found.frequency_hz else "no period"
+    motion = f"{found.frequency_hz:.1f} Hz over {found.periods:.1f} periods"
     lines = [
         f"flag in {path} ({units}):",
         f"  root       ({found.root[0]:.6g}, {found.root[1]:.6g})",

@@ -94,7 +94,7 @@ class FlagGeometry:
     length_spread: float
     direction_se_deg: float
     amplitude: float
-    frequency_hz: float | None
+    frequency_hz: float
     periods: float
     events_used: int
     hot_pixels: tuple[tuple[int, int], ...]
@@ -188,7 +188,7 @@ def find_geometry(
         direction_se_deg=direction_se,
         amplitude=_tip_amplitude(fit),
         frequency_hz=frequency,
-        periods=float(duration_s * frequency) if frequency else 0.0,
+        periods=float(duration_s * frequency),
         events_used=len(seen.x),
         hot_pixels=tuple((int(px % width), int(px // width)) for px in np.flatnonzero(hot)),
         at_edge=min(size) > 0 and _at_edge(seen, frame, (width, height), u_root, float(q3)),
