@@ -78,8 +78,7 @@ class FlagGeometry:
         length_spread: half the interquartile range of the windows' lengths (a spread, not an error).
         direction_se_deg: standard error of the rest direction from the axis fit.
         amplitude: peak-to-peak lateral motion of the tip.
-        frequency_hz: main frequency of the motion (:func:`find_geometry` refuses a recording
-            where no motion repeats, so it never gives None).
+        frequency_hz: main frequency of the motion (a recording where none repeats is refused).
         periods: flapping periods in the recording (duration x frequency).
         events_used: events of the flag after the defects were removed.
         hot_pixels: (x, y) pixels found hot and ignored.
