@@ -63,8 +63,10 @@ def run_rig(source: Path, rec_cfg: RecorderConfig, speed: float, during=None, re
         if during is not None:
             during(cam_bus, recorder)
         cam_thread.join(30)
-        recorded = lambda: recorder.current is not None and recorder.current.packets == camera.packets  # noqa: E731
-        assert wait_for(recorded if rec_cfg.path else lambda: True)
+        if rec_cfg.path:  # recording from launch: every packet the camera sent is in the one file
+            assert wait_for(lambda: recorder.current is not None and recorder.current.packets == camera.packets)
+        else:  # recording on command: the last part has the end of stream (the last packets were in flight)
+            assert wait_for(lambda: recorder.current is None or recorder.current.ended)
         stop.set()
         thread.join(10)
         assert not thread.is_alive()
