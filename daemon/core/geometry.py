@@ -30,10 +30,15 @@ from scipy import ndimage
 
 from flagtrack.daemon.core.geometry_field import FieldFit, References, fit_field, hot_pixels, references, supported
 from flagtrack.daemon.core.geometry_root import length_estimates, root_along_axis
-from flagtrack.daemon.core.mapping import PointMapping
+from flagtrack.daemon.core.mapping import PointMapping, on_sensor
 
 _MAX_LENGTH_OVER_DIAGONAL = 1.2
 """A flag seen whole is at most the sensor's diagonal long (20 % more: a calibration's pixel size varies)."""
+_MIN_TIP_MOTION_PX = 4.0
+"""Least peak-to-peak motion of the far end for a flag (pixels): under it, nothing can be tracked."""
+_MAX_LENGTH_SPREAD = 0.06
+"""Largest spread of the windows' lengths (half their interquartile range) over L for a flag (the
+simulated grid's flags: at most 0.6 %)."""
 
 
 class NoFlagError(ValueError):
@@ -114,8 +119,6 @@ class FlagGeometry:
             out.append(f"only {self.periods:.1f} periods of motion: record longer for surer figures")
         if self.length_spread > 0.03 * self.length:
             out.append(f"the windows' lengths spread by {100 * self.length_spread / self.length:.0f} % of L")
-        if self.amplitude < 4 * self.px_size:
-            out.append("the flag barely moves (tip amplitude under 4 pixels)")
         return out
 
 
@@ -178,7 +181,7 @@ def find_geometry(
             "sensor's diagonal: not one flag"
         )
     root = frame.point(u_root, float(np.interp(u_root, fit.centres, _filled(fit.mean, fit.centres))))
-    return FlagGeometry(
+    found = FlagGeometry(
         root=(float(root[0]), float(root[1])),
         direction_deg=frame.direction_deg,
         length=float(q3),
@@ -193,6 +196,32 @@ def find_geometry(
         at_edge=min(size) > 0 and _at_edge(seen, frame, (width, height), u_root, float(q3)),
         px_size=scale,
     )
+    _refuse_what_no_flag_does(found, size, mapping)
+    return found
+
+
+def _refuse_what_no_flag_does(found: FlagGeometry, size: tuple[int, int], mapping: PointMapping | None) -> None:
+    """NoFlagError when what moves cannot be a flag: a tip that moves under 4 pixels, a length that
+    changes from window to window (a flag's spreads by under 1 % of L on the simulated grid of
+    docs/first-day.md), or a root off the sensor (where its size is known: the tracker refuses it)."""
+    if found.amplitude < _MIN_TIP_MOTION_PX * found.px_size:
+        raise NoFlagError(
+            f"the far end moves {found.amplitude / found.px_size:.1f} pixels peak to peak, under "
+            f"{_MIN_TIP_MOTION_PX:g}: nothing flaps enough to be tracked (flap it harder, or bring the camera closer)"
+        )
+    spread = found.length_spread / found.length
+    if spread > _MAX_LENGTH_SPREAD and not found.at_edge:
+        raise NoFlagError(
+            f"what moves has no length of its own: it spreads by {100 * spread:.0f} % from window to window "
+            "(a flag's, under 1 %): not a flag"
+        )
+    width, height = size
+    x, y = found.root
+    if min(size) > 0 and not on_sensor(x, y, width, height, mapping):
+        raise NoFlagError(
+            f"its root would be at ({x:.4g}, {y:.4g}), off the {width} x {height} sensor: the flag's pole must "
+            "be in view"
+        )
 
 
 @dataclass(frozen=True)

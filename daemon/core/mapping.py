@@ -51,3 +51,23 @@ class AffineMapping:
         y = np.asarray(y_px, dtype=np.float64)
         (a, b), (c, d) = self.matrix
         return a * x + b * y + self.offset[0], c * x + d * y + self.offset[1]
+
+
+def on_sensor(x: float, y: float, width: int, height: int, mapping: PointMapping | None = None) -> bool:
+    """Whether the point (x, y), in the mapping's units (pixels without one), lies on a ``width`` x
+    ``height`` sensor (pixel centres at whole coordinates; with a mapping, inside the sensor's
+    outline mapped to the plane; True when the mapping cannot place that outline: no verdict)."""
+    if mapping is None:
+        return bool(-0.5 <= x <= width - 0.5 and -0.5 <= y <= height - 0.5)
+    u = np.linspace(-0.5, width - 0.5, 65)
+    v = np.linspace(-0.5, height - 0.5, 65)
+    px = np.concatenate([u, np.full(65, width - 0.5), u[::-1], np.full(65, -0.5)]).astype(np.float32)
+    py = np.concatenate([np.full(65, -0.5), v, np.full(65, height - 0.5), v[::-1]]).astype(np.float32)
+    ox, oy = (np.asarray(a, dtype=np.float64) for a in mapping.map(px, py))
+    if not (np.isfinite(ox).all() and np.isfinite(oy).all()):
+        return True
+    x0, y0, x1, y1 = ox, oy, np.roll(ox, -1), np.roll(oy, -1)
+    crosses = (y0 > y) != (y1 > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        at = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+    return bool(np.count_nonzero(crosses & (x < at)) % 2)

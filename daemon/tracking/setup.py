@@ -7,8 +7,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from flagtrack.daemon.tracking.section import TrackingConfig, load_tracking_config
 
 if TYPE_CHECKING:
@@ -98,20 +96,8 @@ def resolve_calibration(config: TrackingConfig, base: Path) -> TrackingConfig:
 
 
 def root_on_sensor(setup: TrackingSetup, width: int, height: int) -> bool:
-    """Whether the root lies on a ``width`` x ``height`` sensor (pixel centres at whole coordinates;
-    with a calibration, inside the sensor's outline mapped to the plane)."""
+    """Whether the root lies on a ``width`` x ``height`` sensor (:func:`.core.mapping.on_sensor`)."""
+    from flagtrack.daemon.core.mapping import on_sensor
+
     x, y = setup.params.chain.root
-    if setup.mapping is None:
-        return bool(-0.5 <= x <= width - 0.5 and -0.5 <= y <= height - 0.5)
-    u = np.linspace(-0.5, width - 0.5, 65)
-    v = np.linspace(-0.5, height - 0.5, 65)
-    px = np.concatenate([u, np.full(65, width - 0.5), u[::-1], np.full(65, -0.5)]).astype(np.float32)
-    py = np.concatenate([np.full(65, -0.5), v, np.full(65, height - 0.5), v[::-1]]).astype(np.float32)
-    ox, oy = (np.asarray(a, dtype=np.float64) for a in setup.mapping.map(px, py))
-    if not (np.isfinite(ox).all() and np.isfinite(oy).all()):
-        return True  # an outline the mapping cannot place: no verdict
-    x0, y0, x1, y1 = ox, oy, np.roll(ox, -1), np.roll(oy, -1)
-    crosses = (y0 > y) != (y1 > y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        at = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
-    return bool(np.count_nonzero(crosses & (x < at)) % 2)
+    return on_sensor(x, y, width, height, setup.mapping)

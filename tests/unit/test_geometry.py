@@ -132,6 +132,33 @@ def test_a_motion_that_does_not_repeat_is_no_flag() -> None:
     assert find_geometry(flag_events(kin), SIZE).periods >= 2
 
 
+class _Stretching:
+    """A line that flaps as a flag does but stretches and shrinks (0.6-1.0 L, at 7 Hz) as no flag can."""
+
+    def __init__(self, kin: WavyFlag) -> None:
+        self.kin, self.length = kin, kin.length
+
+    def positions(self, t_s: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        x, y = self.kin.positions(t_s, s)
+        scale = 0.8 + 0.2 * np.sin(2 * np.pi * 7.0 * np.atleast_1d(t_s))[:, None]
+        return self.kin.root[0] + (x - self.kin.root[0]) * scale, self.kin.root[1] + (y - self.kin.root[1]) * scale
+
+
+def test_what_cannot_be_a_flag_is_refused_by_what_it_does() -> None:
+    """A far end moving under 4 pixels, a line whose length changes from window to window, a root
+    off the sensor (the tracker would refuse it): each refused with its reason. The same root is
+    kept where the sensor's size is unknown (the events' extent does not bound the sensor)."""
+    with pytest.raises(NoFlagError, match=r"moves \d\.\d pixels peak to peak, under 4"):
+        find_geometry(flag_events(WavyFlag(length=200.0, root=(150.0, 240.0), amp_rad=0.02)), SIZE)
+    stretching = _Stretching(WavyFlag(length=200.0, root=(150.0, 240.0), amp_rad=0.8))
+    with pytest.raises(NoFlagError, match="no length of its own"):
+        find_geometry(flag_events(stretching, duration_us=300_000), SIZE)
+    off = flag_events(WavyFlag(length=200.0, root=(-20.0, 240.0), amp_rad=0.8))
+    with pytest.raises(NoFlagError, match="off the 640 x 480 sensor"):
+        find_geometry(off, SIZE)
+    assert find_geometry(off, (0, 0)).root[0] < 0
+
+
 def test_hot_pixels_are_those_far_above_every_neighbour() -> None:
     counts = np.full((20, 20), 50)
     counts[5, 5] = 400  # hot
