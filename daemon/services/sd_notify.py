@@ -126,6 +126,11 @@ class Watchdog:
             self.ready, self._last_s, self.pings = True, now, self.pings + (self.interval_s is not None)
             self._fresh.clear()
 
+    def awaits(self, name: str) -> bool:
+        """Whether the next ping waits for a new beat of ``name`` (none of its beats is unsent)."""
+        with self._lock:
+            return name in self.names and name not in self._fresh
+
     def retire(self, name: str) -> None:
         """Service ``name`` has ended (its work done): the others' beats alone keep the pings going."""
         with self._lock:

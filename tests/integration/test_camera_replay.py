@@ -106,4 +106,4 @@ def test_replay_paces_at_real_time(tmp_path: Path) -> None:
         n += 0 if data is None else len(data.events)
     elapsed = time.monotonic() - start
     assert n == len(events)
-    assert 0.12 < elapsed < 0.6  # 0.3 s of camera time at speed 2
+    assert 0.12 < elapsed < 2.0  # 0.3 s of camera time at speed 2 (the upper bound: a stalled CI machine)

@@ -119,6 +119,7 @@ def test_a_law_is_bounded_held_on_faults_and_stopped_safe(tmp_path: Path, caplog
     out = tmp_path / "runs" / "exp1"
     caplog.set_level(logging.WARNING)
     code = main(["control", "-c", str(rig_file(tmp_path, port)), "--controller", f"{law}:law", "--out", str(out), "-q"])
+    wait_until(lambda: states and states[-1].setpoint_mps == 0.0, 10, "the tunnel's last state (at zero) to arrive")
     done.set()
     assert code == 1  # stopped by the law's faults, not finished
     steps = records(out)
@@ -163,6 +164,7 @@ def test_sigterm_stops_the_loop_safe_and_the_record_says_so(tmp_path: Path) -> N
         wait_until(lambda: (out / "control.jsonl").exists() and len(records(out)) >= 3, 150, "three control steps")
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=90)
+        wait_until(lambda: states and states[-1].setpoint_mps == 0.0, 10, "the tunnel's last state (at zero) to arrive")
     finally:
         proc.kill()
         done.set()

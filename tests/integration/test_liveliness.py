@@ -74,6 +74,8 @@ def test_a_camera_that_ends_or_fails_is_seen_gone_while_the_session_stays(
         assert wait_for(lambda: camera_key in watch.gone, timeout_s=20.0), watch.alive
         assert watch.gone[0] == camera_key and not watch.is_alive(camera_key) and not bus.session.is_closed()
         if source == "failure":  # the failure then stops the others, which go too
+            # (the token goes in the service's `finally`, before its error is stored)
+            assert wait_for(lambda: "camera/cam0" in group.report.errors)
             assert isinstance(group.report.errors["camera/cam0"], DriverError)
         else:  # the other service carries on, alive, in the same session
             assert camera.events > 1000 and "camera/cam0" not in group.report.errors

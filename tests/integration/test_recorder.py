@@ -96,7 +96,8 @@ def test_rotate_on_command_splits_without_losing_events(tmp_path: Path) -> None:
         commands.put(RecorderCommand("start", path="a", request_id="1"))
         assert wait_for(lambda: recorder.current is not None and recorder.current.packets > 0)  # a.raw has some
         commands.put(RecorderCommand("rotate", path="b", request_id="2"))
-        while len(statuses) < 3 and (msg := status.recv(timeout_s=2.0)) is not None:
+        # (a rotation closes and syncs a file before its statuses: slow on a busy disk)
+        while len(statuses) < 3 and (msg := status.recv(timeout_s=10.0)) is not None:
             statuses.append(msg)
 
     run_rig(source, RecorderConfig(directory=tmp_path / "out"), speed=1.0, during=rotate)

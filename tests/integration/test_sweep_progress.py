@@ -88,7 +88,9 @@ def test_quiet_sweep_prints_no_progress_only_the_result(tmp_path: Path) -> None:
 
 def test_a_remote_subscriber_receives_the_facts_of_each_point(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    config = from_mapping(RigConfig, rig_mapping(tmp_path, bus={"listen": [endpoint]}))
+    # the viewer listens, the rig connects: the link is up as the rig's bus opens (the other way round,
+    # a viewer that came first waits for Zenoh's next connection retry, seconds later)
+    config = from_mapping(RigConfig, rig_mapping(tmp_path, bus={"connect": [endpoint]}))
     local: list[SupervisorState] = []
 
     def broken_display(state: SupervisorState) -> None:
@@ -96,7 +98,7 @@ def test_a_remote_subscriber_receives_the_facts_of_each_point(tmp_path: Path, ca
         if state.last_point:  # from the first finished point on, the command's display fails
             raise BrokenPipeError("stderr went away")
 
-    with Bus(BusConfig(namespace=config.bus_config.namespace, connect=(endpoint,))) as viewer:
+    with Bus(BusConfig(namespace=config.bus_config.namespace, listen=(endpoint,))) as viewer:
         states = viewer.subscribe(viewer.keys.supervisor_state(), SupervisorState, capacity=100_000)
         result = run_rig(config, list(config.services), quiet=True, on_supervisor_state=broken_display)
         assert result.code == 0  # the sweep went on: a display never stops it

@@ -23,7 +23,7 @@ from flagtrack.drivers.camera.replay import ReplayCamera, ReplayConfig
 from flagtrack.drivers.formats import open_events, write_events
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
 from tests.fakes.helpers import wait_subscribed
-from tests.integration.test_transport import free_port, received, wait_for
+from tests.integration.test_transport import free_port, received, received_to_final, wait_for
 
 FLAG = WavyFlag(length=200.0, root=(100.0, 240.0), frequency_hz=20.0)
 CONFIG = TrackingConfig(root=FLAG.root, length=FLAG.length, tau_s=2.5e-4)
@@ -78,7 +78,7 @@ def live(path: Path, config: TrackingConfig, speed: float = 0.0) -> tuple[Centre
         camera.start()
         camera.run(threading.Event())
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
-        messages = received(lines)
+        messages = received_to_final(lines)
         stop_service()
         statuses = received(status, timeout_s=0.5)
     assert [m.seq for m in messages] == list(range(len(messages)))
@@ -138,9 +138,10 @@ def test_bad_packets_and_gaps_are_counted_and_tracking_goes_on(tmp_path: Path) -
                     )
                 )
         assert wait_for(lambda: service.packets == len(packets) - 1, timeout_s=20)
-        updates = 0
-        while (msg := lines.recv(timeout_s=1.0)) is not None:
+        updates, timeout_s = 0, 10.0  # (the first message may still be in the making: tracking follows counting)
+        while (msg := lines.recv(timeout_s=timeout_s)) is not None:
             updates += len(msg.t_s)
+            timeout_s = 1.0
     assert service.missing_packets == 1 and service.malformed_packets == 2
     assert updates > 120  # 4 updates per 1 ms packet, a few lost around the gaps
 
@@ -249,7 +250,7 @@ def test_a_restarted_camera_is_tracked_afresh(tmp_path: Path) -> None:
         assert wait_for(lambda: service.packets == 25, timeout_s=20)
         publish(pub, packets_of(second, 60_000), end=True)
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
-        messages = received(lines)
+        messages = received_to_final(lines)
         stop_service()
         statuses = received(status, timeout_s=0.5)
     assert service.restarts == 1 and service.missing_packets == 0
@@ -391,7 +392,7 @@ def test_a_duplicated_or_late_packet_is_dropped_not_taken_for_a_restart(tmp_path
         wait_subscribed(service.bus, cam_bus.keys.centrelines())
         publish(pub, [packets[k] for k in order], seqs=order, end=True, stream_id=stream_id)
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
-        messages = received(lines)
+        messages = received_to_final(lines)
         stop_service()
     assert service.restarts == 0 and service.late_packets == 2 and service.missing_packets == 1
     got = CentrelineBatch.concatenate([m.batch() for m in messages])
@@ -435,7 +436,7 @@ def test_a_packet_whose_time_offset_is_loops_off_is_dropped_not_tracked(tmp_path
         wait_subscribed(service.bus, cam_bus.keys.centrelines())
         publish(pub, [*packets[:30], bad, *packets[31:]], end=True)
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
-        messages = received(lines)
+        messages = received_to_final(lines)
         stop_service()
     assert service.malformed_packets == 1 and service.restarts == 0
     got = CentrelineBatch.concatenate([m.batch() for m in messages])

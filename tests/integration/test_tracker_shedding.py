@@ -20,7 +20,7 @@ from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.sim.quickline import line_events
 from tests.fakes.helpers import wait_subscribed
 from tests.integration.test_tracker_service import CONFIG, FLAG, packets_of
-from tests.integration.test_transport import free_port, received, wait_for
+from tests.integration.test_transport import free_port, received_to_final, wait_for
 
 BUDGET_MS = 1000.0  # far above any stall of a loaded test machine: only the packets sent long ago are late
 N_PACKETS = 60
@@ -89,7 +89,7 @@ def _run(late: range) -> tuple[CentrelineBatch, list[TrackerStatus], TrackerServ
                 )  # fmt: skip
             )
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=60)
-        messages = received(lines)
+        messages = received_to_final(lines)
         assert wait_for(lambda: service.shed.packets == len(late), timeout_s=5)
         statuses: list[TrackerStatus] = []
         deadline = time.monotonic() + 10  # the statuses until one counts every packet

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import socket
+import time
 from collections.abc import Iterator
 
 import pytest
@@ -34,6 +35,18 @@ def received(sub, timeout_s: float = 1.0) -> list:
     """Every message ``sub`` gets until none comes for ``timeout_s``."""
     messages = []
     while (msg := sub.recv(timeout_s=timeout_s)) is not None:
+        messages.append(msg)
+    return messages
+
+
+def received_to_final(sub, timeout_s: float = 30.0) -> list:
+    """Every centreline message ``sub`` gets up to the one that ends the stream (``final``), within
+    ``timeout_s`` in all (the tracker counts a stream ended before it publishes that message)."""
+    messages: list = []
+    deadline = time.monotonic() + timeout_s
+    while not (messages and messages[-1].final):
+        msg = sub.recv(timeout_s=max(deadline - time.monotonic(), 0.0))
+        assert msg is not None, f"no final centreline message within {timeout_s:g} s ({len(messages)} before)"
         messages.append(msg)
     return messages
 

@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from flagtrack.daemon.schema import EventPacket
+from flagtrack.daemon.services import sd_notify
 from flagtrack.daemon.services.recorder import RecorderConfig, RecorderService
 from flagtrack.daemon.services.runner import run_services
 from flagtrack.daemon.services.sd_notify import beat
@@ -122,7 +123,9 @@ def test_a_hung_recorder_loop_stops_the_pings_while_the_process_lives(
                 EventPacket("cam0", 0, 0, 999, 0, 640, 480, "evt3", 0, data=b"")
             )
             wait_until(hanging.is_set, 10.0, "the recorder's write to hang")
-            messages(sock, 0.15)  # a ping already on its way
+            # the ping owed to the recorder's last beat (sent on the other service's beat) is out
+            wait_until(lambda: sd_notify._current is not None and sd_notify._current.awaits("recorder"), 10.0)
+            messages(sock, 0.01)
             assert messages(sock, 1.0) == []  # five watchdog periods without a ping: systemd kills here
             assert runner.is_alive()
             release.set()  # the write returns: the loop beats again

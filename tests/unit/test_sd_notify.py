@@ -185,7 +185,9 @@ def test_a_hung_loop_stops_the_pings_while_the_process_lives(monkeypatch: pytest
         wait_until(lambda: sock.recv(4096).startswith(b"WATCHDOG=1"), what="a second ping")
         tracker.hang.set()
         wait_until(lambda: tracker.hanging, what="the tracker's loop to hang")
-        received(sock, 0.06)  # what was on its way before the hang
+        # the ping owed to the tracker's last beat (sent on a camera beat, under the lock) is out
+        wait_until(lambda: sd_notify._current is not None and sd_notify._current.awaits("tracker"))
+        received(sock, 0.01)
         ticks = camera.ticks
         assert received(sock, 0.5) == []  # ten watchdog periods: systemd would have killed the process
         assert runner.is_alive() and camera.ticks > ticks + 10  # ... whose other loop still runs
