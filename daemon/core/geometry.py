@@ -16,6 +16,9 @@ plane's units through a calibration mapping; angles in degrees from +x towards +
    where the amplitude is well measured), and extrapolated to zero (``|Z|^2 = s^2 (b0 + b1 s)``).
 5. The length: in each short window the line's farthest point is its tip; the arc length from
    the root to it follows the model's curve; the upper quartile of the windows' lengths is L.
+6. What no flag does is refused (:class:`NoFlagError`): a far end moving under 4 pixels, a length
+   that changes from window to window, a root off the sensor (one extrapolated a pixel or two off
+   it, as a pole at the sensor's edge gives, is put on its edge, and said).
 
 Everything here is pure numpy/scipy: events in, a :class:`FlagGeometry` out.
 """
@@ -29,7 +32,7 @@ import numpy as np
 from scipy import ndimage
 
 from flagtrack.daemon.core.geometry_field import FieldFit, References, fit_field, hot_pixels, references, supported
-from flagtrack.daemon.core.geometry_root import length_estimates, root_along_axis
+from flagtrack.daemon.core.geometry_root import length_estimates, root_along_axis, root_onto_sensor
 from flagtrack.daemon.core.mapping import PointMapping, on_sensor
 
 _MAX_LENGTH_OVER_DIAGONAL = 1.2
@@ -38,11 +41,12 @@ _MIN_TIP_MOTION_PX = 4.0
 """Least peak-to-peak motion of the far end for a flag (pixels): under it, nothing can be tracked."""
 _MAX_LENGTH_SPREAD = 0.06
 """Largest spread of the windows' lengths (half their interquartile range) over L for a flag (the
-simulated grid's flags: at most 0.6 %)."""
+simulated grid's flags, 72 recordings: at most 0.8 %)."""
 
 
 class NoFlagError(ValueError):
-    """The events show no flag (empty, noise only, or nothing that flaps); the message says why."""
+    """The events show no flag (empty, noise only, nothing that flaps, or what moves cannot be a flag);
+    the message says why."""
 
 
 @dataclass(frozen=True)
@@ -89,6 +93,8 @@ class FlagGeometry:
         hot_pixels: (x, y) pixels found hot and ignored.
         at_edge: the flag's envelope reaches the sensor's edge (its length may be cut).
         px_size: size of a pixel near the flag, in these units (1 without a mapping).
+        root_pulled: how far downstream the root was moved, onto the sensor, from where the
+            extrapolation put it just off (0: not moved).
     """
 
     root: tuple[float, float]
@@ -104,6 +110,7 @@ class FlagGeometry:
     hot_pixels: tuple[tuple[int, int], ...]
     at_edge: bool
     px_size: float
+    root_pulled: float = 0.0
 
     def warnings(self) -> list[str]:
         """What is unsure, as sentences (empty when nothing is)."""
@@ -112,6 +119,11 @@ class FlagGeometry:
             out.append(
                 f"the first {100 * self.root_gap / self.length:.0f} % of the flag barely moves: the root is "
                 "extrapolated along the axis (record a larger motion for a surer root)"
+            )
+        if self.root_pulled > 0:
+            out.append(
+                f"the root was extrapolated {self.root_pulled / self.px_size:.1f} pixels off the sensor and is put "
+                "at its edge: check that the pole is there"
             )
         if self.at_edge:
             out.append("the flag's motion reaches the sensor's edge: the length may be cut short")
@@ -169,6 +181,10 @@ def find_geometry(
         )
     noise = noise_hz * (end_us - every.t_us[0]) * 1e-6 / scale**2  # noise events per unit area
     u_root, u_first = root_along_axis(*frame.uv(every.x, every.y), fit, scale, params.onset_px * scale, noise)
+    # a pole at the sensor's edge: the extrapolated root may land just off it (by the gap, a pixel or two)
+    on_it = (lambda u: on_sensor(*_axis_point(frame, fit, u), *size, mapping)) if min(size) > 0 else None
+    u_seen = root_onto_sensor(u_root, max(u_first - u_root, 0.0) + 2.0 * scale, on_it)
+    pulled, u_root = u_seen - u_root, u_seen
     u, v = frame.uv(seen.x, seen.y)
     lengths = length_estimates(u, v, seen.t_us, fit, refs, u_root)
     if len(lengths) == 0:
@@ -180,7 +196,7 @@ def find_geometry(
             f"the moving line would be {length_px:.0f} pixels long, longer than the {width} x {height} "
             "sensor's diagonal: not one flag"
         )
-    root = frame.point(u_root, float(np.interp(u_root, fit.centres, _filled(fit.mean, fit.centres))))
+    root = _axis_point(frame, fit, u_root)
     found = FlagGeometry(
         root=(float(root[0]), float(root[1])),
         direction_deg=frame.direction_deg,
@@ -195,33 +211,44 @@ def find_geometry(
         hot_pixels=tuple((int(px % width), int(px // width)) for px in np.flatnonzero(hot)),
         at_edge=min(size) > 0 and _at_edge(seen, frame, (width, height), u_root, float(q3)),
         px_size=scale,
+        root_pulled=float(pulled),
     )
     _refuse_what_no_flag_does(found, size, mapping)
     return found
 
 
 def _refuse_what_no_flag_does(found: FlagGeometry, size: tuple[int, int], mapping: PointMapping | None) -> None:
-    """NoFlagError when what moves cannot be a flag: a tip that moves under 4 pixels, a length that
-    changes from window to window (a flag's spreads by under 1 % of L on the simulated grid of
-    docs/first-day.md), or a root off the sensor (where its size is known: the tracker refuses it)."""
+    """NoFlagError when what moves cannot be a flag: a far end moving under 4 pixels peak to peak (2
+    sqrt(2) times its RMS over the recording's whole periods: a tap followed by a long rest counts low),
+    a length that changes from window to window (a flag's spreads by under 0.8 % of L on the
+    simulated grid of docs/first-day.md; not judged when the motion reaches the sensor's edge), or a
+    root off the sensor (where its size is known: the tracker refuses such a root)."""
     if found.amplitude < _MIN_TIP_MOTION_PX * found.px_size:
         raise NoFlagError(
             f"the far end moves {found.amplitude / found.px_size:.1f} pixels peak to peak, under "
-            f"{_MIN_TIP_MOTION_PX:g}: nothing flaps enough to be tracked (flap it harder, or bring the camera closer)"
+            f"{_MIN_TIP_MOTION_PX:g}: nothing moves enough to be tracked (flap or tap it harder, or bring the "
+            "camera closer)"
         )
     spread = found.length_spread / found.length
     if spread > _MAX_LENGTH_SPREAD and not found.at_edge:
         raise NoFlagError(
-            f"what moves has no length of its own: it spreads by {100 * spread:.0f} % from window to window "
-            "(a flag's, under 1 %): not a flag"
+            f"the moving line's length changes from window to window by {100 * spread:.0f} % of itself "
+            "(a flag's: under 0.8 %): not a flag"
         )
     width, height = size
     x, y = found.root
     if min(size) > 0 and not on_sensor(x, y, width, height, mapping):
+        plane = " (its outline mapped through the calibration)" if mapping is not None else ""
         raise NoFlagError(
-            f"its root would be at ({x:.4g}, {y:.4g}), off the {width} x {height} sensor: the flag's pole must "
-            "be in view"
+            f"what moves would be rooted at ({x:.4g}, {y:.4g}), off the {width} x {height} sensor{plane}: "
+            "a flag's pole is in view"
         )
+
+
+def _axis_point(frame: _Frame, fit: FieldFit, u: float) -> tuple[float, float]:
+    """The point at ``u`` along the axis, on the line's time-mean lateral position there."""
+    x, y = frame.point(u, float(np.interp(u, fit.centres, _filled(fit.mean, fit.centres))))
+    return float(x), float(y)
 
 
 @dataclass(frozen=True)

@@ -6,6 +6,8 @@ Both work in the flag's frame (u along the axis, v across it) on the events and 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy import ndimage
 from scipy.optimize import nnls
@@ -162,3 +164,15 @@ def length_estimates(
     frac = at - low
     extra = excess[shown, low] * (1 - frac) + excess[shown, low + 1] * frac
     return tip - u_root + extra
+
+
+def root_onto_sensor(u_root: float, reach: float, on_sensor: Callable[[float], bool] | None) -> float:
+    """``u_root``, or the nearest axis position downstream of it, within ``reach``, where
+    ``on_sensor`` holds (a pole at the sensor's edge: the extrapolated root may land just off it);
+    ``u_root`` when ``on_sensor`` is None (the sensor's size unknown) or holds nowhere there."""
+    if on_sensor is None or on_sensor(u_root):
+        return u_root
+    for u in u_root + np.linspace(0.0, reach, 41)[1:]:
+        if on_sensor(float(u)):
+            return float(u)
+    return u_root

@@ -127,7 +127,7 @@ class Watchdog:
             self._fresh.clear()
 
     def awaits(self, name: str) -> bool:
-        """Whether the next ping waits for a new beat of ``name`` (none of its beats is unsent)."""
+        """Whether the next ping needs a new beat of ``name`` (its last beat has been pinged for)."""
         with self._lock:
             return name in self.names and name not in self._fresh
 

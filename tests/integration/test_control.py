@@ -146,8 +146,7 @@ def test_a_law_is_bounded_held_on_faults_and_stopped_safe(tmp_path: Path, caplog
     with h5py.File(out / "recording_centrelines.h5") as f:
         assert len(f["t"]) > 100
     readbacks = [s.speed_mps for s in states if s.speed_mps >= 0]
-    assert readbacks and max(readbacks) <= MAX_MPS + TOLERANCE_MPS
-    assert states[-1].setpoint_mps == 0.0  # ended at zero
+    assert readbacks and max(readbacks) <= MAX_MPS + TOLERANCE_MPS  # (and it ended at zero: waited for above)
 
 
 @pytest.mark.slow
@@ -171,8 +170,7 @@ def test_sigterm_stops_the_loop_safe_and_the_record_says_so(tmp_path: Path) -> N
     assert proc.returncode != 0, err
     run = json.loads((out / "run.json").read_text())
     assert run["status"] == "stopped" and "SIGTERM" in run["stop_reason"].upper(), run["stop_reason"]
-    assert all(r["asked_mps"] == 5.0 and r["applied_mps"] == 5.0 for r in records(out))
-    assert states and states[-1].setpoint_mps == 0.0
+    assert all(r["asked_mps"] == 5.0 and r["applied_mps"] == 5.0 for r in records(out))  # (ended at zero: above)
 
 
 def test_a_missing_law_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -10,7 +10,7 @@ import pytest
 from flagtrack.daemon.core.events import EVENT_DTYPE
 from flagtrack.daemon.core.geometry import NoFlagError, find_geometry
 from flagtrack.daemon.core.geometry_field import hot_pixels, supported
-from flagtrack.daemon.core.mapping import AffineMapping
+from flagtrack.daemon.core.mapping import AffineMapping, on_sensor
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
 
 SIZE = (640, 480)
@@ -151,12 +151,39 @@ def test_what_cannot_be_a_flag_is_refused_by_what_it_does() -> None:
     with pytest.raises(NoFlagError, match=r"moves \d\.\d pixels peak to peak, under 4"):
         find_geometry(flag_events(WavyFlag(length=200.0, root=(150.0, 240.0), amp_rad=0.02)), SIZE)
     stretching = _Stretching(WavyFlag(length=200.0, root=(150.0, 240.0), amp_rad=0.8))
-    with pytest.raises(NoFlagError, match="no length of its own"):
+    with pytest.raises(NoFlagError, match="length changes from window to window"):
         find_geometry(flag_events(stretching, duration_us=300_000), SIZE)
     off = flag_events(WavyFlag(length=200.0, root=(-20.0, 240.0), amp_rad=0.8))
     with pytest.raises(NoFlagError, match="off the 640 x 480 sensor"):
         find_geometry(off, SIZE)
     assert find_geometry(off, (0, 0)).root[0] < 0
+
+
+def test_a_pole_at_the_sensors_edge_is_a_flag_with_its_root_on_the_edge() -> None:
+    """The root extrapolated a little off the sensor (the pole at its edge, a small motion) is put on
+    the edge, and said; the figures stay within their targets."""
+    found = find_geometry(flag_events(WavyFlag(length=200.0, root=(5.0, 240.0), amp_rad=0.15)), SIZE)
+    assert -0.5 <= found.root[0] < 1.0 and root_error(found, (5.0, 240.0), 200.0) < 0.05
+    assert any("off the sensor and is put at its edge" in w for w in found.warnings())
+    assert found.root_pulled > 0
+
+
+def test_on_sensor_through_a_mapping_and_without() -> None:
+    """Pixel centres at whole coordinates (half a pixel of border); through a mapping, the sensor's
+    outline mapped to the plane; a mapping that cannot place the outline gives no verdict (True)."""
+    assert on_sensor(-0.5, 0.0, 640, 480) and not on_sensor(-0.6, 0.0, 640, 480)
+    assert on_sensor(639.5, 479.5, 640, 480) and not on_sensor(320.0, 480.0, 640, 480)
+    mapping = AffineMapping(((0.001, 0.0002), (0.0, 0.0014)), (-0.05, -0.3))  # sheared, scaled
+    inside = mapping.map(np.array([320.0]), np.array([240.0]))
+    outside = mapping.map(np.array([-3.0]), np.array([240.0]))
+    assert on_sensor(float(inside[0][0]), float(inside[1][0]), 640, 480, mapping)
+    assert not on_sensor(float(outside[0][0]), float(outside[1][0]), 640, 480, mapping)
+
+    class Nowhere:
+        def map(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return np.full(np.shape(x), np.nan), np.full(np.shape(y), np.nan)
+
+    assert on_sensor(1e9, 1e9, 640, 480, Nowhere())
 
 
 def test_hot_pixels_are_those_far_above_every_neighbour() -> None:
