@@ -70,10 +70,11 @@ class TrackerServiceConfig:
             the replay could go beyond it, and then loses packets (counted as dropped).
         exit_at_end_of_stream: stop after the camera's end of stream (a replayed file).
         max_coalesce: packets already queued are tracked together, up to this many.
-        gather_ms: a call holding fewer than ``gather_events`` events waits for more packets until
-            this long after its oldest packet reached the camera: at a low rate, packets are
-            tracked and published a few together instead of one by one (the per-call work is most
-            of the tracker's cost there); 0: every packet at once.
+        gather_ms: a call holding fewer than ``gather_events`` events and less than this much
+            camera time waits for more packets until this long after its oldest packet reached
+            the camera: at a low rate, packets are tracked and published a few together instead
+            of one by one (the per-call work is most of the tracker's cost there); 0: every
+            packet at once.
         gather_events: a call with this many events waits for no more.
     """
 

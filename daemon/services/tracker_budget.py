@@ -165,8 +165,8 @@ def gather(
     there is no room for within the budget, held for the next call (or None).
 
     ``cfg`` (a ``TrackerServiceConfig``): at most ``max_coalesce`` packets are taken; a call with
-    fewer than ``gather_events`` events waits for more until ``gather_ms`` after ``first`` reached
-    the camera.
+    fewer than ``gather_events`` events and less than ``gather_ms`` of camera time waits for more
+    until ``gather_ms`` after ``first`` reached the camera (a long packet is tracked at once).
     """
     batch: list[EventPacket] = []
     shed: set[int] = set()
@@ -174,6 +174,7 @@ def gather(
     if budget is not None:
         budget.steer(time.time_ns() - first.sent_ns)
     gather_until_ns = first.sent_ns + int(cfg.gather_ms * 1e6)
+    gather_us = cfg.gather_ms * 1e3 - 1  # camera time: a packet's last µs is t_last_us
     while True:
         now_ns = time.time_ns()
         if budget is not None and budget.sheds(more, now_ns):
@@ -190,7 +191,8 @@ def gather(
         batch.append(more)
         if len(batch) - len(shed) >= cfg.max_coalesce or len(batch) >= _MAX_GATHERED or more.end_of_stream:
             break
-        wait_ns = gather_until_ns - time.time_ns() if events < cfg.gather_events else 0
+        gathered = events >= cfg.gather_events or more.t_last_us - first.t_first_us >= gather_us
+        wait_ns = 0 if gathered else gather_until_ns - time.time_ns()
         if (more := recv(timeout_s=max(wait_ns, 0) * 1e-9)) is None:  # type: ignore[assignment]
             break
     return batch, frozenset(shed), None

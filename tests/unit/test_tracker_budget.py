@@ -137,3 +137,18 @@ def test_a_tracker_that_cannot_keep_up_sheds_single_packets_evenly_not_runs() ->
         budget.steer(20_000_000)  # caught up (under half the budget): back to shedding nothing
     assert budget.fraction == 0.0
     assert not any(budget.sheds(_packet(now - 30_000_000), now) for _ in range(40))
+
+
+def test_a_call_holding_gather_ms_of_camera_time_waits_for_no_more() -> None:
+    """Four 1 ms packets, or one of 4 ms, are the gathering's 4 ms: taken at once, not waited on."""
+    now = time.time_ns() + 10**10  # (a deadline far ahead whatever the load)
+
+    def spanning(first_us: int, last_us: int) -> EventPacket:
+        return EventPacket("cam0", 0, first_us, last_us, 1000, 640, 480, "evt3", now)
+
+    ms = _Queue([spanning(k * 1000, k * 1000 + 999) for k in range(1, 5)])
+    batch, _, _ = gather(spanning(0, 999), ms.recv, None, _cfg())
+    assert len(batch) == 5 and [t > 0 for t in ms.timeouts] == [True, True, True, False, False]
+    long = _Queue([spanning(4000, 7999)])
+    batch, _, _ = gather(spanning(0, 3999), long.recv, None, _cfg())
+    assert len(batch) == 2 and long.timeouts == [0.0, 0.0]  # (taken because it was queued: no wait)
