@@ -199,7 +199,12 @@ def bus_floor(recording: Path, packet_us: int, wall_s: float) -> dict[str, Any]:
         configs = write_configs(
             Path(tmp),
             bench={"rig": rig, "bus": {"listen": [endpoint]}},
-            camera={"rig": rig, "bus": {"connect": [endpoint]}, "camera": camera_section(recording, packet_us, 1.0)},
+            camera={
+                "rig": rig,
+                "bus": {"connect": [endpoint]},
+                # packets as cut (not joined at a low rate: their time in the camera is not the bus's)
+                "camera": {**camera_section(recording, packet_us, 1.0), "min_packet_events": 0},
+            },
         )
         transit_ms: list[float] = []
         with Bus(load_rig(configs["bench"], services=()).bus_config_for(["operator"])) as bus:

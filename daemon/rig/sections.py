@@ -49,8 +49,10 @@ class CameraConfig(CameraStreamConfig):
     def __post_init__(self) -> None:
         if self.adapter == "replay" and self.replay is None:
             raise ValueError("adapter 'replay' needs a 'replay:' section with a path")
-        if self.packet_us < 1 or self.max_packet_events < 1 or self.rate_interval_s <= 0:
-            raise ValueError("packet_us, max_packet_events and rate_interval_s must be positive")
+        if self.packet_us < 1 or self.max_packet_events < 1 or self.rate_interval_s <= 0 or self.max_packet_us < 1:
+            raise ValueError("packet_us, max_packet_events, max_packet_us and rate_interval_s must be positive")
+        if self.min_packet_events < 0:
+            raise ValueError("min_packet_events must be 0 or more")
 
 
 @dataclass(frozen=True)

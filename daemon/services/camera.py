@@ -31,7 +31,7 @@ from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.transport import Bus, Publisher
 from flagtrack.drivers.camera.base import Camera, CameraInfo, DeviceDrop, EndOfStream
 from flagtrack.drivers.formats.native import NATIVE_ENCODINGS, NativeCutter
-from flagtrack.drivers.formats.packets import Packet, Packetizer, PacketParams
+from flagtrack.drivers.formats.packets import Packet, Packetizer, PacketJoiner, PacketParams
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +47,10 @@ class CameraStreamConfig:
         id: camera name in key expressions.
         packet_us: camera time per packet.
         max_packet_events: packets are cut earlier when they reach this many events.
+        min_packet_events: consecutive packets are joined while they hold fewer events than this,
+            up to ``max_packet_us`` of camera time (a low rate: fewer, longer packets, each costing
+            its consumers a message, a decode and a call); 0: never joined.
+        max_packet_us: camera time of a joined packet, at most.
         rate_interval_s: camera time per event-rate statistic.
         read_timeout_s: how long one read of the adapter may wait.
     """
@@ -54,6 +58,8 @@ class CameraStreamConfig:
     id: str = "cam0"
     packet_us: int = 1000
     max_packet_events: int = 65_536
+    min_packet_events: int = 4000
+    max_packet_us: int = 4000
     rate_interval_s: float = 0.1
     read_timeout_s: float = 0.05
 
@@ -162,7 +168,9 @@ class CameraService:
         if info.encoding in NATIVE_ENCODINGS:
             NativeCutter(info.encoding).push(bytes(8))  # and the word scan
         rates = RateCounter(int(self.cfg.rate_interval_s * 1e6))
+        joiner = PacketJoiner(self.cfg.min_packet_events, self.cfg.max_packet_us)
         cutter: NativeCutter | None = None  # made at the first native bytes the adapter did not cut
+        native = False  # (the packets are the device's own words)
         precut_horizon = -1  # of the packets the adapter cut
         while not stop.is_set():
             beat(self.name, f"{self.packets} packets, {self.events} events sent")
@@ -173,16 +181,22 @@ class CameraService:
                 horizon = max(packetizer.horizon_us, cutter.horizon_us if cutter is not None else -1, precut_horizon)
                 last = last or [Packet(b"", horizon, horizon, 0, 0, 0, 0)]
                 native = cutter is not None or precut_horizon >= 0
-                self._publish(last, 0, info, events_pub, rate_pub, rates, end_of_stream=True, native=native)
+                self._count(last, rates, rate_pub)
+                joined = joiner.push(last, time.time_ns()) + joiner.flush()
+                self._publish(joined, info, events_pub, end_of_stream=True, native=native)
                 self.reached_eof = True
                 return
-            if data is None:
+            if data is None:  # a silent camera: what is held goes out (it waited a read's timeout at most)
+                self._publish(joiner.flush(), info, events_pub, native=native)
                 continue
-            if data.drops:
+            if data.drops:  # the packets before the drop go out first: the drop is said with the next one
+                self._publish(joiner.flush(), info, events_pub, native=native)
                 self._note_drops(data.drops, info)
             if data.packets and cutter is None and self._fits(data.packets):  # cut by the adapter
                 precut_horizon = max(precut_horizon, *(p.t_last_us for p in data.packets))
-                self._publish(data.packets, data.arrival_ns, info, events_pub, rate_pub, rates, native=True)
+                native = True
+                self._count(data.packets, rates, rate_pub)
+                self._publish(joiner.push(data.packets, data.arrival_ns), info, events_pub, native=True)
             elif data.raw is not None or data.packets:  # the device's own words: cut, not decoded
                 raw = (
                     data.raw
@@ -194,11 +208,15 @@ class CameraService:
                     cutter = NativeCutter(info.encoding, params, info.t_offset_us)
                     if data.packets:  # after packets the adapter cut: their state words go first
                         raw = data.packets[0].data[: data.packets[0].preamble_bytes] + raw
+                native = True
                 packets = cutter.push(raw)
-                self._publish(packets, data.arrival_ns, info, events_pub, rate_pub, rates, native=True)
+                self._count(packets, rates, rate_pub)
+                self._publish(joiner.push(packets, data.arrival_ns), info, events_pub, native=True)
             else:
                 packets = packetizer.push(data.events, data.triggers, data.t_until_us)
-                self._publish(packets, data.arrival_ns, info, events_pub, rate_pub, rates)
+                self._count(packets, rates, rate_pub)
+                self._publish(joiner.push(packets, data.arrival_ns), info, events_pub)
+        self._publish(joiner.flush(), info, events_pub, native=native)  # stopped: what it held
 
     def _fits(self, packets: list[Packet]) -> bool:
         """Whether packets an adapter cut are within this service's packet size (time and events)."""
@@ -207,19 +225,26 @@ class CameraService:
             for p in packets
         )
 
+    def _count(self, packets: list[Packet], rates: RateCounter, rate_pub: Publisher) -> None:
+        """Count the packets as cut (before they are joined) and publish the rates of the intervals they close."""
+        for packet in packets:
+            for t_end_us, n, n_on, n_bytes in rates.add(packet):
+                interval_s = rates.interval_us * 1e-6
+                rate_pub.put(
+                    EventRate(self.cfg.id, t_end_us, interval_s, n, n / interval_s, n_on / n if n else 0.0, n_bytes)
+                )
+
     def _publish(
         self,
-        packets: list[Packet],
-        arrival_ns: int,
+        packets: list[tuple[Packet, int]],
         info: CameraInfo,
         events_pub: Publisher,
-        rate_pub: Publisher,
-        rates: RateCounter,
         end_of_stream: bool = False,
         native: bool = False,
     ) -> None:
+        """Publish ``packets``, each with the arrival of its first events at the adapter (0: now)."""
         drop = self._drop_fields() if packets and self._pending_drops else {}
-        for i, packet in enumerate(packets):
+        for i, (packet, arrival_ns) in enumerate(packets):
             events_pub.put(
                 EventPacket(
                     camera_id=self.cfg.id,
@@ -245,11 +270,6 @@ class CameraService:
             self._pending_drops.clear()
             self.packets += 1
             self.events += packet.n_events
-            for t_end_us, n, n_on, n_bytes in rates.add(packet):
-                interval_s = rates.interval_us * 1e-6
-                rate_pub.put(
-                    EventRate(self.cfg.id, t_end_us, interval_s, n, n / interval_s, n_on / n if n else 0.0, n_bytes)
-                )
 
     def _note_drops(self, drops: tuple[DeviceDrop, ...], info: CameraInfo) -> None:
         """Count what the adapter reports lost, log it (rarely) and say so in a status (at most one

@@ -295,6 +295,60 @@ class _HeldColumns:
         self.n = max(keep, 0)
 
 
+class PacketJoiner:
+    """Consecutive packets joined while they hold fewer than ``min_events`` events, up to ``max_us``
+    of camera time: at a low event rate, fewer and longer packets (each costs its consumers a
+    message, a decode and a call whatever it holds); at a high one, the packets as cut.
+
+    A joined packet is the first packet whole followed by the others' words after their state
+    preamble (:attr:`Packet.preamble_bytes`): the same stream, byte for byte. ``push`` returns
+    ``(packet, arrival_ns)`` pairs, each with the arrival of its first part (its events waited in
+    the camera from then on); packets of another time loop are not joined.
+    """
+
+    def __init__(self, min_events: int, max_us: int) -> None:
+        self.min_events, self.max_us = min_events, max_us
+        self._held: list[Packet] = []
+        self._arrival_ns = 0
+
+    def push(self, packets: list[Packet], arrival_ns: int) -> list[tuple[Packet, int]]:
+        """Take ``packets`` (arrived at ``arrival_ns``); return those ready, joined."""
+        out: list[tuple[Packet, int]] = []
+        for packet in packets:
+            held = self._held
+            if held and (
+                packet.t_offset_us != held[0].t_offset_us or packet.t_last_us - held[0].t_first_us >= self.max_us
+            ):
+                out += self.flush()
+            if not self._held:
+                self._arrival_ns = arrival_ns
+            self._held.append(packet)
+            span_us = packet.t_last_us - self._held[0].t_first_us + 1
+            if span_us >= self.max_us or sum(p.n_events for p in self._held) >= self.min_events:
+                out += self.flush()
+        return out
+
+    def flush(self) -> list[tuple[Packet, int]]:
+        """The packets held, joined (none if none is)."""
+        held, self._held = self._held, []
+        if not held:
+            return []
+        if len(held) == 1:
+            return [(held[0], self._arrival_ns)]
+        first = held[0]
+        joined = Packet(
+            data=first.data + b"".join(p.data[p.preamble_bytes :] for p in held[1:]),
+            t_first_us=first.t_first_us,
+            t_last_us=held[-1].t_last_us,
+            n_events=sum(p.n_events for p in held),
+            n_on=sum(p.n_on for p in held),
+            n_triggers=sum(p.n_triggers for p in held),
+            t_offset_us=first.t_offset_us,
+            preamble_bytes=first.preamble_bytes,
+        )
+        return [(joined, self._arrival_ns)]
+
+
 def slot_table(t: np.ndarray, running_max: int, slot_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cut events into runs of one time slot: slot = (running maximum of t, from ``running_max`` on) // ``slot_us``.
 

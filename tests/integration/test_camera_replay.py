@@ -63,7 +63,7 @@ def test_real_recording_arrives_exactly(shared_real: Path, name: str) -> None:
     assert sum(p.n_events for p in packets) == len(want)
     assert statuses[0].state == "streaming" and statuses[-1].state == "eof" and statuses[-1].events == len(want)
     spans = [p.t_last_us - p.t_first_us for p in packets if p.n_events]
-    assert max(spans) < 1000  # about 1 ms of data per packet
+    assert max(spans) < 4000  # 1 ms packets, joined up to 4 ms while they hold under 4 000 events
     assert sum(r.events for r in rates) <= len(want)  # only whole 0.1 s intervals are reported
 
 
