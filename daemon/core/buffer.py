@@ -55,6 +55,17 @@ class EventBuffer:
             self.cum_ring = np.empty(cap + 1, dtype=np.int64)
             self.forget_counts()
 
+    def preallocate(self, events: int) -> None:
+        """Room for ``events`` live events, its memory written once now: the first touch of fresh
+        pages costs the kernel's time, better spent before a stream than in its first windows."""
+        if events <= len(self.t):
+            return
+        self.reserve(events - (self.n - self.start))
+        for arr in (self.t, self.x, self.y):
+            arr[self.n :] = 0
+        for arr in (self.cum_region, self.cum_ring):  # (valid only over cls: the rest is free)
+            arr[self.n + 1 :] = 0
+
     def _compact(self) -> None:
         cut, live = self.start, self.n - self.start
         for arr in (self.t, self.x, self.y):

@@ -33,6 +33,7 @@ MAX_SAMPLES = 100_001
 """Most samples of a smoothed centreline (``ds`` at least L / 100 000)."""
 _BATCH_UPDATES = 4096  # updates per compiled call (bounds the output arrays) ...
 _BATCH_VALUES = 1 << 22  # ... and at most about this many samples and joints in them (long centrelines)
+_PREALLOCATE_SLACK_S = 0.01  # events past the windows: a chunk (a gathered call holds a few ms)
 _DELTA_GROUP = 4  # rho buckets (of r/4) per Delta_RMS group: about one link length
 
 
@@ -163,6 +164,14 @@ class Tracker:
         self.s = params.s
         self._batch_updates = max(1, min(_BATCH_UPDATES, _BATCH_VALUES // (len(self.s) + chain.n_joints + 1)))
         self.stats = TrackerStats()
+
+    def preallocate(self, events_per_s: float) -> None:
+        """Allocate the event buffer now for a stream of ``events_per_s``: its look-back and longest
+        window, with a quarter more (growing it during the first windows of a fast stream costs them
+        tens of milliseconds of fresh memory)."""
+        longest_us = max(seg.tau_s for seg in self.params.schedule.segments) * 1e6
+        span_s = (self._look_back_us + longest_us) * 1e-6 + _PREALLOCATE_SLACK_S
+        self._buffer.preallocate(math.ceil(events_per_s * span_s * 1.25))
 
     @property
     def state(self) -> ChainState:

@@ -76,6 +76,9 @@ class TrackerServiceConfig:
             of one by one (the per-call work is most of the tracker's cost there); 0: every
             packet at once.
         gather_events: a call with this many events waits for no more.
+        reserve_mev_s: the event rate (Mev/s) whose buffers each core tracker allocates before its
+            stream (about 4 MB per Mev/s, the verdicts' look-back held): growing them in the first
+            windows of a fast stream costs those windows tens of milliseconds; 0: grow as events come.
     """
 
     camera_id: str = "cam0"
@@ -88,6 +91,11 @@ class TrackerServiceConfig:
     max_coalesce: int = 64
     gather_ms: float = 4.0
     gather_events: int = 20_000
+    reserve_mev_s: float = 20.0
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.reserve_mev_s <= 1000:
+            raise ValueError(f"reserve_mev_s must be from 0 to 1000 (Mev/s), got {self.reserve_mev_s}")
 
 
 def warm_up_kernels(tracker_factory: Any) -> None:
@@ -163,8 +171,19 @@ class TrackerService:
         self._status_pub = self.bus.publisher(keys.tracker_status())
 
     def warm_up(self) -> None:
-        """Load the compiled kernels before the first packet (see :func:`warm_up_kernels`)."""
+        """Load the compiled kernels and allocate the tracker's buffers before the first packet
+        (see :func:`warm_up_kernels`, ``reserve_mev_s``)."""
         warm_up_kernels(self.tracker_factory)
+        self._reserve(self.tracker)
+
+    def _reserve(self, tracker: Any) -> Any:
+        if self.cfg.reserve_mev_s > 0:
+            tracker.preallocate(self.cfg.reserve_mev_s * 1e6)
+        return tracker
+
+    def _fresh_tracker(self) -> Any:
+        """A new core tracker for the next stream, its buffers allocated."""
+        return self._reserve(self.tracker_factory())
 
     def run(self, stop: threading.Event) -> None:
         self.warm_up()
@@ -273,7 +292,7 @@ class TrackerService:
             self.tracker.skip_to(packet.t_last_us + 1)
         except Exception as exc:  # noqa: BLE001 - as any chunk the core cannot take: a fresh tracker goes on
             self._failed([packet], exc)
-            self.tracker = self.tracker_factory()
+            self.tracker = self._fresh_tracker()
 
     def _new_stream(self, packet: EventPacket, previous_next_seq: int | None) -> None:
         """Another stream began (the camera restarted). The updates of the old stream are
@@ -288,7 +307,7 @@ class TrackerService:
             "tracked afresh",
             1,
         )
-        self.tracker = self.tracker_factory()
+        self.tracker = self._fresh_tracker()
         self.stream += 1
         self.shed.end_stream()
 
@@ -321,7 +340,7 @@ class TrackerService:
             )
         except Exception as exc:  # noqa: BLE001 - the core choked on this data: a fresh tracker goes on
             self._failed(run, exc)
-            self.tracker = self.tracker_factory()
+            self.tracker = self._fresh_tracker()
             batches = []
         self._track(batches, run, end_of_stream, advanced=True)
 
@@ -360,10 +379,10 @@ class TrackerService:
         except Exception as exc:  # noqa: BLE001 - the core choked on this data: a fresh tracker goes on
             batch = None
             self._failed(run, exc)
-            self.tracker = self.tracker_factory()
+            self.tracker = self._fresh_tracker()
         if end_of_stream:
             self.streams_ended += 1
-            self.tracker = self.tracker_factory()
+            self.tracker = self._fresh_tracker()
             self._sequence.restart()
         if batch is not None:
             self._add(batch, source_ns)

@@ -95,6 +95,7 @@ def test_the_cli_prints_the_summary_and_exits_0(tmp_path: Path, capsys: pytest.C
         ({"camera": {"adapter": "replay", "replay": {"path": "nowhere.raw"}}}, "camera.replay.path", "no such file"),
         ({"camera": {"min_packet_events": -1}}, "camera", "min_packet_events must be 0 or more"),
         ({"camera": {"max_packet_us": 0}}, "camera", "max_packet_us"),
+        ({"tracker_service": {"reserve_mev_s": -1}}, "tracker_service", "reserve_mev_s must be from 0 to 1000"),
     ],
 )  # fmt: skip
 def test_a_mistake_is_one_line_naming_the_key_and_the_file(

@@ -29,3 +29,18 @@ def test_live_events_survive_drops_compactions_and_growth() -> None:
         assert np.array_equal(buf.x[buf.start : buf.n], live % 640)
     assert len(buf.times) == 10 * 60_000  # the 100 ms look-back: the last 10 chunks
     assert len(buf.t) < 4 * 10 * 60_000  # compacted, not only grown
+
+
+def test_preallocated_room_keeps_the_live_events_and_is_not_grown_again() -> None:
+    buf = EventBuffer()
+    _append(buf, np.arange(0, 5_000, dtype=np.int64))
+    buf.drop_before(1_000)
+    buf.preallocate(200_000)
+    assert len(buf.t) >= 200_000 and len(buf.cum_region) == len(buf.t) + 1
+    assert np.array_equal(buf.times, np.arange(1_000, 5_000))  # (compacted to the front)
+    assert np.array_equal(buf.x[buf.start : buf.n], buf.times % 640)
+    arrays = buf.t, buf.x, buf.cum_region
+    _append(buf, np.arange(5_000, 150_000, dtype=np.int64))
+    assert all(a is b for a, b in zip(arrays, (buf.t, buf.x, buf.cum_region)))  # the same memory
+    buf.preallocate(10)  # smaller than it has: nothing changes
+    assert buf.t is arrays[0]
