@@ -172,6 +172,13 @@ class CameraService:
         cutter: NativeCutter | None = None  # made at the first native bytes the adapter did not cut
         native = False  # (the packets are the device's own words)
         precut_horizon = -1  # of the packets the adapter cut
+
+        def send(packets: list[Packet], arrival_ns: int, own_words: bool, end_of_stream: bool = False) -> None:
+            """Count the packets as cut, then publish what the joiner lets go (all of it at the end)."""
+            self._count(packets, rates, rate_pub)
+            joined = joiner.push(packets, arrival_ns) + (joiner.flush() if end_of_stream else [])
+            self._publish(joined, info, events_pub, end_of_stream=end_of_stream, native=own_words)
+
         while not stop.is_set():
             beat(self.name, f"{self.packets} packets, {self.events} events sent")
             try:
@@ -181,9 +188,7 @@ class CameraService:
                 horizon = max(packetizer.horizon_us, cutter.horizon_us if cutter is not None else -1, precut_horizon)
                 last = last or [Packet(b"", horizon, horizon, 0, 0, 0, 0)]
                 native = cutter is not None or precut_horizon >= 0
-                self._count(last, rates, rate_pub)
-                joined = joiner.push(last, time.time_ns()) + joiner.flush()
-                self._publish(joined, info, events_pub, end_of_stream=True, native=native)
+                send(last, time.time_ns(), native, end_of_stream=True)
                 self.reached_eof = True
                 return
             if data is None:  # a silent camera: what is held goes out (it waited a read's timeout at most)
@@ -195,8 +200,7 @@ class CameraService:
             if data.packets and cutter is None and self._fits(data.packets):  # cut by the adapter
                 precut_horizon = max(precut_horizon, *(p.t_last_us for p in data.packets))
                 native = True
-                self._count(data.packets, rates, rate_pub)
-                self._publish(joiner.push(data.packets, data.arrival_ns), info, events_pub, native=True)
+                send(data.packets, data.arrival_ns, native)
             elif data.raw is not None or data.packets:  # the device's own words: cut, not decoded
                 raw = (
                     data.raw
@@ -209,13 +213,9 @@ class CameraService:
                     if data.packets:  # after packets the adapter cut: their state words go first
                         raw = data.packets[0].data[: data.packets[0].preamble_bytes] + raw
                 native = True
-                packets = cutter.push(raw)
-                self._count(packets, rates, rate_pub)
-                self._publish(joiner.push(packets, data.arrival_ns), info, events_pub, native=True)
+                send(cutter.push(raw), data.arrival_ns, native)
             else:
-                packets = packetizer.push(data.events, data.triggers, data.t_until_us)
-                self._count(packets, rates, rate_pub)
-                self._publish(joiner.push(packets, data.arrival_ns), info, events_pub)
+                send(packetizer.push(data.events, data.triggers, data.t_until_us), data.arrival_ns, False)
         self._publish(joiner.flush(), info, events_pub, native=native)  # stopped: what it held
 
     def _fits(self, packets: list[Packet]) -> bool:
