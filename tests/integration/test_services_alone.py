@@ -90,10 +90,9 @@ viewer: {{sink: rrd, rrd_path: {tmp_path / "view.rrd"}}}
     assert (tmp_path / "view.rrd").stat().st_size > 10_000
     tracking = [s for s in statuses if s.state == "tracking" and s.updates_per_s > 0]
     assert tracking, statuses
-    busiest = max(tracking, key=lambda s: s.updates_per_s)
-    assert busiest.updates_per_s == pytest.approx(SPEED / TAU_S, rel=0.35)  # one update per tau of camera time
-    events = read_events(recording).events
-    camera_rate = len(events) / ((events["t"][-1] - events["t"][0]) * 1e-6)
-    assert busiest.events_per_s == pytest.approx(SPEED * camera_rate, rel=0.35)
+    # each status counts over about 1 s (status_interval_s): summed, the rates give back what flowed, however
+    # a stall and its catch-up moved it between windows (one update per tau of camera time, every event)
+    assert sum(s.updates_per_s for s in statuses) == pytest.approx(len(t_offline), rel=0.2)
+    assert sum(s.events_per_s for s in statuses) == pytest.approx(len(read_events(recording).events), rel=0.2)
     assert statuses[-1].missing_packets == 0 and statuses[-1].malformed_packets == 0
     assert 0.0 <= min(s.lag_s for s in tracking) < 0.5
