@@ -7,6 +7,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+SPARE = 2
+"""Free room a grown buffer keeps, in live events: a compaction moves the live events to the front, so
+each event is moved about ``1 / SPARE`` times (docs/live.md)."""
+
 
 def _empty(dtype: type) -> np.ndarray:
     return np.empty(0, dtype=dtype)
@@ -37,34 +41,43 @@ class EventBuffer:
         return self.t[self.start : self.n]
 
     def reserve(self, extra: int) -> None:
-        """Make room for ``extra`` more events after ``n`` (compacting, then growing)."""
+        """Make room for ``extra`` more events after ``n``: compacting, and growing where the room
+        left would then hold fewer than the live events (so that an event is moved at most once on
+        average however long the look-back; growing leaves ``SPARE`` times the live events free)."""
         if self.n + extra <= len(self.t):
             return
         live = self.n - self.start
         if self.start:
             self._compact()
-        if live + extra > len(self.t):
-            cap = max(live + extra, 2 * len(self.t), 1024)
-            for name in ("t", "x", "y"):
-                old = getattr(self, name)
-                new = np.empty(cap, dtype=old.dtype)
-                new[:live] = old[:live]
-                setattr(self, name, new)
-            # the prefix counts are made again where needed (most windows never need them): not copied
-            self.cum_region = np.empty(cap + 1, dtype=np.int64)
-            self.cum_ring = np.empty(cap + 1, dtype=np.int64)
-            self.forget_counts()
+        if 2 * live + extra > len(self.t):
+            self._grow(max((1 + SPARE) * live + extra, 1024))
 
     def preallocate(self, events: int) -> None:
-        """Room for ``events`` live events, its memory written once now: the first touch of fresh
-        pages costs the kernel's time, better spent before a stream than in its first windows."""
-        if events <= len(self.t):
+        """Room for ``events`` live events and ``SPARE`` times as many free, its memory written once
+        now: the first touch of fresh pages costs the kernel's time, better spent before a stream
+        than in its first windows."""
+        cap = (1 + SPARE) * events
+        if cap <= len(self.t):
             return
-        self.reserve(events - (self.n - self.start))
+        if self.start:
+            self._compact()
+        self._grow(cap)
         for arr in (self.t, self.x, self.y):
             arr[self.n :] = 0
         for arr in (self.cum_region, self.cum_ring):  # (valid only over cls: the rest is free)
             arr[self.n + 1 :] = 0
+
+    def _grow(self, cap: int) -> None:
+        live = self.n - self.start  # (compacted: start is 0)
+        for name in ("t", "x", "y"):
+            old = getattr(self, name)
+            new = np.empty(cap, dtype=old.dtype)
+            new[:live] = old[:live]
+            setattr(self, name, new)
+        # the prefix counts are made again where needed (most windows never need them): not copied
+        self.cum_region = np.empty(cap + 1, dtype=np.int64)
+        self.cum_ring = np.empty(cap + 1, dtype=np.int64)
+        self.forget_counts()
 
     def _compact(self) -> None:
         cut, live = self.start, self.n - self.start

@@ -167,11 +167,11 @@ class Tracker:
 
     def preallocate(self, events_per_s: float) -> None:
         """Allocate the event buffer now for a stream of ``events_per_s``: its look-back and longest
-        window, with a quarter more (growing it during the first windows of a fast stream costs them
-        tens of milliseconds of fresh memory)."""
+        window, and the buffer's spare room (growing it during the first windows of a fast stream
+        costs them tens of milliseconds of fresh memory)."""
         longest_us = max(seg.tau_s for seg in self.params.schedule.segments) * 1e6
         span_s = (self._look_back_us + longest_us) * 1e-6 + _PREALLOCATE_SLACK_S
-        self._buffer.preallocate(math.ceil(events_per_s * span_s * 1.25))
+        self._buffer.preallocate(math.ceil(events_per_s * span_s))
 
     @property
     def state(self) -> ChainState:

@@ -77,7 +77,8 @@ class TrackerServiceConfig:
             packet at once.
         gather_events: a call with this many events waits for no more.
         reserve_mev_s: the event rate (Mev/s) whose buffers each core tracker allocates before its
-            stream (about 4 MB per Mev/s, the verdicts' look-back held): growing them in the first
+            stream (about 10.6 MB per Mev/s: the verdicts' look-back and twice as much free room, so
+            that compactions move an event half a time on average): growing them in the first
             windows of a fast stream costs those windows tens of milliseconds; 0: grow as events come.
     """
 

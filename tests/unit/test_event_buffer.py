@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flagtrack.daemon.core.buffer import EventBuffer
+from flagtrack.daemon.core.buffer import SPARE, EventBuffer
 
 
 def _append(buf: EventBuffer, t: np.ndarray) -> None:
@@ -36,7 +36,7 @@ def test_preallocated_room_keeps_the_live_events_and_is_not_grown_again() -> Non
     _append(buf, np.arange(0, 5_000, dtype=np.int64))
     buf.drop_before(1_000)
     buf.preallocate(200_000)
-    assert len(buf.t) >= 200_000 and len(buf.cum_region) == len(buf.t) + 1
+    assert len(buf.t) >= (1 + SPARE) * 200_000 and len(buf.cum_region) == len(buf.t) + 1
     assert np.array_equal(buf.times, np.arange(1_000, 5_000))  # (compacted to the front)
     assert np.array_equal(buf.x[buf.start : buf.n], buf.times % 640)
     arrays = buf.t, buf.x, buf.cum_region
@@ -44,3 +44,36 @@ def test_preallocated_room_keeps_the_live_events_and_is_not_grown_again() -> Non
     assert all(a is b for a, b in zip(arrays, (buf.t, buf.x, buf.cum_region)))  # the same memory
     buf.preallocate(10)  # smaller than it has: nothing changes
     assert buf.t is arrays[0]
+
+
+class _CountingBuffer(EventBuffer):
+    moved = 0
+
+    def _compact(self) -> None:
+        self.moved += self.n - self.start
+        super()._compact()
+
+
+def _stream(buf: EventBuffer, chunks: int, per_chunk: int, look_back: int) -> int:
+    """Append ``chunks`` chunks of 10 ms, keeping ``look_back`` µs; return the events appended."""
+    rng = np.random.default_rng(1)
+    for i in range(chunks):
+        _append(buf, np.sort(rng.integers(i * 10_000, (i + 1) * 10_000, per_chunk)))
+        buf.drop_before((i + 1) * 10_000 - look_back)
+    return chunks * per_chunk
+
+
+def test_an_event_is_moved_at_most_once_on_average_whatever_the_look_back() -> None:
+    for look_back in (20_000, 100_000, 500_000):
+        buf = _CountingBuffer()
+        appended = _stream(buf, 300, 20_000, look_back)
+        assert 0 < buf.moved <= 1.1 * appended, look_back
+
+
+def test_a_buffer_preallocated_for_its_stream_moves_an_event_half_a_time() -> None:
+    buf = _CountingBuffer()
+    buf.preallocate(10 * 20_000 + 20_000)  # the 100 ms look-back and a chunk
+    arrays = buf.t
+    appended = _stream(buf, 300, 20_000, 100_000)
+    assert buf.t is arrays  # never grown
+    assert 0 < buf.moved <= (1 / SPARE + 0.05) * appended  # (without the spare room: ~10 moves an event)

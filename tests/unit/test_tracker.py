@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from flagtrack.daemon.core.buffer import SPARE
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.chain import ChainParams, ChainState
 from flagtrack.daemon.core.denoise import BackgroundActivityFilter, DenoiseParams
@@ -299,8 +300,8 @@ def test_a_horizon_past_the_last_event_adds_no_window_that_starts_after_it(event
 def test_a_preallocated_tracker_gives_the_same_updates(events: np.ndarray) -> None:
     params = _params()
     tracker = Tracker(params)
-    tracker.preallocate(20e6)  # 20 Mev/s: room for the look-back and the longest window, a quarter more
-    assert len(tracker._buffer.t) >= 20e6 * (params.stale_after_s or 0) * 1.25
+    tracker.preallocate(20e6)  # 20 Mev/s: room for the look-back and the longest window, and the spare
+    assert len(tracker._buffer.t) >= 20e6 * (params.stale_after_s or 0) * (1 + SPARE)
     cuts = np.arange(5_000, len(events), 5_000)
     out = CentrelineBatch.concatenate([tracker.feed(chunk) for chunk in np.split(events, cuts)] + [tracker.finish()])
     _assert_same(_feed_in_chunks(events, params, cuts), out)
