@@ -56,7 +56,7 @@ class EventBuffer:
         """Room for ``events`` live events and ``SPARE`` times as many free, its memory written once
         now: the first touch of fresh pages costs the kernel's time, better spent before a stream
         than in its first windows."""
-        cap = (1 + SPARE) * events
+        cap = (1 + SPARE) * max(events, self.n - self.start)
         if cap <= len(self.t):
             return
         if self.start:

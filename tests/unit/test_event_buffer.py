@@ -46,6 +46,14 @@ def test_preallocated_room_keeps_the_live_events_and_is_not_grown_again() -> Non
     assert buf.t is arrays[0]
 
 
+def test_preallocating_less_than_the_live_events_keeps_them_all() -> None:
+    buf = EventBuffer()
+    _append(buf, np.arange(0, 50_000, dtype=np.int64))
+    buf.drop_before(10)
+    buf.preallocate(1_000)
+    assert np.array_equal(buf.times, np.arange(10, 50_000)) and len(buf.t) >= (1 + SPARE) * len(buf.times)
+
+
 class _CountingBuffer(EventBuffer):
     moved = 0
 
