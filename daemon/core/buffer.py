@@ -47,10 +47,10 @@ class EventBuffer:
         if self.n + extra <= len(self.t):
             return
         live = self.n - self.start
-        if self.start:
-            self._compact()
         if 2 * live + extra > len(self.t):
             self._grow(max((1 + SPARE) * live + extra, 1024))
+        elif self.start:
+            self._compact()
 
     def preallocate(self, events: int) -> None:
         """Room for ``events`` live events and ``SPARE`` times as many free, its memory written once
@@ -59,8 +59,6 @@ class EventBuffer:
         cap = (1 + SPARE) * max(events, self.n - self.start)
         if cap <= len(self.t):
             return
-        if self.start:
-            self._compact()
         self._grow(cap)
         for arr in (self.t, self.x, self.y):
             arr[self.n :] = 0
@@ -68,12 +66,14 @@ class EventBuffer:
             arr[self.n + 1 :] = 0
 
     def _grow(self, cap: int) -> None:
-        live = self.n - self.start  # (compacted: start is 0)
+        """New arrays of ``cap`` events holding the live ones at their front."""
+        live = self.n - self.start
         for name in ("t", "x", "y"):
             old = getattr(self, name)
             new = np.empty(cap, dtype=old.dtype)
-            new[:live] = old[:live]
+            new[:live] = old[self.start : self.n]
             setattr(self, name, new)
+        self.start, self.n = 0, live
         # the prefix counts are made again where needed (most windows never need them): not copied
         self.cum_region = np.empty(cap + 1, dtype=np.int64)
         self.cum_ring = np.empty(cap + 1, dtype=np.int64)
