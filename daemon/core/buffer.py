@@ -65,6 +65,13 @@ class EventBuffer:
         for arr in (self.cum_region, self.cum_ring):  # (valid only over cls: the rest is free)
             arr[self.n + 1 :] = 0
 
+    def emptied(self) -> EventBuffer:
+        """An empty buffer in this one's memory, for a fresh tracker (this buffer must not be used
+        again: its arrays are the new one's)."""
+        empty = EventBuffer(self.t, self.x, self.y, self.cum_region, self.cum_ring)
+        empty.forget_counts()
+        return empty
+
     def _grow(self, cap: int) -> None:
         """New arrays of ``cap`` events holding the live ones at their front."""
         live = self.n - self.start

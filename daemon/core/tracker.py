@@ -173,6 +173,15 @@ class Tracker:
         span_s = (self._look_back_us + longest_us) * 1e-6 + _PREALLOCATE_SLACK_S
         self._buffer.preallocate(math.ceil(events_per_s * span_s))
 
+    def take_buffer_of(self, old: Tracker) -> None:
+        """Track in the event buffer of ``old``, a tracker of an ended stream that is not used again
+        (a fresh tracker of the live service: its memory is written already). Call before the first
+        feed."""
+        if self._clock is not None:
+            raise RuntimeError("take_buffer_of() after the first events")
+        self._buffer = old._buffer.emptied()
+        old._buffer = EventBuffer()
+
     @property
     def state(self) -> ChainState:
         """The current chain (a copy)."""

@@ -182,9 +182,14 @@ class TrackerService:
             tracker.preallocate(self.cfg.reserve_mev_s * 1e6)
         return tracker
 
-    def _fresh_tracker(self) -> Any:
-        """A new core tracker for the next stream, its buffers allocated."""
-        return self._reserve(self.tracker_factory())
+    def _fresh_tracker(self, ended: Any = None) -> Any:
+        """A new core tracker for the next stream, its buffers allocated: those of ``ended`` when
+        given, a tracker whose stream ended and that no thread uses (memory already written, where
+        fresh memory costs the new stream's first windows up to a few hundred ms)."""
+        tracker = self.tracker_factory()
+        if ended is not None:
+            tracker.take_buffer_of(ended)
+        return self._reserve(tracker)
 
     def run(self, stop: threading.Event) -> None:
         self.warm_up()
@@ -308,7 +313,7 @@ class TrackerService:
             "tracked afresh",
             1,
         )
-        self.tracker = self._fresh_tracker()
+        self.tracker = self._fresh_tracker(ended=self.tracker)  # (the runs before were tracked to the end)
         self.stream += 1
         self.shed.end_stream()
 
@@ -383,7 +388,7 @@ class TrackerService:
             self.tracker = self._fresh_tracker()
         if end_of_stream:
             self.streams_ended += 1
-            self.tracker = self._fresh_tracker()
+            self.tracker = self._fresh_tracker(ended=self.tracker)
             self._sequence.restart()
         if batch is not None:
             self._add(batch, source_ns)

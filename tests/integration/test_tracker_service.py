@@ -248,11 +248,13 @@ def test_a_restarted_camera_is_tracked_afresh(tmp_path: Path) -> None:
         wait_subscribed(service.bus, cam_bus.keys.centrelines(), cam_bus.keys.tracker_status())
         publish(pub, packets_of(first, 30_000)[:25])  # then the camera dies: no end of stream
         assert wait_for(lambda: service.packets == 25, timeout_s=20)
+        memory = service.tracker._buffer.t  # (preallocated at start-up: written once)
         publish(pub, packets_of(second, 60_000), end=True)
         assert wait_for(lambda: service.streams_ended == 1, timeout_s=30)
         messages = received_to_final(lines)
         stop_service()
         statuses = received(status, timeout_s=0.5)
+    assert service.tracker._buffer.t is memory  # the fresh trackers of the restart and the end reuse it
     assert service.restarts == 1 and service.missing_packets == 0
     assert statuses[-1].restarts == 1 and statuses[-1].missing_packets == 0
     old = [m for m in messages if m.stream == 0 and len(m.t_s)]

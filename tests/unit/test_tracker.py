@@ -297,6 +297,28 @@ def test_a_horizon_past_the_last_event_adds_no_window_that_starts_after_it(event
     _assert_same(track(part, params), live)
 
 
+def test_a_tracker_in_the_buffer_of_an_ended_stream_gives_the_same_updates(events: np.ndarray) -> None:
+    """A fresh tracker taking the memory of one that tracked another stream (the live service after
+    a camera restart) tracks as a new one; the old tracker keeps none of that memory."""
+    params = _params()
+    old = Tracker(params)
+    old.preallocate(20e6)
+    other = events[:60_000].copy()  # another stream: later, and mirrored
+    other["t"] += 10_000_000
+    other["y"] = other["y"].max() - other["y"]
+    for chunk in np.array_split(other, 6):
+        old.feed(chunk)
+    memory = old._buffer.t
+    tracker = Tracker(params)
+    tracker.take_buffer_of(old)
+    assert tracker._buffer.t is memory and not np.shares_memory(old._buffer.t, memory)
+    cuts = np.arange(5_000, len(events), 5_000)
+    out = CentrelineBatch.concatenate([tracker.feed(chunk) for chunk in np.split(events, cuts)] + [tracker.finish()])
+    _assert_same(_feed_in_chunks(events, params, cuts), out)
+    with pytest.raises(RuntimeError, match="after the first events"):
+        tracker.take_buffer_of(Tracker(params))
+
+
 def test_a_preallocated_tracker_gives_the_same_updates(events: np.ndarray) -> None:
     params = _params()
     tracker = Tracker(params)
