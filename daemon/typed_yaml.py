@@ -34,7 +34,7 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     except UnicodeDecodeError as exc:  # found by `flagtrack bench fuzz`: a traceback before
         raise ConfigError(f"not UTF-8 text (byte {exc.start}: {exc.reason})", path=str(path)) from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_unique_keys_loader())  # (a SafeLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
@@ -44,6 +44,28 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ConfigError("the top level must be a mapping of sections", path=str(path))
     return data
+
+
+@functools.cache
+def _unique_keys_loader() -> type:
+    """yaml's safe loader, refusing a mapping that gives a key twice (YAML leaves it to the loader:
+    PyYAML keeps the last silently, so an edit to the first copy would do nothing)."""
+    import yaml
+
+    class UniqueKeysLoader(yaml.SafeLoader):
+        def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+            first: dict[Any, int] = {}
+            for key_node, _ in node.value:
+                key = self.construct_object(key_node, deep=True)
+                if isinstance(key, typing.Hashable) and key != "<<":
+                    if key in first:
+                        raise yaml.constructor.ConstructorError(
+                            None, None, f"key {key!r} given twice (first at line {first[key] + 1})", key_node.start_mark
+                        )
+                    first[key] = key_node.start_mark.line
+            return super().construct_mapping(node, deep)
+
+    return UniqueKeysLoader
 
 
 def from_mapping(cls: type[T], data: Any, *, path: str | None = None, key: str = "", base: T | None = None) -> T:

@@ -82,6 +82,20 @@ def test_load_yaml_reports_line(tmp_path: Path) -> None:
         load_yaml(tmp_path / "missing.yaml")
 
 
+def test_a_key_given_twice_is_refused_naming_both_lines(tmp_path: Path) -> None:
+    """PyYAML keeps the last of two equal keys: an edit to the first would do nothing, silently."""
+    twice = tmp_path / "rig.yaml"
+    twice.write_text("tracker:\n  root: [100, 240]\n  length: 400\n  root: [0, 0]\nrecorder: {}\n")
+    with pytest.raises(ConfigError, match=r"rig.yaml.*line 4.*'root' given twice \(first at line 2\)"):
+        load_yaml(twice)
+    twice.write_text("tracker: {root: [1, 2]}\ntracker: {length: 3}\n")
+    with pytest.raises(ConfigError, match="'tracker' given twice"):
+        load_yaml(twice)
+    once = tmp_path / "ok.yaml"
+    once.write_text("tracker: {root: [1, 2]}\nrecorder: {root: 3}\n")  # the same key in two sections
+    assert load_yaml(once) == {"tracker": {"root": [1, 2]}, "recorder": {"root": 3}}
+
+
 @dataclass(frozen=True)
 class Window:
     x: int = 0
