@@ -96,6 +96,13 @@ def open_hardware_camera(rig: RigSections) -> OpenedCamera | None:
         raise DriverError(
             f"cannot open the camera ({type(exc).__name__}: {exc})", device=f"camera adapter '{rig.camera.adapter}'"
         ) from exc
+    try:  # the sensor's size is known now: a root off it tracks nothing
+        from flagtrack.daemon.tracking.setup import refuse_root_off_sensor
+
+        refuse_root_off_sensor(rig.tracker, info.width, info.height, sensor=f"camera {info.serial}", path=rig.path)
+    except FlagtrackError:
+        camera.close()
+        raise
     for key, why in auto.why.items():
         log.info("camera %s: %s.%s auto: %s", rig.camera.id, "camera.hardware", key, why)
     if auto.why:  # the status message says what was set and why

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -226,6 +227,31 @@ def _check_tracker(rig: RigSections, findings: Findings) -> None:
     _check_calibration(rig, findings)
     if not findings.strict:
         rig.tracker.tracker_params(path=rig.path)
+    sensor = _known_sensor(rig) if findings.files else None
+    if sensor is not None:  # (a hardware camera's: when up opens it)
+        from flagtrack.daemon.tracking.setup import refuse_root_off_sensor
+
+        width, height, whose = sensor
+        refuse_root_off_sensor(rig.tracker, width, height, sensor=whose, path=rig.path)
+
+
+def _known_sensor(rig: RigSections) -> tuple[int, int, str] | None:
+    """(width, height, whose) of the sensor a simulated or replay camera has, None where unknown."""
+    camera = rig.camera
+    if camera.adapter == "simulated":
+        return camera.simulated.width, camera.simulated.height, "the simulated camera (camera.simulated)"
+    if camera.adapter == "replay" and camera.replay is not None and Path(camera.replay.path).is_file():
+        from flagtrack.daemon.errors import FlagtrackError
+        from flagtrack.drivers.formats.files import open_events
+
+        try:
+            with open_events(camera.replay.path) as reader:
+                width, height = reader.info.width, reader.info.height
+            if width and height:
+                return width, height, f"the recording {camera.replay.path}"
+        except FlagtrackError:  # (config check says so under camera.replay.path)
+            return None
+    return None
 
 
 def _prepare_tracker(p: Preparation) -> None:

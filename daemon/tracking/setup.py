@@ -83,6 +83,35 @@ def processing_attrs(config: TrackingConfig) -> dict[str, Any]:
     return attrs
 
 
+def refuse_root_off_sensor(config: TrackingConfig, width: int, height: int, *, sensor: str, path: str | None) -> None:
+    """Refuse a ``tracker.root`` off a ``width`` x ``height`` sensor (``sensor`` says whose), through
+    the calibration when there is one; nothing to say without a root or with a calibration not made
+    yet.
+
+    Raises:
+        ConfigError: naming ``tracker.root`` and ``path``.
+        FormatError: the calibration file is not one.
+    """
+    from flagtrack.daemon.core.mapping import on_sensor
+    from flagtrack.daemon.errors import ConfigError
+
+    if config.root is None or (config.calibration is not None and not Path(config.calibration).is_file()):
+        return
+    mapping: PointMapping | None = None
+    if config.calibration is not None:
+        from flagtrack.calibration.calfile import load_mapping
+
+        mapping = load_mapping(config.calibration)
+    x, y = config.root
+    if not on_sensor(x, y, width, height, mapping):
+        plane = " (its outline mapped through the calibration)" if mapping is not None else ""
+        raise ConfigError(
+            f"({x:g}, {y:g}) is off the {width} x {height} sensor of {sensor}{plane}: nothing there to track",
+            key="tracker.root",
+            path=path,
+        )
+
+
 def load_tracking_config_file(path: str | Path) -> TrackingConfig:
     """The ``tracker:`` section of ``path``; a relative calibration file is taken from the file's folder."""
     return resolve_calibration(load_tracking_config(path), Path(path).parent)

@@ -377,6 +377,23 @@ def test_what_only_the_device_can_refuse_stops_up_before_the_rest_opens(
     assert not (tmp_path / "live.rrd").exists() and not (tmp_path / "rec").exists()
 
 
+def test_a_root_off_the_opened_cameras_sensor_stops_up_before_the_rest_opens(
+    fake_nd, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """Only the device says its sensor's size: a tracker root off it is one line, exit 2, the camera
+    released (a sweep would otherwise run to its end on nothing)."""
+    from flagtrack.daemon.cli import main
+
+    cam = fake_nd._fake.plug(fake_nd.FakeCamera(name=fake_nd.Name.CENTURYARKS_VGA, serial="V1"))
+    config = hardware_rig(tmp_path, '{serial: "V1"}', "[camera, recorder, viewer]")
+    config.write_text(config.read_text() + "tracker: {root: [700, 240], length: 300}\n")
+    assert main(["up", "-c", str(config)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and f"file {config}, key 'tracker.root': (700, 240) is off the 640 x 480" in lines[0], lines
+    assert cam.opened == cam.closed == 1
+    assert not (tmp_path / "live.rrd").exists() and not (tmp_path / "rec").exists()
+
+
 def test_the_camera_opened_first_is_the_one_the_service_streams(
     fake_nd, tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:

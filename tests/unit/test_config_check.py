@@ -161,6 +161,24 @@ def test_a_replay_recording_is_checked_readable(tmp_path: Path) -> None:
         check_rig_file(path)
 
 
+def test_a_root_off_a_known_sensor_is_refused_by_the_check_and_the_rig(tmp_path: Path) -> None:
+    """A root off the sensor tracked nothing: a whole sweep ran to "finished" on 100 % stale updates.
+    The simulated camera's and a replay's sensor are known before anything opens."""
+    path = rig_file(tmp_path, tracker={"root": [1500, 240], "length": 300})
+    with pytest.raises(
+        ConfigError, match=r"key 'tracker.root': \(1500, 240\) is off the 640 x 480 sensor of the simulated"
+    ):
+        check_rig_file(path)
+    with pytest.raises(ConfigError, match=r"key 'tracker.root'"):
+        load_rig(path)  # what up, sweep and each service check
+    recording = tmp_path / "run.raw"
+    write_events(recording, np.zeros(0, EVENT_DTYPE), width=320, height=240)
+    replay = {"adapter": "replay", "replay": {"path": str(recording)}}
+    with pytest.raises(ConfigError, match=r"off the 320 x 240 sensor of the recording"):
+        check_rig_file(rig_file(tmp_path, camera=replay, tracker={"root": [400, 100], "length": 300}))
+    check_rig_file(rig_file(tmp_path, camera=replay, tracker={"root": [300, 100], "length": 300}))
+
+
 def test_a_part_of_a_rig_is_checked_as_its_sections() -> None:
     report = check_rig_file(DEPLOY / "tunnel-modbus.yaml")
     assert report.kind == "part" and report.services == () and report.plan is None
