@@ -81,15 +81,17 @@ class _Plan:
 
 
 def _plan(args: argparse.Namespace) -> _Plan:
+    from flagtrack.daemon.commands._outputs import check_output
     from flagtrack.daemon.errors import ConfigError
+    from flagtrack.daemon.typed_yaml import require_output_file
 
+    for option, output in (("--snapshot", args.snapshot), ("--rrd", args.rrd)):
+        if output is not None:
+            require_output_file(output, key=option, path=None)
+            check_output(output, option, (args.replay, args.config, args.calibration), makes_folder=True)
     rig, tracker = _rig_and_tracker(args)
     params = _params(args)
     viewer, note = _viewer(args, rig)
-    if args.snapshot is not None:
-        from flagtrack.daemon.typed_yaml import require_output_file
-
-        require_output_file(args.snapshot, key="--snapshot", path=None)
     speed = args.speed if args.speed is not None else (1.0 if viewer is not None and viewer.sink != "rrd" else 0.0)
     if speed < 0:
         raise ConfigError(f"--speed must be 0 or more, got {speed}")

@@ -114,6 +114,29 @@ def _parse_setup(args: argparse.Namespace) -> tuple:
     return board, frame, search, degree
 
 
+def _check_outputs(recording: Path, output: Path, figure: Path | None) -> None:
+    """Refuse, before any work, outputs that cannot be written or would replace the recording, each
+    other, or a file that is not an earlier calibration (a rig config given as ``-o``)."""
+    from flagtrack.calibration.calfile import FORMAT
+    from flagtrack.daemon.commands._outputs import check_output
+    from flagtrack.daemon.errors import ConfigError
+
+    def is_calibration(file: Path) -> bool:
+        import yaml
+
+        try:
+            data = yaml.safe_load(file.read_text(encoding="utf-8")) if file.stat().st_size < 1 << 20 else None
+        except (OSError, UnicodeDecodeError, yaml.YAMLError):
+            return False
+        return isinstance(data, dict) and data.get("format") == FORMAT
+
+    check_output(output, "-o", (recording,), replaceable=is_calibration, holds="a calibration")
+    if figure is not None:
+        check_output(figure, "--figure", (recording, output))
+        if figure.resolve() == output.resolve():
+            raise ConfigError(f"--figure {figure}: is the calibration's own file (-o)")
+
+
 def _calibrate(args: argparse.Namespace) -> int:
     from flagtrack.calibration.calfile import save_calibration
     from flagtrack.calibration.corners import detect_corners
@@ -125,8 +148,9 @@ def _calibrate(args: argparse.Namespace) -> int:
 
     board, frame, search, degree = _parse_setup(args)
     path = Path(args.inputs[0])
-    events, size = read_excerpt(path, args.max_seconds, tuple(args.size) if args.size else None)
     figure = None if args.no_figure else (args.figure or args.output.with_suffix(".png"))
+    _check_outputs(path, args.output, figure)
+    events, size = read_excerpt(path, args.max_seconds, tuple(args.size) if args.size else None)
     try:
         timing = detect_blink(events["t"], events["p"], search)
     except CalibrationError as exc:

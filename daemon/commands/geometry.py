@@ -41,6 +41,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.seconds is not None and not args.seconds > 0:
         raise ConfigError(f"must be positive, got {args.seconds}", key="--seconds")
+    if args.output is not None:
+        from flagtrack.daemon.commands._outputs import check_output, only_yaml_sections
+
+        inputs = (args.file, args.calibration)
+        check_output(args.output, "-o", inputs, replaceable=only_yaml_sections("tracker"), holds="a tracker: section")
     mapping, units = _mapping(args.calibration)
     events, size = _read(args.file, args.seconds)
     try:

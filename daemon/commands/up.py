@@ -44,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from flagtrack.daemon.rig.run import run_rig
 
     rig, names = rig_from_args(args)
+    _refuse_outputs_over_inputs(args, rig)
     with SweepProgressView(quiet=args.quiet or "supervisor" not in names) as progress:
         return run_rig(
             rig,
@@ -54,6 +55,17 @@ def run(args: argparse.Namespace) -> int:
             quiet=args.quiet,
             on_supervisor_state=progress,
         ).code
+
+
+def _refuse_outputs_over_inputs(args: argparse.Namespace, rig: RigConfig) -> None:
+    """``--centrelines`` or ``--rrd`` naming the recording, the rig config or the calibration (the
+    folders are checked with the rig's)."""
+    from flagtrack.daemon.commands._outputs import check_output
+
+    inputs = (args.replay, args.config, rig.tracker.calibration)
+    for option, output in (("--centrelines", args.centrelines), ("--rrd", args.rrd)):
+        if output is not None:
+            check_output(output, option, inputs, makes_folder=True)
 
 
 def rig_from_args(args: argparse.Namespace) -> tuple[RigConfig, list[str]]:

@@ -1,0 +1,53 @@
+"""Outputs a command refuses before any work: a folder, a missing folder, one of its own inputs, or
+a file that holds something else than what it writes."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+from flagtrack.daemon.errors import ConfigError
+
+
+def check_output(
+    output: Path,
+    option: str,
+    inputs: Iterable[Path | None] = (),
+    *,
+    replaceable: Callable[[Path], bool] | None = None,
+    holds: str = "",
+    makes_folder: bool = False,
+) -> None:
+    """Refuse ``output`` (given as ``option``) in one line when it cannot be written or would destroy
+    something: a folder, in a folder that does not exist (unless the command ``makes_folder``), one
+    of ``inputs`` itself, or (where ``replaceable`` says so of the non-empty file there) a file that
+    is not ``holds``."""
+    if output.is_dir():
+        raise ConfigError(f"{option} {output}: is a directory (give the file to write)")
+    if not makes_folder and not output.parent.is_dir():
+        raise ConfigError(f"{option} {output}: folder {output.parent} does not exist")
+    if not output.exists():
+        return
+    for source in inputs:
+        if source is not None and source.exists() and output.resolve() == source.resolve():
+            raise ConfigError(f"{option} {output}: is the input {source} itself (it would be overwritten)")
+    if replaceable is not None and output.stat().st_size and not replaceable(output):
+        raise ConfigError(f"{option} {output}: holds something else than {holds}: give a new file (it is left as is)")
+
+
+def only_yaml_sections(*sections: str) -> Callable[[Path], bool]:
+    """Whether a file is YAML whose top level holds no keys but ``sections`` (an earlier output of the
+    command, not a rig config)."""
+
+    def check(path: Path) -> bool:
+        import yaml
+
+        try:
+            if path.stat().st_size > 1 << 20:  # (not a config: a recording, say)
+                return False
+            data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, yaml.YAMLError):
+            return False
+        return data is None or (isinstance(data, dict) and set(data) <= set(sections))
+
+    return check

@@ -1,0 +1,60 @@
+"""An output that would destroy an input or a file of another kind is refused before any work: one
+line naming the option, exit 2, the file left as it was (it was overwritten, exit 0)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flagtrack.daemon.cli import main
+from flagtrack.daemon.core.events import EVENT_DTYPE
+from flagtrack.drivers.formats.files import write_events
+
+RIG = "rig: t\ncamera: {adapter: simulated}\ntracker: {root: [150, 240], length: 300}\n"
+
+
+@pytest.fixture
+def folder(tmp_path: Path) -> Path:
+    events = np.zeros(100, EVENT_DTYPE)
+    events["t"] = np.arange(100) * 10
+    write_events(tmp_path / "rec.raw", events, width=640, height=480)
+    (tmp_path / "rig.yaml").write_text(RIG)
+    return tmp_path
+
+
+CASES = [
+    (["geometry", "rec.raw", "-o", "rec.raw"], "-o rec.raw: is the input rec.raw itself"),
+    (["geometry", "rec.raw", "-o", "rig.yaml"], "-o rig.yaml: holds something else than a tracker: section"),
+    (["calibrate", "rec.raw", "--board", "9x6", "--square-mm", "20", "-o", "rec.raw"], "-o rec.raw: is the input"),
+    (["calibrate", "rec.raw", "--board", "9x6", "--square-mm", "20", "-o", "rig.yaml"], "than a calibration"),
+    (["calibrate", "rec.raw", "--board", "9x6", "--square-mm", "20", "-o", "c.yaml", "--figure", "rec.raw"],
+     "--figure rec.raw: is the input"),
+    (["aim", "--replay", "rec.raw", "--snapshot", "rec.raw", "--viewer", "none", "-q"], "--snapshot rec.raw: is the input"),
+    (["aim", "--replay", "rec.raw", "--rrd", "rig.yaml", "-c", "rig.yaml", "-q"], "--rrd rig.yaml: is the input"),
+    (["up", "--replay", "rec.raw", "--centrelines", "rec.raw", "--exit-at-eof", "-q"], "--centrelines rec.raw: is the input"),
+    (["up", "-c", "rig.yaml", "--rrd", "rig.yaml", "-q"], "--rrd rig.yaml: is the input"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("argv", "words"), CASES)
+def test_an_output_over_an_input_or_another_kind_of_file_is_refused(
+    folder: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], argv: list[str], words: str
+) -> None:
+    monkeypatch.chdir(folder)
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0], err
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+
+
+def test_an_earlier_output_of_the_same_kind_is_replaced(folder: Path) -> None:
+    from flagtrack.daemon.commands._outputs import check_output, only_yaml_sections
+
+    earlier = folder / "tracker.yaml"
+    earlier.write_text("# the flag's geometry\ntracker: {root: [1, 2], length: 3}\n")
+    check_output(earlier, "-o", (folder / "rec.raw",), replaceable=only_yaml_sections("tracker"), holds="x")
+    (folder / "empty.yaml").write_text("")
+    check_output(folder / "empty.yaml", "-o", (), replaceable=only_yaml_sections("tracker"), holds="x")
