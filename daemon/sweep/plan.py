@@ -42,6 +42,12 @@ class Branch(enum.Enum):
     DOWN = "down"
 
 
+_MAX_S = 86_400.0
+"""A point's settle and record times at most: a day."""
+MAX_SPEEDS = 10_000
+"""Speeds a plan may have at most (a step of 1e-12 m/s would be billions of points)."""
+
+
 @dataclass(frozen=True)
 class SpeedRange:
     """Speeds ``start, start + step, ...`` up to ``stop`` included, m/s."""
@@ -51,8 +57,12 @@ class SpeedRange:
     step: float
 
     def __post_init__(self) -> None:
+        if not all(math.isfinite(v) for v in (self.start, self.stop, self.step)):
+            raise ValueError("range needs finite start, stop and step")
         if not (self.step > 0 and 0 <= self.start <= self.stop):
             raise ValueError("range needs step > 0 and 0 <= start <= stop")
+        if (self.stop - self.start) / self.step >= MAX_SPEEDS:
+            raise ValueError(f"range gives more than {MAX_SPEEDS} speeds: a larger step")
 
     def values(self) -> tuple[float, ...]:
         """The speeds, rounded to 1e-9 m/s (no 3.0000000000004)."""
@@ -105,10 +115,12 @@ class SweepConfig:
             raise ValueError("give exactly one of 'speeds' and 'range'")
         if self.speeds is not None and (not self.speeds or any(not (math.isfinite(v) and v >= 0) for v in self.speeds)):
             raise ValueError("speeds must be a non-empty list of speeds >= 0")
+        if self.speeds is not None and len(self.speeds) > MAX_SPEEDS:
+            raise ValueError(f"speeds: more than {MAX_SPEEDS}")
         if not self.branches:
             raise ValueError("branches must not be empty")
-        if self.settle_s < 0 or self.record_s <= 0:
-            raise ValueError("need settle_s >= 0 and record_s > 0")
+        if not (0 <= self.settle_s <= _MAX_S and 0 < self.record_s <= _MAX_S):
+            raise ValueError(f"need settle_s >= 0 and record_s > 0, both at most {_MAX_S:g} s")
         if not 0 <= self.retries <= 100:
             raise ValueError("retries must be within 0..100")
 

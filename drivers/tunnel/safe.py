@@ -19,6 +19,7 @@ implements :class:`~flagtrack.drivers.tunnel.base.WindTunnel`:
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import threading
@@ -66,6 +67,9 @@ class SafetyParams:
     loop_timeout_s: float = 10.0
 
     def __post_init__(self) -> None:
+        for name, value in dataclasses.asdict(self).items():  # a limit of inf or nan is no limit
+            if not math.isfinite(value):
+                raise ValueError(f"{name} must be a finite number, got {value}")
         if not 0.0 <= self.min_speed_mps <= self.max_speed_mps or self.max_speed_mps <= 0:
             raise ValueError("need 0 <= min_speed_mps <= max_speed_mps and max_speed_mps > 0")
         names = (
