@@ -130,6 +130,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except FlagtrackError as exc:
         print(f"flagtrack {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # a path a command did not check itself: still one line (the traceback at DEBUG)
+        log.debug("flagtrack %s failed", args.command, exc_info=exc)
+        where = ": ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
+        print(f"flagtrack {args.command}: error: {where + ': ' if where else ''}{exc.strerror or exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"flagtrack {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -54,9 +54,10 @@ def run(args: argparse.Namespace) -> int:
     setup = setup_from_arguments(config, args, path=str(args.config) if args.config else None)
     started = time.perf_counter()
     with _ProgressBar(args.file, not args.no_progress and sys.stderr.isatty()) as bar:
-        summary = reconstruct_file(
-            args.file, args.output, setup, progress=bar, strict=args.strict, check_sensor=_sensor_check(setup, args)
-        )
+        summary = reconstruct_file(  # (atomic: a failure leaves an earlier output as it was, and no stub)
+            args.file, args.output, setup, progress=bar, strict=args.strict, check_sensor=_sensor_check(setup, args),
+            atomic=True,
+        )  # fmt: skip
     elapsed = time.perf_counter() - started
     rate = summary.events_in / elapsed / 1e6 if elapsed > 0 else 0.0
     print(

@@ -35,6 +35,12 @@ GROW_PASS = 0.25
 ``noise_pass`` (so where the fixed window already lets noise through, it stays fixed)."""
 _NEVER = np.int32(-(1 << 31) + 1)  # "never fired", in the int32 map of times relative to a base
 _REBASE_US = 1 << 30  # move the base forward when times get this far from it (~18 minutes)
+MAX_SENSOR_PX = 8192
+"""No event sensor is wider or taller (the largest are 1280 x 960): the time map grows at most to this."""
+
+
+class BeyondAnySensorError(ValueError):
+    """An event at a pixel no event sensor has (not an event recording, or a corrupt one)."""
 
 
 # state vector of the adaptive rule (int64): block index, isolated events in it, current k,
@@ -336,6 +342,11 @@ class BackgroundActivityFilter:
     def _fit(self, max_x: int, max_y: int) -> None:
         """Grow the time map so that pixel (max_x, max_y) fits (kept times are preserved)."""
         width, height = max(self._width, max_x + 1), max(self._height, max_y + 1)
+        if max(width, height) > MAX_SENSOR_PX:  # (a random file as a headerless DAT: a 1 GB map, then 5)
+            raise BeyondAnySensorError(
+                f"an event at pixel ({max_x}, {max_y}): beyond any event sensor ({MAX_SENSOR_PX} pixels a side at "
+                "most): not an event recording, or a corrupt one"
+            )
         if (width, height) != (self._width, self._height):
             grown = np.full((height + 2, width + 2), _NEVER, dtype=np.int32)
             grown[: self._height + 2, : self._width + 2] = self._last.reshape(self._height + 2, self._width + 2)

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from flagtrack.daemon.core.denoise import BeyondAnySensorError
+from flagtrack.daemon.errors import FormatError
 from flagtrack.daemon.tracking.pipeline import TrackerPipeline
 from flagtrack.daemon.tracking.setup import TrackingSetup
 from flagtrack.drivers.formats import open_events
@@ -106,7 +108,10 @@ def reconstruct_file(
             # and writes the updates (the same results as tracker.feed on each chunk)
             with TrackerPipeline(tracker, lambda batch, _tag: sink.add(batch)) as pipeline:
                 for chunk in reader:
-                    pipeline.feed(chunk.events)
+                    try:
+                        pipeline.feed(chunk.events)
+                    except BeyondAnySensorError as exc:
+                        raise FormatError(str(exc), path=str(path), offset=chunk.byte_offset) from None
                     if progress is not None:
                         progress(chunk.byte_offset)
                 if progress is not None:

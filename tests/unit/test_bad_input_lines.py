@@ -1,0 +1,50 @@
+"""Bad input found by a review: one line, exit 2, nothing already written lost."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flagtrack.daemon.cli import main
+from flagtrack.daemon.core.events import EVENT_DTYPE
+from flagtrack.drivers.formats.files import write_events
+
+
+def _one_line(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    return err[0]
+
+
+def test_an_event_beyond_any_sensor_is_refused_and_an_earlier_output_kept(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A headerless DAT (as OpenEB reads one) of random bytes has 14-bit pixels: the noise filter's map
+    grew to 1 GB and its rebase to 5 GB, for 22 s, for 10 events."""
+    raw = np.zeros(10, dtype=[("t", "<u4"), ("w", "<u4")])
+    raw["t"] = np.arange(10) * 100
+    raw["w"] = 10_000 | (20 << 14)  # x 10 000, y 20
+    (tmp_path / "junk.dat").write_bytes(raw.tobytes())
+    earlier = tmp_path / "out.h5"
+    earlier.write_bytes(b"an earlier result")
+    argv = ["reconstruct", str(tmp_path / "junk.dat"), "-o", str(earlier), "--root", "150", "240", "--length", "300"]
+    assert main(argv) == 2
+    line = _one_line(capsys)
+    assert "junk.dat" in line and "(10000, 20): beyond any event sensor" in line, line
+    assert earlier.read_bytes() == b"an earlier result" and sorted(p.name for p in tmp_path.iterdir()) == [
+        "junk.dat",
+        "out.h5",
+    ]
+
+
+def test_an_output_a_command_did_not_check_is_still_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    events = np.zeros(5, EVENT_DTYPE)
+    events["t"] = np.arange(5)
+    write_events(tmp_path / "rec.raw", events, width=640, height=480)
+    assert main(["events", "convert", str(tmp_path / "rec.raw"), str(tmp_path / "nowhere" / "t.npy")]) == 2
+    line = _one_line(capsys)
+    assert line.startswith("flagtrack events: error: ") and str(tmp_path / "nowhere" / "t.npy") in line, line
