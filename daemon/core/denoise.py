@@ -26,6 +26,7 @@ import math
 import numpy as np
 
 from flagtrack.daemon.core.denoise_params import DenoiseParams
+from flagtrack.daemon.core.events import MAX_SENSOR_PX
 from flagtrack.daemon.core.jit import njit
 
 __all__ = ["BackgroundActivityFilter", "DenoiseParams"]
@@ -35,8 +36,6 @@ GROW_PASS = 0.25
 ``noise_pass`` (so where the fixed window already lets noise through, it stays fixed)."""
 _NEVER = np.int32(-(1 << 31) + 1)  # "never fired", in the int32 map of times relative to a base
 _REBASE_US = 1 << 30  # move the base forward when times get this far from it (~18 minutes)
-MAX_SENSOR_PX = 8192
-"""No event sensor is wider or taller (the largest are 1280 x 960): the time map grows at most to this."""
 
 
 class BeyondAnySensorError(ValueError):

@@ -15,6 +15,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from flagtrack.daemon import __version__
+from flagtrack.daemon.core.events import MAX_SENSOR_PX
 from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.formats.geometry import inferred_geometry
 
@@ -138,6 +139,12 @@ def raw_layout(fields: Mapping[str, str], offsets: Mapping[str, int], path: str 
         width, height = _int_or_none(w), _int_or_none(h)
     if width is None or height is None:
         width, height = inferred_geometry(fields) or (None, None)
+    if width is not None and height is not None and not (0 < width <= MAX_SENSOR_PX and 0 < height <= MAX_SENSOR_PX):
+        raise FormatError(
+            f"sensor size {width} x {height} in the header: not an event sensor's (1 to {MAX_SENSOR_PX} pixels a side)",
+            path=path,
+            offset=offsets.get("format", offsets.get("geometry")),
+        )
     endianness = options.get("endianness") or fields.get("endianness") or ""
     if not endianness:
         system_id = _int_or_none(fields.get("system_ID"))

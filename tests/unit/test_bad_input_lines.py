@@ -48,3 +48,17 @@ def test_an_output_a_command_did_not_check_is_still_one_line(
     assert main(["events", "convert", str(tmp_path / "rec.raw"), str(tmp_path / "nowhere" / "t.npy")]) == 2
     line = _one_line(capsys)
     assert line.startswith("flagtrack events: error: ") and str(tmp_path / "nowhere" / "t.npy") in line, line
+
+
+@pytest.mark.parametrize("width", ["99999999999999999999", "-640", "0", "8193"])
+def test_a_header_size_no_sensor_has_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str], width: str) -> None:
+    """Beyond 64 bits it was an OverflowError (events info), a hang (up --replay); 0 or negative, a
+    warning per event and exit 0."""
+    events = np.zeros(5, EVENT_DTYPE)
+    events["t"] = np.arange(5)
+    path = tmp_path / "rec.raw"
+    write_events(path, events, width=640, height=480)
+    data = path.read_bytes()
+    path.write_bytes(data.replace(b"width=640", f"width={width}".encode(), 1))
+    assert main(["events", "info", str(path)]) == 2
+    assert f"sensor size {width} x 480 in the header: not an event sensor's" in _one_line(capsys)
