@@ -119,9 +119,8 @@ def test_the_rules_are_made_from_the_rigs_keys(tmp_path: Path) -> None:
 
 
 def test_the_password_never_reaches_a_record(tmp_path: Path) -> None:
-    path = secured_rig(tmp_path, bus="    user: rig\n    password: hunter2-secret\n".replace("    ", "    "))
-    text = path.read_text().replace("    acl: true\n", "    acl: true\n    user: rig\n    password: hunter2-secret\n")
-    path.write_text(text)
+    path = secured_rig(tmp_path, bus="    user: rig\n    password: hunter2-secret\n")
+    assert path.read_text().count("hunter2-secret") == 1  # (it was given twice: the YAML loader refuses that now)
     rig = load_rig(path, services=())
     assert "hunter2" not in repr(rig.bus)
     snapshot = rig.snapshot()
