@@ -59,13 +59,23 @@ def run(args: argparse.Namespace) -> int:
 
 def _refuse_outputs_over_inputs(args: argparse.Namespace, rig: RigConfig) -> None:
     """``--centrelines`` or ``--rrd`` naming the recording, the rig config or the calibration (the
-    folders are checked with the rig's)."""
+    folders are checked with the rig's), or ``--record`` naming a recording made before."""
     from flagtrack.daemon.commands._outputs import check_output
 
     inputs = (args.replay, args.config, rig.tracker.calibration)
     for option, output in (("--centrelines", args.centrelines), ("--rrd", args.rrd)):
         if output is not None:
             check_output(output, option, inputs, makes_folder=True)
+    if args.record is not None:  # a second `up --record NAME` replaced the first recording without a word
+        from flagtrack.daemon.errors import ConfigError
+        from flagtrack.daemon.services.recorder import recording_base
+
+        base = recording_base(rig.recorder.directory, str(args.record))
+        earlier = base.with_name(base.name + ".raw")
+        if earlier.exists():
+            raise ConfigError(
+                f"{earlier} exists: give another name, or move it (a recording is not replaced)", key="--record"
+            )
 
 
 def rig_from_args(args: argparse.Namespace) -> tuple[RigConfig, list[str]]:

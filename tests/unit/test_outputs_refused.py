@@ -58,3 +58,16 @@ def test_an_earlier_output_of_the_same_kind_is_replaced(folder: Path) -> None:
     check_output(earlier, "-o", (folder / "rec.raw",), replaceable=only_yaml_sections("tracker"), holds="x")
     (folder / "empty.yaml").write_text("")
     check_output(folder / "empty.yaml", "-o", (), replaceable=only_yaml_sections("tracker"), holds="x")
+
+
+def test_up_record_refuses_a_name_recorded_before(
+    folder: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A second `up --record test1` replaced recordings/test1.raw (2.28 MB -> 1.24 MB), exit 0."""
+    monkeypatch.chdir(folder)
+    (folder / "recordings").mkdir()
+    (folder / "recordings" / "test1.raw").write_bytes(b"the first recording")
+    assert main(["up", "-c", "rig.yaml", "--record", "test1", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "key '--record': recordings/test1.raw exists" in err[0], err
+    assert (folder / "recordings" / "test1.raw").read_bytes() == b"the first recording"
