@@ -62,6 +62,11 @@ def run(args: argparse.Namespace) -> int:
 
     if not (args.run_dir / RUN_LOG).exists():
         raise ConfigError(f"no run log in {args.run_dir}", key="RUN_DIR")
+    if args.centrelines is not None and not args.centrelines.is_dir():  # (every point "no centrelines file")
+        raise ConfigError(f"{args.centrelines}: no such folder", key="--centrelines")
+    for name, value in (("--x-over-l", args.x_over_l), ("--max-lag-ms", args.max_lag_ms), ("--window", args.window)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise ConfigError(f"must be a positive number, got {value}", key=name)
     record = read_run(args.run_dir)
     sensor = run_sensor_config(record, str(args.run_dir / RUN_LOG))
     sync = dataclasses.replace(

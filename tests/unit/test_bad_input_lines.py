@@ -62,3 +62,25 @@ def test_a_header_size_no_sensor_has_is_refused(tmp_path: Path, capsys: pytest.C
     path.write_bytes(data.replace(b"width=640", f"width={width}".encode(), 1))
     assert main(["events", "info", str(path)]) == 2
     assert f"sensor size {width} x 480 in the header: not an event sensor's" in _one_line(capsys)
+
+
+@pytest.mark.parametrize(
+    ("extra", "words"),
+    [
+        (["--centrelines", "nowhere"], "key '--centrelines': nowhere: no such folder"),
+        (["--x-over-l", "nan"], "key '--x-over-l': must be a positive number, got nan"),
+        (["--max-lag-ms", "-5"], "key '--max-lag-ms'"),
+        (["--window", "0"], "key '--window'"),
+    ],
+)
+def test_validate_refuses_a_missing_centrelines_folder_and_bad_numbers_first(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], extra: list[str], words: str
+) -> None:
+    """A mistyped --centrelines folder rewrote a good validation.csv with "no centrelines file" at
+    every point, exit 0."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "run.jsonl").write_text("")
+    assert main(["validate", "run", *extra]) == 2
+    assert words in _one_line(capsys)
+    assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["run.jsonl"]
