@@ -90,9 +90,11 @@ def read_calibration_file(path: str | Path) -> dict[str, Any]:
     """
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(f"cannot read calibration file: {exc.strerror}", path=str(path)) from exc
+    except UnicodeDecodeError as exc:  # a recording given as the calibration, say
+        raise FormatError(f"not a calibration file (not UTF-8 text at byte {exc.start})", path=str(path)) from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:

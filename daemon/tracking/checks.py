@@ -18,6 +18,7 @@ MAX_JOINTS, MAX_LINK_RATIO = 1000, 1000.0
 MAX_SAMPLES = 100_001
 TIME_RANGE_S = (1e-6, 3600.0)
 MAX_ABS_TIME_S = 1e9
+MAX_COORDINATE = 1e9  # root and length, in pixels or plane units (1e308: the loss settings overflowed)
 
 
 def check_tracking_config(config: Any, *, path: str | None = None) -> None:
@@ -28,10 +29,10 @@ def check_tracking_config(config: Any, *, path: str | None = None) -> None:
 
     if config.root is not None:
         root = tuple(config.root)
-        if len(root) != 2 or not all(_finite(v) for v in root):
-            fail("root", f"must be two finite numbers (x, y), got {_show(root)}")
-    if config.length is not None and not (_finite(config.length) and config.length > 0):
-        fail("length", f"must be a positive finite number, got {config.length}")
+        if len(root) != 2 or not all(_finite(v) and abs(v) <= MAX_COORDINATE for v in root):
+            fail("root", f"must be two finite numbers (x, y) of at most {MAX_COORDINATE:g}, got {_show(root)}")
+    if config.length is not None and not (_finite(config.length) and 0 < config.length <= MAX_COORDINATE):
+        fail("length", f"must be a positive finite number of at most {MAX_COORDINATE:g}, got {config.length}")
     if not _finite(config.direction_deg):
         fail("direction_deg", f"must be a finite number of degrees, got {config.direction_deg}")
     if not 1 <= config.joints <= MAX_JOINTS:

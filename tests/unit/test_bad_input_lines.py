@@ -84,3 +84,10 @@ def test_validate_refuses_a_missing_centrelines_folder_and_bad_numbers_first(
     assert main(["validate", "run", *extra]) == 2
     assert words in _one_line(capsys)
     assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["run.jsonl"]
+
+
+def test_a_binary_file_given_as_the_calibration_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """It was a UnicodeDecodeError traceback (the -c loader already said "not UTF-8 text")."""
+    (tmp_path / "cal.yaml").write_bytes(b"\x89HDF\r\n\x1a\n\xff\xfe")
+    assert main(["calibrate", "map", str(tmp_path / "cal.yaml"), "1", "2"]) == 2
+    assert "cal.yaml" in (line := _one_line(capsys)) and "not a calibration file (not UTF-8 text" in line, line

@@ -151,6 +151,7 @@ def test_the_core_api_refuses_with_a_value_error_or_tracks(
         (["--tau", "0"], "--tau: must be in [1e-06, 3600] s"),
         (["--dt", "-1"], "--dt: must be in [1e-06, 3600] s"),
         (["--ds", "1e-9"], "--ds: must be in [L / 100000, L]"),
+        (["--length", "1e308"], "--length: must be a positive finite number of at most 1e+09"),  # an OverflowError
     ],
 )
 def test_the_issues_parameters_are_refused_by_option(argv: list[str], words: str) -> None:
