@@ -79,10 +79,14 @@ def run_overview(folder: Path) -> dict[str, Any]:
     except (FormatError, ValueError, TypeError, KeyError, AttributeError) as exc:  # a log another program wrote
         return {**row, "status": "unreadable", "reason": str(exc)}
     started = record.start.get("t_unix")
-    known_start = isinstance(started, int | float)
+    try:  # (another program's log: a time of 1e300 or NaN is no time; the other runs are still listed)
+        shown = time.strftime("%Y-%m-%d %H:%M", time.localtime(started)) if isinstance(started, int | float) else None
+    except (OverflowError, ValueError, OSError):
+        shown = None
+    known_start = shown is not None
     return {
         **row,
-        "started": time.strftime("%Y-%m-%d %H:%M", time.localtime(started)) if known_start else None,
+        "started": shown,
         "started_unix": started if known_start else None,
         "points_done": sum(p.status == "done" for p in points),
         "points_planned": len(record.planned_ids),

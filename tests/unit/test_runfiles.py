@@ -185,6 +185,23 @@ def test_runs_list_shows_each_folder_with_its_status_or_why_it_is_not_a_run(
     assert listed["d-foreign"]["status"] == "not a run" and listed["d-foreign"]["points_done"] is None
 
 
+@pytest.mark.parametrize("t_unix", ["1e300", "NaN"])
+def test_a_start_time_that_is_no_time_leaves_the_listing_whole(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], t_unix: str
+) -> None:
+    """It was an OverflowError / ValueError that aborted the whole listing, good runs included."""
+    make_runs(tmp_path)
+    log_path = tmp_path / "b-killed" / "run.jsonl"
+    first, *rest = log_path.read_text().splitlines(keepends=True)
+    start = json.loads(first)
+    start["t_unix"] = float(t_unix)
+    log_path.write_text("".join([json.dumps(start) + "\n", *rest]))
+    assert main(["runs", "list", str(tmp_path), "--json"]) == 0
+    listed = {row["run"]: row for row in json.loads(capsys.readouterr().out)}
+    assert listed["b-killed"]["started"] is None and listed["b-killed"]["status"] == "incomplete"
+    assert listed["a-finished"]["status"] == "finished"
+
+
 def test_runs_list_of_one_run_folder_and_of_a_missing_folder(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
