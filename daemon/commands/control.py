@@ -42,6 +42,10 @@ def run(args: argparse.Namespace) -> int:
     from flagtrack.daemon.rig.control import control_rig
     from flagtrack.daemon.rig.run import run_rig
 
+    if args.out is not None and args.out.exists() and not args.out.is_dir():  # (found only once the rig was up)
+        from flagtrack.daemon.errors import ConfigError
+
+        raise ConfigError(f"{args.out} is a file: give the run folder to make", key="--out")
     rig = load_rig(args.config, services=())
     rig, names = control_rig(rig, args.controller, duration_s=args.duration, period_s=args.period, out=args.out)
     result = run_rig(rig, names, shutdown_timeout_s=args.shutdown_timeout, quiet=args.quiet)

@@ -91,3 +91,13 @@ def test_a_binary_file_given_as_the_calibration_is_one_line(tmp_path: Path, caps
     (tmp_path / "cal.yaml").write_bytes(b"\x89HDF\r\n\x1a\n\xff\xfe")
     assert main(["calibrate", "map", str(tmp_path / "cal.yaml"), "1", "2"]) == 2
     assert "cal.yaml" in (line := _one_line(capsys)) and "not a calibration file (not UTF-8 text" in line, line
+
+
+def test_control_out_onto_a_file_is_refused_before_the_rig_starts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """It failed once every service was up: three ERROR lines, then "flagtrack control: error", exit 1."""
+    (tmp_path / "afile").write_text("kept")
+    rig = Path(__file__).resolve().parents[2] / "deploy" / "rig-control-sim.yaml"
+    assert main(["control", "-c", str(rig), "--out", str(tmp_path / "afile")]) == 2
+    assert "key '--out'" in _one_line(capsys) and (tmp_path / "afile").read_text() == "kept"
