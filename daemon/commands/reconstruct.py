@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 from flagtrack.daemon.commands._tracking_args import add_tracking_arguments, setup_from_arguments
 
 if TYPE_CHECKING:
+    from flagtrack.daemon.tracking.offline import ReconstructSummary
     from flagtrack.daemon.tracking.setup import TrackingSetup
 
 COMMAND = "reconstruct"
@@ -73,7 +74,9 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     print(f"{args.output}: {summary.verdicts()}", file=sys.stderr)
-    if summary.mostly_unmeasured:
+    if summary.updates == 0:  # (not the geometry: no window had a place to be)
+        print(f"warning: {_why_no_updates(summary)}", file=sys.stderr)
+    elif summary.mostly_unmeasured:
         geometry = (
             "the calibration, --root, --length, --direction" if setup.mapping else "--root, --length, --direction"
         )
@@ -82,6 +85,19 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     return 0
+
+
+def _why_no_updates(summary: ReconstructSummary) -> str:
+    """What to check when a recording gave no update at all."""
+    if summary.events_in == 0:
+        return "the recording holds no events"
+    if summary.events_kept == 0:
+        return f"the noise filter kept none of its {summary.events_in} events (tracker.denoise)"
+    span_s = ((summary.last_t_us or 0) - (summary.first_t_us or 0)) * 1e-6
+    return (
+        f"no window fits in the recording's {span_s:.3f} s of events: check --t-start, --t-stop "
+        "(tracker.t_start_s, tracker.t_stop_s) and --tau"
+    )
 
 
 def check_paths(events: Path, output: Path, config: Path | None) -> None:

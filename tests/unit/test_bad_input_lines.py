@@ -101,3 +101,11 @@ def test_control_out_onto_a_file_is_refused_before_the_rig_starts(
     rig = Path(__file__).resolve().parents[2] / "deploy" / "rig-control-sim.yaml"
     assert main(["control", "-c", str(rig), "--out", str(tmp_path / "afile")]) == 2
     assert "key '--out'" in _one_line(capsys) and (tmp_path / "afile").read_text() == "kept"
+
+
+def test_no_updates_at_all_is_not_blamed_on_the_geometry(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "empty.csv").write_text("t,x,y,p\n")
+    argv = ["reconstruct", str(tmp_path / "empty.csv"), "-o", str(tmp_path / "e.h5"), "--root", "150", "240"]
+    assert main([*argv, "--length", "300"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the recording holds no events" in err and "geometry" not in err, err
