@@ -94,6 +94,27 @@ def test_get_and_stop(sim: SimulatedTunnel, tmp_path: Path) -> None:
     assert sim.setpoint_mps == 0.0 and sim.speed_mps < 0.15
 
 
+def test_get_from_a_controller_that_does_not_answer_is_an_error_line(tmp_path: Path) -> None:
+    """A real pseudo-terminal nobody answers on: it printed "speed nan m/s, fault no reply" on stdout,
+    as if it were a reading (exit 2)."""
+    import os
+    import pty
+
+    master, slave = pty.openpty()
+    try:
+        port = os.ttyname(slave)
+        config = str(rig_config(tmp_path, port))
+        got = subprocess.run([*FLAGTRACK, "tunnel", "get", "-c", config], capture_output=True, text=True, timeout=30)
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert got.returncode == 2 and got.stdout == "", got
+    lines = got.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"flagtrack tunnel: error: {port}: ") and "no reply" in lines[0], (
+        lines
+    )
+
+
 def test_sim_command_prints_a_pty_the_driver_can_use() -> None:
     proc = subprocess.Popen([*FLAGTRACK, "tunnel", "sim", "--tau-s", "0.02"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
