@@ -68,9 +68,11 @@ def run_overview(folder: Path) -> dict[str, Any]:
         "decay_mps": None,
         "status": None,
         "reason": None,
+        "kind": None,  # "sweep" (run.jsonl) or "control" (flagtrack control's run.json)
     }
     if not (folder / RUN_LOG).is_file():
-        return {**row, "status": "not a run", "reason": f"no {RUN_LOG}"}
+        control = _control_run(folder)
+        return {**row, **control} if control else {**row, "status": "not a run", "reason": f"no {RUN_LOG}"}
     try:
         record = read_run(folder)
         points = summary_points(record)
@@ -94,6 +96,31 @@ def run_overview(folder: Path) -> dict[str, Any]:
         "decay_mps": decay,
         "status": status,
         "reason": detail or None,
+        "kind": "sweep",
+    }
+
+
+def _control_run(folder: Path) -> dict[str, Any] | None:
+    """The row fields of a feedback-control run (``flagtrack control``: its ``run.json``), or None."""
+    try:
+        description = json.loads((folder / "run.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(description, dict) or description.get("format") != "flagtrack-control-run":
+        return None
+    started = description.get("started_unix")
+    try:
+        shown = time.strftime("%Y-%m-%d %H:%M", time.localtime(started)) if isinstance(started, int | float) else None
+    except (OverflowError, ValueError, OSError):
+        shown = None
+    status = description.get("status")
+    reason = description.get("error") or description.get("stop_reason")
+    return {
+        "started": shown,
+        "started_unix": started if shown else None,
+        "kind": "control",
+        "status": status if isinstance(status, str) else "unreadable",
+        "reason": str(reason) if reason and reason != status else None,
     }
 
 
@@ -111,7 +138,9 @@ def _table(rows: list[dict[str, Any]]) -> str:
             "-" if row["points_planned"] is None else f"{row['points_done']}/{row['points_planned']}",
             cell(row["onset_mps"]),
             cell(row["decay_mps"]),
-            row["status"] + (f": {row['reason']}" if row["reason"] else ""),
+            ("control run, " if row.get("kind") == "control" else "")
+            + row["status"]
+            + (f": {row['reason']}" if row["reason"] else ""),
         )
         for row in rows
     ]

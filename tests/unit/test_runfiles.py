@@ -202,6 +202,22 @@ def test_a_start_time_that_is_no_time_leaves_the_listing_whole(
     assert listed["a-finished"]["status"] == "finished"
 
 
+def test_a_control_run_is_listed_as_one(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`demo --feedback`'s folder has its own README.txt and run.json; it was "not a run: no run.jsonl"."""
+    make_runs(tmp_path)
+    description = {"format": "flagtrack-control-run", "started_unix": 1_790_000_000.0, "status": "stopped",
+                   "stop_reason": "Ctrl-C", "error": None}  # fmt: skip
+    (tmp_path / "f-control").mkdir()
+    (tmp_path / "f-control" / "run.json").write_text(json.dumps(description))
+    assert main(["runs", "list", str(tmp_path)]) == 0
+    rows = {line.split()[0]: line for line in capsys.readouterr().out.splitlines()[1:]}
+    assert rows["f-control"].endswith("control run, stopped: Ctrl-C") and "not a run" in rows["d-foreign"]
+    assert main(["runs", "list", str(tmp_path), "--json"]) == 0
+    listed = {row["run"]: row for row in json.loads(capsys.readouterr().out)}
+    assert listed["f-control"]["kind"] == "control" and listed["f-control"]["status"] == "stopped"
+    assert listed["a-finished"]["kind"] == "sweep" and listed["d-foreign"]["kind"] is None
+
+
 def test_runs_list_of_one_run_folder_and_of_a_missing_folder(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
