@@ -82,6 +82,7 @@ class _Plan:
 
 def _plan(args: argparse.Namespace) -> _Plan:
     from flagtrack.daemon.commands._outputs import check_output
+    from flagtrack.daemon.core.events import MAX_SENSOR_PX
     from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.typed_yaml import require_output_file
 
@@ -95,8 +96,8 @@ def _plan(args: argparse.Namespace) -> _Plan:
     speed = args.speed if args.speed is not None else (1.0 if viewer is not None and viewer.sink != "rrd" else 0.0)
     if speed < 0:
         raise ConfigError(f"--speed must be 0 or more, got {speed}")
-    if args.sensor is not None and min(args.sensor) < 1:
-        raise ConfigError(f"--sensor must be two positive sizes, got {args.sensor[0]} {args.sensor[1]}")
+    if args.sensor is not None and not all(1 <= v <= MAX_SENSOR_PX for v in args.sensor):
+        raise ConfigError(f"--sensor must be two sizes of 1 to {MAX_SENSOR_PX}, got {args.sensor[0]} {args.sensor[1]}")
     sensor = (args.sensor[0], args.sensor[1]) if args.sensor else None
     return _Plan(rig, tracker, params, viewer, note, speed, sensor)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -93,6 +94,7 @@ def _parse_setup(args: argparse.Namespace) -> tuple:
         n, m = (int(v) for v in args.board.lower().split("x"))
     except ValueError as exc:
         raise ConfigError(f"--board must look like 9x6 (inner corners), got {args.board!r}", key="board") from exc
+    _check_numbers(args, n, m)
     try:
         board = BoardSpec((n, m), args.square_mm * 1e-3)
         frame = GridFrame(
@@ -112,6 +114,32 @@ def _parse_setup(args: argparse.Namespace) -> tuple:
     if degree < 1:
         raise ConfigError(f"--degree must be >= 1, got {degree}", key="degree")
     return board, frame, search, degree
+
+
+_MAX_CORNERS = 100  # a side of the board, inner corners
+
+
+def _check_numbers(args: argparse.Namespace, n: int, m: int) -> None:
+    """Each number of the calibration's options in its range, named (before any work)."""
+    from flagtrack.daemon.core.events import MAX_SENSOR_PX
+    from flagtrack.daemon.errors import ConfigError
+
+    if not (2 <= n <= _MAX_CORNERS and 2 <= m <= _MAX_CORNERS):
+        raise ConfigError(f"--board: 2 to {_MAX_CORNERS} inner corners a side, got {args.board}")
+    positive = {
+        "--square-mm": args.square_mm,
+        "--max-seconds": args.max_seconds,
+        "--min-period-ms": args.min_period_ms,
+        "--max-period-ms": args.max_period_ms,
+        "--period-ms": args.period_ms,
+    }
+    for option, value in positive.items():
+        if value is not None and not (math.isfinite(value) and 0 < value <= 1e6):
+            raise ConfigError(f"{option}: must be a positive number up to 1e6, got {value}")
+    if not all(math.isfinite(v) and abs(v) <= 1e6 for v in args.origin_offset_mm):
+        raise ConfigError(f"--origin-offset-mm: must be two numbers up to 1e6 mm, got {args.origin_offset_mm}")
+    if args.size is not None and not all(0 < v <= MAX_SENSOR_PX for v in args.size):
+        raise ConfigError(f"--size: 1 to {MAX_SENSOR_PX} pixels a side, got {args.size[0]} {args.size[1]}")
 
 
 def _check_outputs(recording: Path, output: Path, figure: Path | None) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 
 COMMAND = "simulate"
@@ -40,12 +41,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Simulate and print one JSON line per recording."""
+    from flagtrack.daemon.core.events import MAX_SENSOR_PX
     from flagtrack.daemon.errors import ConfigError
     from flagtrack.drivers.sim.dvs import DvsParams
     from flagtrack.drivers.sim.simulate import RecordingSpec, simulate_checkerboard, simulate_many
 
-    if args.n < 1 or args.width < 16 or args.height < 16:
-        raise ConfigError("need --n >= 1 and a sensor of at least 16 x 16 px")
+    if args.n < 1 or not (16 <= args.width <= MAX_SENSOR_PX and 16 <= args.height <= MAX_SENSOR_PX):
+        raise ConfigError(f"need --n >= 1 and a sensor of 16 to {MAX_SENSOR_PX} px a side")
+    if args.duration is not None and not (math.isfinite(args.duration) and 0 < args.duration <= 3600):
+        raise ConfigError(f"--duration: must be above 0 and at most 3600 s, got {args.duration}")
+    rates = {"--leak-rate": args.leak_rate, "--shot-noise": args.shot_noise, "--refractory-us": args.refractory_us}
+    for option, value in {**rates, "--contrast": args.contrast}.items():
+        if not (math.isfinite(value) and value >= 0):
+            raise ConfigError(f"{option}: must be a finite number >= 0, got {value}")
     try:
         dvs = DvsParams(
             contrast_on=args.contrast,

@@ -94,7 +94,8 @@ def rig_from_args(args: argparse.Namespace) -> tuple[RigConfig, list[str]]:
     names = list(rig.services)
     if args.replay is not None:
         if not args.replay.is_file():
-            raise ConfigError(f"no such recording: {args.replay}", key="--replay")
+            what = "is a directory, not a recording" if args.replay.is_dir() else "no such recording"
+            raise ConfigError(f"{args.replay}: {what}", key="--replay")
         camera = CameraConfig(
             id=rig.camera.id,
             adapter="replay",

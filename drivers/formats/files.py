@@ -75,6 +75,8 @@ def open_events(path: str | Path, *, strict: bool = False, chunk_bytes: int = DE
     Returns:
         an :class:`EventReader` whose ``info`` is a :class:`RecordingInfo`.
     """
+    if Path(path).is_dir():  # (it was "unknown event file type '(no extension)'")
+        raise FormatError("is a directory, not an event file", path=str(path))
     return READERS[file_format(path)](path, strict=strict, chunk_bytes=chunk_bytes)
 
 

@@ -109,3 +109,33 @@ def test_no_updates_at_all_is_not_blamed_on_the_geometry(tmp_path: Path, capsys:
     assert main([*argv, "--length", "300"]) == 0
     err = capsys.readouterr().err
     assert "warning: the recording holds no events" in err and "geometry" not in err, err
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["calibrate", "REC", "--board", "9x6", "--square-mm", "-20", "-o", "c.yaml"], "--square-mm: must be a positive"),
+        (["calibrate", "REC", "--board", "9x6", "--square-mm", "20", "--max-seconds", "nan", "-o", "c.yaml"],
+         "--max-seconds"),
+        (["calibrate", "REC", "--board", "99999999999999x2", "--square-mm", "20", "-o", "c.yaml"], "--board: 2 to 100"),
+        (["calibrate", "REC", "--board", "9x6", "--square-mm", "20", "--size", "-1", "5", "-o", "c.yaml"], "--size"),
+        (["simulate", "OUT", "--duration", "-1"], "--duration: must be above 0"),
+        (["simulate", "OUT", "--shot-noise", "inf"], "--shot-noise"),
+        (["simulate", "OUT", "--width", "99999999"], "a sensor of 16 to 8192 px"),
+        (["aim", "--replay", "REC", "--sensor", "99999999", "99999999", "--snapshot", "a.png", "-q"], "--sensor"),
+        (["events", "info", "."], "is a directory, not an event file"),
+        (["up", "--replay", ".", "--exit-at-eof"], "key '--replay': .: is a directory, not a recording"),
+    ],
+)  # fmt: skip
+def test_numbers_and_folders_a_command_cannot_use_are_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], argv: list[str], words: str
+) -> None:
+    """Tracebacks (a cv2.error, a 358 GiB or 71 PiB allocation) or a 0-event recording with exit 0."""
+    monkeypatch.chdir(tmp_path)
+    events = np.zeros(5, EVENT_DTYPE)
+    events["t"] = np.arange(5)
+    write_events(tmp_path / "rec.raw", events, width=640, height=480)
+    argv = [str(tmp_path / "rec.raw") if a == "REC" else str(tmp_path / "out") if a == "OUT" else a for a in argv]
+    assert main(argv) == 2
+    assert words in _one_line(capsys)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.raw"]
