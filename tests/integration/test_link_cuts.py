@@ -150,8 +150,10 @@ recorder: {{directory: {tmp_path / "rec"}, path: run, centrelines: true, flush_i
         warnings.simplefilter("always")
         events = reader.read().events
     # A packet in flight at the cut can arrive garbled (seen in about one run of two: the tracker counts it
-    # undecodable, the recorder writes it as it came); the reader skips its bad stretch and says so.
-    assert len(caught) == len(reader.skipped) and len(reader.skipped) <= 2, [str(w.message) for w in caught]
+    # undecodable, the recorder writes it as it came); the reader skips its bad stretch and says so, in
+    # as many ranges as the garbage has stretches between valid time bases (11 within 4 KB, once).
+    stretches = [r for i, r in enumerate(reader.skipped) if i == 0 or r.start - reader.skipped[i - 1].end > 1 << 16]
+    assert len(caught) == len(reader.skipped) and len(stretches) <= 2, [str(w.message) for w in caught]
     assert doc["events"] - reader.events_lost_at_most <= len(events) <= doc["events"]
     assert doc["events"] >= at_router_restart > before_cut and len(events) > before_cut  # nothing before is lost
     assert doc["missing_packets"] == sum(g["missing_packets"] for g in doc["gaps"])
