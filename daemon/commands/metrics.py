@@ -61,6 +61,10 @@ def run(args: argparse.Namespace) -> int:
     recon, recon_attrs = read_centrelines(args.recon)
     truth, truth_attrs, present = read_truth(args.truth)
     length = truth_attrs.get("length")
+    if length is not None and not _positive(length):  # (0 was a ZeroDivisionError, NaN NaN results)
+        raise FormatError(
+            f"ground truth: attribute 'length' must be a positive number, got {length!r}", path=args.truth
+        )
     has_joints, has_delta = "joints/x" in present, "delta_rms" in present
     try:
         result = compare(
@@ -126,3 +130,11 @@ def _text_line(key: str, value: float | int | None, reason: str, units: str) -> 
         shown += f" {units}"
     meaning = MEANINGS.get(key)
     return f"{key:30s} {shown}" + (f"  {meaning}" if meaning else "")
+
+
+def _positive(value: object) -> bool:
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
+    return math.isfinite(number) and number > 0

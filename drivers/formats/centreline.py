@@ -401,6 +401,8 @@ def read_centrelines(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any]]
             attrs = {name: _decode_attr(value) for name, value in f.attrs.items()}
     except OSError as exc:
         raise FormatError(f"cannot open as HDF5: {exc}", path=str(path)) from exc
+    except ValueError as exc:  # datasets of disagreeing shapes (another program's file, a damaged one)
+        raise FormatError(f"not a flagtrack centreline file: {exc}", path=str(path)) from None
     return batch, attrs
 
 

@@ -140,3 +140,30 @@ def test_a_truth_without_x_is_one_clear_error(tmp_path: Path, capsys: pytest.Cap
     assert out.err.splitlines() == [
         f"flagtrack metrics: error: {truth}: ground truth has no /x dataset (a truth needs /t, /s, /x, /y)"
     ]
+
+
+@pytest.mark.parametrize("length", [0.0, float("nan"), -1.0])
+def test_a_truth_length_that_is_no_length_is_one_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], length: float
+) -> None:
+    """0 was a ZeroDivisionError traceback, NaN printed NaN results."""
+    truth = truth_file(tmp_path / "truth.h5", ("t", "s", "x", "y"))
+    with h5py.File(truth, "a") as f:
+        f.attrs["length"] = length
+    assert main(["metrics", "compare", str(recon_file(tmp_path / "recon.h5")), str(truth)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and f"{truth}: ground truth: attribute 'length' must be a positive number" in err[0], err
+
+
+def test_a_reconstruction_of_disagreeing_shapes_is_one_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    recon = recon_file(tmp_path / "recon.h5")
+    with h5py.File(recon, "a") as f:
+        x = f["x"][()]
+        del f["x"]
+        f.create_dataset("x", data=x[:, :1])
+    truth = truth_file(tmp_path / "truth.h5", ("t", "s", "x", "y"))
+    assert main(["metrics", "compare", str(recon), str(truth)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and f"{recon}: not a flagtrack centreline file: " in err[0], err
