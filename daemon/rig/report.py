@@ -67,6 +67,8 @@ def check_rig_file(
         ConfigError: one line naming the key and the file.
     """
     data = load_yaml(path)
+    if not data:  # (it passed as "a part of a rig", --strict too: a file saved empty, or the wrong one)
+        raise ConfigError("holds no sections: nothing to check (a rig: deploy/rig-single-pc.yaml)", path=str(path))
     rig = load_rig(path, services=())
     kind = "rig" if "services" in data else "part"
     names = _chosen_services(rig, data, services)

@@ -187,6 +187,14 @@ def test_a_root_off_a_known_sensor_is_refused_by_the_check_and_the_rig(tmp_path:
     check_rig_file(rig_file(tmp_path, camera=replay, tracker={"root": [300, 100], "length": 300}))
 
 
+@pytest.mark.parametrize("text", ["", "# only a comment\n", "{}\n"])
+def test_a_file_without_sections_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str) -> None:
+    """It passed as "a part of a rig", --strict too."""
+    (tmp_path / "rig.yaml").write_text(text)
+    assert main(["config", "check", str(tmp_path / "rig.yaml"), "--strict"]) == 2
+    assert "holds no sections: nothing to check" in capsys.readouterr().err
+
+
 def test_a_part_of_a_rig_is_checked_as_its_sections() -> None:
     report = check_rig_file(DEPLOY / "tunnel-modbus.yaml")
     assert report.kind == "part" and report.services == () and report.plan is None
