@@ -20,6 +20,7 @@ class ConfigError(FlagtrackError):
     """
 
     def __init__(self, message: str, *, key: str | None = None, path: str | None = None) -> None:
+        self.message = message
         self.key = key
         self.path = path
         where = ", ".join(part for part in (path and f"file {path}", key and f"key '{key}'") if part)

@@ -56,8 +56,10 @@ def _unique_keys_loader() -> type:
         def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
             first: dict[Any, int] = {}
             for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":  # (<<: an alias's keys, which the next may override)
+                    continue
                 key = self.construct_object(key_node, deep=True)
-                if isinstance(key, typing.Hashable) and key != "<<":
+                if isinstance(key, typing.Hashable):
                     if key in first:
                         raise yaml.constructor.ConstructorError(
                             None, None, f"key {key!r} given twice (first at line {first[key] + 1})", key_node.start_mark
@@ -290,7 +292,12 @@ def _convert_scalar(hint: Any, value: Any, *, path: str | None, key: str) -> Any
             return value
     elif hint is float:
         if isinstance(value, int | float) and not isinstance(value, bool):
-            return float(value)
+            try:
+                return float(value)
+            except OverflowError:  # a 400-digit integer
+                raise ConfigError(
+                    f"a number of {len(str(value))} digits is beyond any float", key=key, path=path
+                ) from None
     elif hint is str:
         if isinstance(value, str):
             return value

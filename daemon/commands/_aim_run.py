@@ -82,7 +82,7 @@ def open_source(
     cfg = rig.camera
     if cfg.adapter == "replay" and cfg.replay is not None:  # decoded: aim reads events, not bytes
         cfg = dataclasses.replace(cfg, replay=dataclasses.replace(cfg.replay, native=False))
-    opened = open_hardware_camera(rig)
+    opened = open_hardware_camera(rig, check_root=False)  # (aim is where a wrong root is seen and fixed)
     if opened is not None:
         return Source(opened, opened.open(), f"camera {cfg.id} ({cfg.adapter})", live=True)
     camera = open_camera(cfg, rig_path=rig.path)

@@ -86,11 +86,12 @@ def _plan(args: argparse.Namespace) -> _Plan:
     from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.typed_yaml import require_output_file
 
+    rig, tracker = _rig_and_tracker(args)  # (reads only: nothing is written before the outputs are checked)
+    inputs = (args.replay, args.config, tracker.calibration)
     for option, output in (("--snapshot", args.snapshot), ("--rrd", args.rrd)):
         if output is not None:
             require_output_file(output, key=option, path=None)
-            check_output(output, option, (args.replay, args.config, args.calibration), makes_folder=True)
-    rig, tracker = _rig_and_tracker(args)
+            check_output(output, option, inputs, makes_folder=True)
     params = _params(args)
     viewer, note = _viewer(args, rig)
     speed = args.speed if args.speed is not None else (1.0 if viewer is not None and viewer.sink != "rrd" else 0.0)

@@ -55,8 +55,9 @@ def run(args: argparse.Namespace) -> int:
     setup = setup_from_arguments(config, args, path=str(args.config) if args.config else None)
     started = time.perf_counter()
     with _ProgressBar(args.file, not args.no_progress and sys.stderr.isatty()) as bar:
+        output = args.output.resolve() if args.output.is_symlink() else args.output  # (written through a link)
         summary = reconstruct_file(  # (atomic: a failure leaves an earlier output as it was, and no stub)
-            args.file, args.output, setup, progress=bar, strict=args.strict, check_sensor=_sensor_check(setup, args),
+            args.file, output, setup, progress=bar, strict=args.strict, check_sensor=_sensor_check(setup, args),
             atomic=True,
         )  # fmt: skip
     elapsed = time.perf_counter() - started
@@ -113,6 +114,8 @@ def check_paths(events: Path, output: Path, config: Path | None) -> None:
         raise ConfigError(f"-o {output}: folder {output.parent} does not exist")
     if output.exists() and events.exists() and output.resolve() == events.resolve():
         raise ConfigError(f"-o {output}: is the event file itself (it would be overwritten)")
+    if output.exists() and config is not None and config.exists() and output.resolve() == config.resolve():
+        raise ConfigError(f"-o {output}: is the config file itself (it would be overwritten)")
 
 
 def _sensor_check(setup: TrackingSetup, args: argparse.Namespace) -> Callable[[int, int], None]:

@@ -102,6 +102,13 @@ def _checkerboard(args: argparse.Namespace, dvs: object, simulate_checkerboard: 
         n, m = (int(v) for v in args.corners.lower().split("x"))
     except ValueError as exc:
         raise ConfigError(f"--corners must look like 9x6, got {args.corners!r}", key="corners") from exc
+    if not (2 <= n <= 100 and 2 <= m <= 100):
+        raise ConfigError(f"--corners: 2 to 100 a side, got {args.corners}")
+    for option, value in (("--square-mm", args.square_mm), ("--blink-ms", args.blink_ms)):
+        if not (math.isfinite(value) and 0 < value <= 1e5):
+            raise ConfigError(f"{option}: must be a positive number up to 1e5, got {value}")
+    if not 1 <= args.periods <= 1000:
+        raise ConfigError(f"--periods: 1 to 1000, got {args.periods}")
     square = args.square_mm * 1e-3
     spec = CheckerboardSpec(
         inner_corners=(n, m), square=square, origin=(0.09 - square * (n - 1) / 2, -square * (m - 1) / 2)

@@ -41,20 +41,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Build the rig from the config and flags, run it, report."""
     from flagtrack.daemon.commands._progress import SweepProgressView
+    from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.rig.run import run_rig
 
     rig, names = rig_from_args(args)
     _refuse_outputs_over_inputs(args, rig)
-    with SweepProgressView(quiet=args.quiet or "supervisor" not in names) as progress:
-        return run_rig(
-            rig,
-            names,
-            exit_at_end_of_stream=args.exit_at_eof,
-            centrelines=args.centrelines,
-            shutdown_timeout_s=args.shutdown_timeout,
-            quiet=args.quiet,
-            on_supervisor_state=progress,
-        ).code
+    try:
+        with SweepProgressView(quiet=args.quiet or "supervisor" not in names) as progress:
+            return run_rig(
+                rig,
+                names,
+                exit_at_end_of_stream=args.exit_at_eof,
+                centrelines=args.centrelines,
+                shutdown_timeout_s=args.shutdown_timeout,
+                quiet=args.quiet,
+                on_supervisor_state=progress,
+            ).code
+    except ConfigError as exc:  # a value the command line gave is named as such, not as the file's key
+        option = {"tracker.root": "--root", "tracker.length": "--length"}.get(exc.key or "")
+        if option is not None and getattr(args, option[2:]) is not None:
+            raise ConfigError(exc.message, key=option) from None
+        raise
 
 
 def _refuse_outputs_over_inputs(args: argparse.Namespace, rig: RigConfig) -> None:

@@ -10,9 +10,10 @@ from __future__ import annotations
 import numpy as np
 
 EVENT_DTYPE = np.dtype([("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")])
+"""Camera change-detection events: t µs, x/y pixel, p 1 = ON (brighter), 0 = OFF."""
+
 MAX_SENSOR_PX = 8192
 """No event sensor is wider or taller (the largest are 1280 x 960): a size or pixel beyond is not an event recording's."""
-"""Camera change-detection events: t µs, x/y pixel, p 1 = ON (brighter), 0 = OFF."""
 
 TRIGGER_DTYPE = np.dtype([("t", "<i8"), ("channel", "u1"), ("edge", "u1")])
 """External trigger events: t µs, input channel, edge 1 = rising, 0 = falling."""

@@ -69,7 +69,7 @@ class OpenedCamera:
         return getattr(self.camera, name)
 
 
-def open_hardware_camera(rig: RigSections) -> OpenedCamera | None:
+def open_hardware_camera(rig: RigSections, *, check_root: bool = True) -> OpenedCamera | None:
     """Open the rig's hardware camera now, before the bus and the other services (None for replay or simulated).
 
     What only the device can check (a bias its model lacks, a value it refuses, an ROI that does
@@ -96,10 +96,11 @@ def open_hardware_camera(rig: RigSections) -> OpenedCamera | None:
         raise DriverError(
             f"cannot open the camera ({type(exc).__name__}: {exc})", device=f"camera adapter '{rig.camera.adapter}'"
         ) from exc
-    try:  # the sensor's size is known now: a root off it tracks nothing
-        from flagtrack.daemon.tracking.setup import refuse_root_off_sensor
+    try:  # the sensor's size is known now: a root off it tracks nothing (check_root False: aim, which sets it up)
+        if check_root:
+            from flagtrack.daemon.tracking.setup import refuse_root_off_sensor
 
-        refuse_root_off_sensor(rig.tracker, info.width, info.height, sensor=f"camera {info.serial}", path=rig.path)
+            refuse_root_off_sensor(rig.tracker, info.width, info.height, sensor=f"camera {info.serial}", path=rig.path)
     except FlagtrackError:
         camera.close()
         raise

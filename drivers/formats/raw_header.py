@@ -177,6 +177,8 @@ def raw_header(
     """
     if encoding not in _FORMAT_OUT:
         raise FormatError(f"unknown encoding {encoding!r} (known: evt2, evt21, evt3)")
+    if not (0 < int(width) <= MAX_SENSOR_PX and 0 < int(height) <= MAX_SENSOR_PX):  # (the readers refuse it)
+        raise FormatError(f"sensor size {width} x {height}: not an event sensor's (1 to {MAX_SENSOR_PX} pixels a side)")
     maker = SIMULATED_FIELDS if simulated else PROPHESEE_FIELDS
     known: dict[str, object] = {
         "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S"),

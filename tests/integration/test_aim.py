@@ -236,10 +236,14 @@ def test_a_hardware_camera_through_its_sdk(
     fake_nd, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The rig's Prophesee camera (the fake neuromorphic-drivers SDK): the device's EVT 3.0 bytes are
-    decoded, every event the sensor produced is counted, the flapping line is measured."""
+    decoded, every event the sensor produced is counted, the flapping line is measured. The rig's root
+    is off this sensor: aim is where that is seen and fixed (`up` refuses it), so it opens anyway."""
     fake = fake_nd._fake.plug(fake_nd.FakeCamera(duration_us=150_000, seed=5))
     rig = tmp_path / "rig.yaml"
-    rig.write_text('camera: {id: cam0, adapter: prophesee, hardware: {serial: "00050423", stall_timeout_s: 30}}\n')
+    rig.write_text(
+        'camera: {id: cam0, adapter: prophesee, hardware: {serial: "00050423", stall_timeout_s: 30}}\n'
+        "tracker: {root: [1500, 240], length: 300}\n"
+    )
     monkeypatch.delenv("DISPLAY", raising=False)
     figures = aim_here(capsys, "-c", str(rig), "--duration", "3", "--window-ms", "20")
     assert figures["source"] == "camera cam0 (prophesee)"

@@ -122,6 +122,8 @@ def test_no_updates_at_all_is_not_blamed_on_the_geometry(tmp_path: Path, capsys:
         (["simulate", "OUT", "--duration", "-1"], "--duration: must be above 0"),
         (["simulate", "OUT", "--shot-noise", "inf"], "--shot-noise"),
         (["simulate", "OUT", "--width", "99999999"], "a sensor of 16 to 8192 px"),
+        (["simulate", "OUT", "--checkerboard", "--blink-ms", "nan"], "--blink-ms: must be a positive number"),
+        (["simulate", "OUT", "--checkerboard", "--periods", "0"], "--periods: 1 to 1000"),
         (["aim", "--replay", "REC", "--sensor", "99999999", "99999999", "--snapshot", "a.png", "-q"], "--sensor"),
         (["events", "info", "."], "is a directory, not an event file"),
         (["up", "--replay", ".", "--exit-at-eof"], "key '--replay': .: is a directory, not a recording"),

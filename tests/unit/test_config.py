@@ -62,6 +62,7 @@ def test_nested_values_are_converted() -> None:
         ({"name": "a", "root": [1]}, "root", "expected 2 values"),
         ({"name": "a", "limit": "x"}, "limit", "expected float"),
         ({"name": "a", "inner": {"joints": 0}}, None, "at least 1"),
+        ({"name": "a", "inner": {"alpha": 10**400}}, "inner.alpha", "401 digits is beyond any float"),  # OverflowError
     ],
 )
 def test_errors_name_key_and_file(data: dict, key: str | None, words: str) -> None:
@@ -91,6 +92,9 @@ def test_a_key_given_twice_is_refused_naming_both_lines(tmp_path: Path) -> None:
     twice.write_text("tracker: {root: [1, 2]}\ntracker: {length: 3}\n")
     with pytest.raises(ConfigError, match="'tracker' given twice"):
         load_yaml(twice)
+    merged = tmp_path / "merged.yaml"  # a merge key and an override of what it brings are not a repeat
+    merged.write_text("base: &b {root: [1, 2], length: 3}\ntracker:\n  <<: *b\n  length: 4\n")
+    assert load_yaml(merged)["tracker"] == {"root": [1, 2], "length": 4}
     once = tmp_path / "ok.yaml"
     once.write_text("tracker: {root: [1, 2]}\nrecorder: {root: 3}\n")  # the same key in two sections
     assert load_yaml(once) == {"tracker": {"root": [1, 2]}, "recorder": {"root": 3}}

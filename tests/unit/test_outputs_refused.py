@@ -35,6 +35,8 @@ CASES = [
     (["aim", "--replay", "rec.raw", "--rrd", "rig.yaml", "-c", "rig.yaml", "-q"], "--rrd rig.yaml: is the input"),
     (["up", "--replay", "rec.raw", "--centrelines", "rec.raw", "--exit-at-eof", "-q"], "--centrelines rec.raw: is the input"),
     (["up", "-c", "rig.yaml", "--rrd", "rig.yaml", "-q"], "--rrd rig.yaml: is the input"),
+    (["reconstruct", "rec.raw", "-o", "rig.yaml", "-c", "rig.yaml"], "-o rig.yaml: is the config file itself"),
+    (["up", "-c", "rig.yaml", "--root", "900", "100", "-q"], "key '--root': (900, 100) is off the 640 x 480 sensor"),
 ]  # fmt: skip
 
 
@@ -71,3 +73,25 @@ def test_up_record_refuses_a_name_recorded_before(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "key '--record': recordings/test1.raw exists" in err[0], err
     assert (folder / "recordings" / "test1.raw").read_bytes() == b"the first recording"
+
+
+def test_aim_refuses_a_snapshot_onto_the_rigs_calibration(
+    folder: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(folder)
+    (folder / "cal.yaml").write_text("format: flagtrack-calibration\n")
+    (folder / "rig.yaml").write_text(RIG.replace("length: 300}", "length: 300, calibration: cal.yaml}"))
+    assert main(["aim", "-c", "rig.yaml", "--snapshot", "cal.yaml", "--viewer", "none", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--snapshot cal.yaml: is the input" in err[0], err
+    assert (folder / "cal.yaml").read_text() == "format: flagtrack-calibration\n"
+
+
+def test_reconstruct_writes_through_a_symbolic_link(folder: Path) -> None:
+    """The atomic write renamed a new file over the link (the link's target kept the old result)."""
+    (folder / "results").mkdir()
+    (folder / "results" / "out.h5").write_bytes(b"old")
+    (folder / "out.h5").symlink_to(folder / "results" / "out.h5")
+    argv = ["reconstruct", str(folder / "rec.raw"), "-o", str(folder / "out.h5"), "--root", "150", "240"]
+    assert main([*argv, "--length", "300"]) == 0
+    assert (folder / "out.h5").is_symlink() and (folder / "results" / "out.h5").read_bytes()[:4] == b"\x89HDF"
