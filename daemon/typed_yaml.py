@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import functools
+import math
 import os
 import types
 import typing
@@ -293,11 +294,14 @@ def _convert_scalar(hint: Any, value: Any, *, path: str | None, key: str) -> Any
     elif hint is float:
         if isinstance(value, int | float) and not isinstance(value, bool):
             try:
-                return float(value)
+                number = float(value)
             except OverflowError:  # a 400-digit integer
                 raise ConfigError(
                     f"a number of {len(str(value))} digits is beyond any float", key=key, path=path
                 ) from None
+            if not math.isfinite(number):  # (.nan passed every range check; .inf made a limit no limit)
+                raise ConfigError(f"must be a finite number, got {number}", key=key, path=path)
+            return number
     elif hint is str:
         if isinstance(value, str):
             return value

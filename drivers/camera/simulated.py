@@ -23,7 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from flagtrack.daemon.core.events import TRIGGER_DTYPE, empty_triggers
+from flagtrack.daemon.core.events import MAX_SENSOR_PX, TRIGGER_DTYPE, empty_triggers
 from flagtrack.daemon.errors import DriverError
 from flagtrack.drivers.camera.base import CameraData, CameraInfo, DeviceDrop
 from flagtrack.drivers.sim.flutter import FlutterModel, FlutterParams, FlutterState
@@ -90,6 +90,10 @@ class SimulatedCameraConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        if not (16 <= self.width <= MAX_SENSOR_PX and 16 <= self.height <= MAX_SENSOR_PX):
+            raise ValueError(f"width and height must be 16 to {MAX_SENSOR_PX} pixels, got {self.width} x {self.height}")
+        if self.speed_mps < 0:
+            raise ValueError(f"speed_mps must be 0 or more, got {self.speed_mps}")
         if self.slice_us < 50 or self.time_scale <= 0:
             raise ValueError("slice_us must be >= 50 and time_scale > 0")
         if self.trigger_period_ms < 0 or (

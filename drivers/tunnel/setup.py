@@ -61,6 +61,8 @@ class TunnelConfig:
             raise ValueError(f"driver {self.driver!r} needs a port")
         if self.timeout_s <= 0:
             raise ValueError("timeout_s must be positive")
+        if not 50 <= self.baudrate <= 4_000_000:  # (-9600 and 1e30 passed to pyserial)
+            raise ValueError(f"baudrate must be 50 to 4000000, got {self.baudrate}")
         if self.driver == "simulated" and self.safety.keepalive_s > self.sim.watchdog_s / 2:
             raise ValueError("safety.keepalive_s must be at most half of sim.watchdog_s")
 

@@ -90,20 +90,27 @@ def test_the_cli_prints_the_summary_and_exits_0(tmp_path: Path, capsys: pytest.C
         ({"supervisor": {"sweep": SWEEP, "required": ["camera", "trakcer"]}}, "supervisor.required", "'trakcer'"),
         ({"supervisor": {"sweep": SWEEP, "required": ["sensor"]}}, "supervisor.required", "'sensor'"),  # no token it waits for
         ({"supervisor": {"sweep": {**SWEEP, "record_s": 0}}}, "supervisor.sweep", "record_s > 0"),
-        ({"supervisor": {"sweep": {**SWEEP, "record_s": float("nan")}}}, "supervisor.sweep", "record_s > 0"),
-        ({"tunnel": {**SIM_TUNNEL, "safety": {"max_speed_mps": 10, "max_ramp_mps2": float("inf")}}}, "tunnel.safety",
-         "max_ramp_mps2 must be a finite number"),
-        ({"supervisor": {"sweep": {**SWEEP, "settle_s": float("inf")}}}, "supervisor.sweep", "at most 86400 s"),
+        ({"supervisor": {"sweep": {**SWEEP, "record_s": float("nan")}}}, "supervisor.sweep.record_s",
+         "must be a finite number, got nan"),  # (passed every range check)
+        ({"tunnel": {**SIM_TUNNEL, "safety": {"max_speed_mps": 10, "max_ramp_mps2": float("inf")}}},
+         "tunnel.safety.max_ramp_mps2", "must be a finite number, got inf"),  # (no ramp limit at all)
+        ({"supervisor": {"sweep": {**SWEEP, "settle_s": 1e9}}}, "supervisor.sweep", "at most 86400 s"),
         ({"supervisor": {"sweep": {**SWEEP, "range": {"start": 3, "stop": 6, "step": 1e-12}}}}, "supervisor.sweep.range",
          "more than 10000 speeds"),
         ({"supervisor": {"sweep": {**SWEEP, "range": {"start": 3, "stop": float("inf"), "step": 1}}}},
-         "supervisor.sweep.range", "finite"),
+         "supervisor.sweep.range.stop", "finite"),
         ({"camera": {"adapter": "prophesee", "hardware": {"biases": {"dif_on": 3}}}}, "camera.hardware.biases.dif_on",
          "no Prophesee-sensor camera has a bias"),
         ({"camera": {"adapter": "replay", "replay": {"path": "nowhere.raw"}}}, "camera.replay.path", "no such file"),
         ({"camera": {"min_packet_events": -1}}, "camera", "min_packet_events must be 0 or more"),
         ({"camera": {"max_packet_us": 0}}, "camera", "max_packet_us"),
         ({"tracker_service": {"reserve_mev_s": -1}}, "tracker_service", "reserve_mev_s must be from 0 to 1000"),
+        ({"tunnel": {**SIM_TUNNEL, "baudrate": -9600}}, "tunnel", "baudrate must be 50 to 4000000"),
+        ({"viewer": {"sink": "none", "web_port": 10**9}}, "viewer.web_port", "must be a port"),
+        ({"camera": {"adapter": "simulated", "simulated": {"width": 10**12}}}, "camera.simulated", "16 to 8192"),
+        ({"camera": {"adapter": "simulated", "simulated": {"speed_mps": -6}}}, "camera.simulated", "speed_mps"),
+        ({"supervisor": {"sweep": SWEEP, "expected_rate_mev_s": float("nan")}}, "supervisor.expected_rate_mev_s",
+         "finite"),
     ],
 )  # fmt: skip
 def test_a_mistake_is_one_line_naming_the_key_and_the_file(

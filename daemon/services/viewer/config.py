@@ -64,6 +64,9 @@ class ViewerConfig:
                 continue
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"must be a positive number, got {value!r}", key=f"viewer.{name}")
+        for name in ("web_port", "grpc_port"):
+            if not 1 <= getattr(self, name) <= 65535:
+                raise ConfigError(f"must be a port, 1 to 65535, got {getattr(self, name)}", key=f"viewer.{name}")
 
 
 def effective_sink(cfg: ViewerConfig) -> str:
