@@ -68,9 +68,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Calibrate, or map pixel positions with an existing calibration."""
-    if args.inputs[0] == "map" and len(args.inputs) > 1:
-        return _map(args.inputs[1:], args.json)
     from flagtrack.daemon.errors import ConfigError
+
+    if args.inputs[0] == "map":
+        if len(args.inputs) == 1:  # (it said "calibrating needs --board, --square-mm, -o/--output")
+            raise ConfigError(
+                "map needs a calibration file and pixel positions: flagtrack calibrate map CAL.yaml X Y ..."
+            )
+        return _map(args.inputs[1:], args.json)
 
     if len(args.inputs) != 1:
         raise ConfigError(f"give one recording (or: map CAL.yaml X Y ...), got {' '.join(args.inputs)}")
@@ -223,11 +228,15 @@ def _map(values: list[str], as_json: bool) -> int:
 
     cal_path, coords = values[0], values[1:]
     if not coords or len(coords) % 2:
-        raise ConfigError(f"map needs pixel positions as X Y pairs, got {len(coords)} numbers")
+        raise ConfigError(
+            f"map needs pixel positions as X Y pairs after the calibration file, got {len(coords)} numbers"
+        )
     try:
         xy = np.array([float(v) for v in coords]).reshape(-1, 2)
     except ValueError as exc:
         raise ConfigError(f"map: not a number in {' '.join(coords)}") from exc
+    if not np.isfinite(xy).all():  # (it printed "nan nan m")
+        raise ConfigError(f"map: pixel positions must be finite, got {' '.join(coords)}")
     mapping = load_mapping(cal_path)
     x_m, y_m = mapping.map(xy[:, 0], xy[:, 1])
     if as_json:
