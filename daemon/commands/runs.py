@@ -81,10 +81,7 @@ def run_overview(folder: Path) -> dict[str, Any]:
     except (FormatError, ValueError, TypeError, KeyError, AttributeError) as exc:  # a log another program wrote
         return {**row, "status": "unreadable", "reason": str(exc)}
     started = record.start.get("t_unix")
-    try:  # (another program's log: a time of 1e300 or NaN is no time; the other runs are still listed)
-        shown = time.strftime("%Y-%m-%d %H:%M", time.localtime(started)) if isinstance(started, int | float) else None
-    except (OverflowError, ValueError, OSError):
-        shown = None
+    shown = _local_time(started)
     known_start = shown is not None
     return {
         **row,
@@ -100,6 +97,17 @@ def run_overview(folder: Path) -> dict[str, Any]:
     }
 
 
+def _local_time(t_unix: object) -> str | None:
+    """``t_unix`` as local date and minute, or None where it is no time (a log another program wrote:
+    1e300 or NaN; the other runs are still listed)."""
+    if not isinstance(t_unix, int | float):
+        return None
+    try:
+        return time.strftime("%Y-%m-%d %H:%M", time.localtime(t_unix))
+    except (OverflowError, ValueError, OSError):
+        return None
+
+
 def _control_run(folder: Path) -> dict[str, Any] | None:
     """The row fields of a feedback-control run (``flagtrack control``: its ``run.json``), or None."""
     try:
@@ -109,10 +117,7 @@ def _control_run(folder: Path) -> dict[str, Any] | None:
     if not isinstance(description, dict) or description.get("format") != "flagtrack-control-run":
         return None
     started = description.get("started_unix")
-    try:
-        shown = time.strftime("%Y-%m-%d %H:%M", time.localtime(started)) if isinstance(started, int | float) else None
-    except (OverflowError, ValueError, OSError):
-        shown = None
+    shown = _local_time(started)
     status = description.get("status")
     reason = description.get("error") or description.get("stop_reason")
     return {
