@@ -85,6 +85,8 @@ class EventReader:
         if not self.path.is_file():
             raise FormatError("no such file", path=str(self.path))
         self.size_bytes = self.path.stat().st_size
+        if self.size_bytes == 0:  # (a 0-byte .dat read as 0 events, a .raw as "no encoding")
+            raise FormatError("empty file (0 bytes)", path=str(self.path))
         self.skipped: list[SkippedRange] = []  # byte ranges skipped after faults (non-strict), in file order
 
     @property

@@ -143,3 +143,13 @@ def test_numbers_and_folders_a_command_cannot_use_are_one_line(
     assert main(argv) == 2
     assert words in _one_line(capsys)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.raw"]
+
+
+@pytest.mark.parametrize("name", ["empty.dat", "empty.raw", "empty.npy", "empty.csv"])
+def test_a_zero_byte_recording_is_one_line_whatever_its_format(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str
+) -> None:
+    """A 0-byte .dat read as 0 events with exit 0 where a .raw was an error."""
+    (tmp_path / name).write_bytes(b"")
+    assert main(["events", "info", str(tmp_path / name)]) == 2
+    assert f"{name}: empty file (0 bytes)" in _one_line(capsys)
