@@ -99,12 +99,11 @@ def run(args: argparse.Namespace) -> int:
 
 def _tracking_setup(args: argparse.Namespace, record: RunRecord) -> TrackingSetup:
     """The tracking set-up of ``--reconstruct``: the ``-c`` file's or the run's own, with the flags applied."""
-    from flagtrack.daemon.commands._tracking_args import apply_tracking_arguments
-    from flagtrack.daemon.tracking.setup import tracking_setup
+    from flagtrack.daemon.commands._tracking_args import setup_from_arguments
     from flagtrack.daemon.validation.run import run_tracking_config
 
     config, where = run_tracking_config(record, args.config)
-    return tracking_setup(apply_tracking_arguments(config, args), path=where)
+    return setup_from_arguments(config, args, path=where)  # (a flag's bad value named by its option)
 
 
 _COLUMNS = (

@@ -111,3 +111,13 @@ def test_validate_recomputes_from_the_files_by_both_paths(
     assert rows["000-up-4.00"]["sensor_sync"] == "coarse"  # a still flag has nothing to correlate
     assert (out / "validation.csv").exists() and (out / "001-up-5.50.png").exists()
     assert (run_dir / "run.jsonl").read_bytes() == log_before  # the run log is never rewritten
+
+
+def test_a_bad_reconstruct_option_is_named_by_its_option(
+    sweep: tuple[Path, object], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--tau nan was blamed on "file RUN/run.jsonl, key 'tracker.tau_s'"."""
+    run_dir, _ = sweep
+    assert main(["validate", str(run_dir), "--reconstruct", "--tau", "nan", "-o", str(run_dir.parent / "t")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("flagtrack validate: error: --tau: ") and "run.jsonl" not in err[0], err
