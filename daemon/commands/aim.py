@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -95,7 +96,7 @@ def _plan(args: argparse.Namespace) -> _Plan:
     params = _params(args)
     viewer, note = _viewer(args, rig)
     speed = args.speed if args.speed is not None else (1.0 if viewer is not None and viewer.sink != "rrd" else 0.0)
-    if speed < 0:
+    if not (math.isfinite(speed) and speed >= 0):  # (nan passed)
         raise ConfigError(f"--speed must be 0 or more, got {speed}")
     if args.sensor is not None and not all(1 <= v <= MAX_SENSOR_PX for v in args.sensor):
         raise ConfigError(f"--sensor must be two sizes of 1 to {MAX_SENSOR_PX}, got {args.sensor[0]} {args.sensor[1]}")

@@ -125,6 +125,7 @@ def test_no_updates_at_all_is_not_blamed_on_the_geometry(tmp_path: Path, capsys:
         (["simulate", "OUT", "--checkerboard", "--blink-ms", "nan"], "--blink-ms: must be a positive number"),
         (["simulate", "OUT", "--checkerboard", "--periods", "0"], "--periods: 1 to 1000"),
         (["aim", "--replay", "REC", "--sensor", "99999999", "99999999", "--snapshot", "a.png", "-q"], "--sensor"),
+        (["aim", "--replay", "REC", "--speed", "nan", "--snapshot", "a.png", "-q"], "--speed must be 0 or more"),
         (["events", "info", "."], "is a directory, not an event file"),
         (["calibrate", "map"], "map needs a calibration file and pixel positions"),
         (["calibrate", "map", "REC", "nan", "inf"], "map: pixel positions must be finite"),
