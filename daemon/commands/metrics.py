@@ -54,11 +54,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print the comparison of ``args.recon`` with ``args.truth``."""
+    import numpy as np
+
     from flagtrack.daemon.core.metrics import compare
     from flagtrack.daemon.errors import FormatError
     from flagtrack.drivers.formats.centreline import TRUTH_REQUIRED, read_centrelines, read_truth
 
     recon, recon_attrs = read_centrelines(args.recon)
+    t_s = recon.t_s
+    if len(t_s) and not (np.isfinite(t_s).all() and (np.diff(t_s) > 0).all()):  # (compared as if it were)
+        raise FormatError("/t is not finite and increasing: not a reconstruction to compare", path=str(args.recon))
     truth, truth_attrs, present = read_truth(args.truth)
     length = truth_attrs.get("length")
     if length is not None and not _positive(length):  # (0 was a ZeroDivisionError, NaN NaN results)

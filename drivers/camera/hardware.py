@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from flagtrack.daemon.core.events import empty_events, empty_triggers
+from flagtrack.daemon.core.events import MAX_SENSOR_PX, empty_events, empty_triggers
 from flagtrack.daemon.errors import ConfigError, DriverError
 from flagtrack.drivers.camera.base import CameraData, DeviceDrop
 from flagtrack.drivers.formats import make_decoder
@@ -58,6 +58,10 @@ class Roi:
             raise ConfigError("x and y must be >= 0", key=f"{KEY}.roi")
         if self.width < 1 or self.height < 1:
             raise ConfigError("width and height must be >= 1", key=f"{KEY}.roi")
+        if self.x + self.width > MAX_SENSOR_PX or self.y + self.height > MAX_SENSOR_PX:  # (1e9 passed config check)
+            raise ConfigError(
+                f"{self.as_dict()} reaches past any event sensor ({MAX_SENSOR_PX} pixels)", key=f"{KEY}.roi"
+            )
 
     def check_inside(self, width: int, height: int) -> None:
         """Raise ConfigError unless the region fits a ``width`` x ``height`` sensor."""

@@ -167,3 +167,17 @@ def test_a_reconstruction_of_disagreeing_shapes_is_one_clear_error(
     assert main(["metrics", "compare", str(recon), str(truth)]) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and f"{recon}: not a flagtrack centreline file: " in err[0], err
+
+
+@pytest.mark.parametrize("bad", ["nan", "descending"])
+def test_a_reconstruction_whose_times_are_no_times_is_one_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], bad: str
+) -> None:
+    recon = recon_file(tmp_path / "recon.h5")
+    with h5py.File(recon, "a") as f:
+        t = f["t"][()]
+        f["t"][...] = np.where(np.arange(len(t)) == 3, np.nan, t) if bad == "nan" else t[::-1]
+    truth = truth_file(tmp_path / "truth.h5", ("t", "s", "x", "y"))
+    assert main(["metrics", "compare", str(recon), str(truth)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "/t is not finite and increasing" in err[0], err

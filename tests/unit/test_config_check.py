@@ -106,6 +106,8 @@ def test_the_cli_prints_the_summary_and_exits_0(tmp_path: Path, capsys: pytest.C
         ({"camera": {"max_packet_us": 0}}, "camera", "max_packet_us"),
         ({"tracker_service": {"reserve_mev_s": -1}}, "tracker_service", "reserve_mev_s must be from 0 to 1000"),
         ({"tunnel": {**SIM_TUNNEL, "baudrate": -9600}}, "tunnel", "baudrate must be 50 to 4000000"),
+        ({"camera": {"adapter": "prophesee", "hardware": {"roi": {"x": 0, "y": 0, "width": 10**9, "height": 10}}}},
+         "camera.hardware.roi", "reaches past any event sensor"),
         ({"viewer": {"sink": "none", "web_port": 10**9}}, "viewer.web_port", "must be a port"),
         ({"camera": {"adapter": "simulated", "simulated": {"width": 10**12}}}, "camera.simulated", "16 to 8192"),
         ({"camera": {"adapter": "simulated", "simulated": {"speed_mps": -6}}}, "camera.simulated", "speed_mps"),
