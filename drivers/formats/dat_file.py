@@ -16,9 +16,15 @@ from types import TracebackType
 
 import numpy as np
 
-from flagtrack.daemon.core.events import EVENT_DTYPE, MAX_SENSOR_PX, TRIGGER_DTYPE, empty_events, empty_triggers
+from flagtrack.daemon.core.events import EVENT_DTYPE, TRIGGER_DTYPE, empty_events, empty_triggers
 from flagtrack.daemon.errors import FormatError
-from flagtrack.drivers.formats.reader import DEFAULT_CHUNK_BYTES, EventChunk, EventReader, RecordingInfo
+from flagtrack.drivers.formats.reader import (
+    DEFAULT_CHUNK_BYTES,
+    EventChunk,
+    EventReader,
+    RecordingInfo,
+    check_sensor_size,
+)
 
 CD_TYPES = (0, 12)
 TRIGGER_TYPE = 14
@@ -69,11 +75,8 @@ class DatReader(EventReader):
         width, height = fields.get("Width"), fields.get("Height")
         numbers = all(v and v.isascii() and v.isdigit() for v in (width, height))  # not "6²0": str.isdigit takes it
         size = (int(width), int(height)) if numbers and width and height else (None, None)
-        if size[0] is not None and not (0 < size[0] <= MAX_SENSOR_PX and 0 < (size[1] or 0) <= MAX_SENSOR_PX):
-            raise FormatError(
-                f"sensor size {width} x {height} in the header: not an event sensor's (1 to {MAX_SENSOR_PX} pixels a side)",
-                path=str(self.path),
-            )
+        if size[0] is not None and size[1] is not None:
+            check_sensor_size(size[0], size[1], path=str(self.path))
         self.info = RecordingInfo(self.path, "dat", None, size[0], size[1], fields)
 
     def _chunks(self) -> Iterator[EventChunk]:

@@ -15,9 +15,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from flagtrack.daemon import __version__
-from flagtrack.daemon.core.events import MAX_SENSOR_PX
 from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.formats.geometry import inferred_geometry
+from flagtrack.drivers.formats.reader import check_sensor_size
 
 MAX_HEADER_BYTES = 1 << 20
 _FORMAT_NAMES = {"EVT2": "evt2", "EVT21": "evt21", "EVT3": "evt3"}
@@ -139,12 +139,8 @@ def raw_layout(fields: Mapping[str, str], offsets: Mapping[str, int], path: str 
         width, height = _int_or_none(w), _int_or_none(h)
     if width is None or height is None:
         width, height = inferred_geometry(fields) or (None, None)
-    if width is not None and height is not None and not (0 < width <= MAX_SENSOR_PX and 0 < height <= MAX_SENSOR_PX):
-        raise FormatError(
-            f"sensor size {width} x {height} in the header: not an event sensor's (1 to {MAX_SENSOR_PX} pixels a side)",
-            path=path,
-            offset=offsets.get("format", offsets.get("geometry")),
-        )
+    if width is not None and height is not None:
+        check_sensor_size(width, height, path=path, offset=offsets.get("format", offsets.get("geometry")))
     endianness = options.get("endianness") or fields.get("endianness") or ""
     if not endianness:
         system_id = _int_or_none(fields.get("system_ID"))
@@ -177,8 +173,7 @@ def raw_header(
     """
     if encoding not in _FORMAT_OUT:
         raise FormatError(f"unknown encoding {encoding!r} (known: evt2, evt21, evt3)")
-    if not (0 < int(width) <= MAX_SENSOR_PX and 0 < int(height) <= MAX_SENSOR_PX):  # (the readers refuse it)
-        raise FormatError(f"sensor size {width} x {height}: not an event sensor's (1 to {MAX_SENSOR_PX} pixels a side)")
+    check_sensor_size(int(width), int(height))  # (what the readers would refuse)
     maker = SIMULATED_FIELDS if simulated else PROPHESEE_FIELDS
     known: dict[str, object] = {
         "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S"),

@@ -19,11 +19,21 @@ from typing import Any, Self
 
 import numpy as np
 
-from flagtrack.daemon.core.events import empty_events, empty_triggers
+from flagtrack.daemon.core.events import MAX_SENSOR_PX, empty_events, empty_triggers
 from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.formats.codec import FormatWarning, SkippedRange
 
 DEFAULT_CHUNK_BYTES = 8 << 20
+
+
+def check_sensor_size(width: int, height: int, *, path: str | None = None, offset: int | None = None) -> None:
+    """Refuse a header's sensor size that no event sensor has (0, negative, over :data:`MAX_SENSOR_PX`)."""
+    if not (0 < width <= MAX_SENSOR_PX and 0 < height <= MAX_SENSOR_PX):
+        raise FormatError(
+            f"sensor size {width} x {height} in the header: not an event sensor's (1 to {MAX_SENSOR_PX} pixels a side)",
+            path=path,
+            offset=offset,
+        )
 
 
 @dataclass(frozen=True)
