@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Any
 
 from flagtrack.daemon.errors import ConfigError
 
@@ -35,19 +36,24 @@ def check_output(
         raise ConfigError(f"{option} {output}: holds something else than {holds}: give a new file (it is left as is)")
 
 
-def only_yaml_sections(*sections: str) -> Callable[[Path], bool]:
-    """Whether a file is YAML whose top level holds no keys but ``sections`` (an earlier output of the
-    command, not a rig config)."""
+def yaml_file_where(holds: Callable[[Any], bool]) -> Callable[[Path], bool]:
+    """Whether a file is small YAML (a config, not a recording) whose content ``holds`` says yes to."""
 
     def check(path: Path) -> bool:
         import yaml
 
         try:
-            if path.stat().st_size > 1 << 20:  # (not a config: a recording, say)
+            if path.stat().st_size > 1 << 20:
                 return False
             data = yaml.safe_load(path.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, yaml.YAMLError):
             return False
-        return data is None or (isinstance(data, dict) and set(data) <= set(sections))
+        return holds(data)
 
     return check
+
+
+def only_yaml_sections(*sections: str) -> Callable[[Path], bool]:
+    """Whether a file is YAML whose top level holds no keys but ``sections`` (an earlier output of the
+    command, not a rig config)."""
+    return yaml_file_where(lambda data: data is None or (isinstance(data, dict) and set(data) <= set(sections)))

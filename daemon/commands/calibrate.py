@@ -151,18 +151,10 @@ def _check_outputs(recording: Path, output: Path, figure: Path | None) -> None:
     """Refuse, before any work, outputs that cannot be written or would replace the recording, each
     other, or a file that is not an earlier calibration (a rig config given as ``-o``)."""
     from flagtrack.calibration.calfile import FORMAT
-    from flagtrack.daemon.commands._outputs import check_output
+    from flagtrack.daemon.commands._outputs import check_output, yaml_file_where
     from flagtrack.daemon.errors import ConfigError
 
-    def is_calibration(file: Path) -> bool:
-        import yaml
-
-        try:
-            data = yaml.safe_load(file.read_text(encoding="utf-8")) if file.stat().st_size < 1 << 20 else None
-        except (OSError, UnicodeDecodeError, yaml.YAMLError):
-            return False
-        return isinstance(data, dict) and data.get("format") == FORMAT
-
+    is_calibration = yaml_file_where(lambda data: isinstance(data, dict) and data.get("format") == FORMAT)
     check_output(output, "-o", (recording,), replaceable=is_calibration, holds="a calibration")
     if figure is not None:
         check_output(figure, "--figure", (recording, output))
