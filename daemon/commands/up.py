@@ -7,7 +7,7 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from flagtrack.daemon.commands._tracking_args import add_tracking_arguments
+from flagtrack.daemon.commands._tracking_args import OPTIONS, add_tracking_arguments
 
 if TYPE_CHECKING:
     from flagtrack.daemon.rig.config import RigConfig
@@ -58,8 +58,8 @@ def run(args: argparse.Namespace) -> int:
                 on_supervisor_state=progress,
             ).code
     except ConfigError as exc:  # a value the command line gave is named as such, not as the file's key
-        option = {"tracker.root": "--root", "tracker.length": "--length"}.get(exc.key or "")
-        if option is not None and getattr(args, option[2:]) is not None:
+        dest, option = OPTIONS.get((exc.key or "").removeprefix("tracker."), (None, None))
+        if dest is not None and getattr(args, dest, None) is not None:
             raise ConfigError(exc.message, key=option) from None
         raise
 
