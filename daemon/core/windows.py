@@ -19,8 +19,9 @@ import numpy as np
 
 STEP_RANGE_S = (1e-6, 3600.0)
 """dt and tau: from 1 µs (the events' resolution) to an hour."""
-MAX_ABS_TIME_S = 1e9
-"""Largest update time in seconds (its microseconds fit in 64 bits with room)."""
+MAX_ABS_TIME_S = 1e11
+"""Largest update time in seconds (a recording's clock may be Unix time, 1.6e9 s in 2020; its
+microseconds fit in 64 bits with room)."""
 _MAX_BATCH = 1 << 16  # update times generated per step (bounds memory after a long gap)
 _SCALAR_MAX = 32  # up to this many candidate windows, take() tests them one by one (no array passes)
 _NONE = (np.empty(0), np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64))  # what take() returns for no update
@@ -119,6 +120,24 @@ class UpdateClock:
         self._anchor_us = start_us
         self._count = 0
         self._stop_us = math.inf if schedule.t_stop_s is None else schedule.t_stop_s * 1e6
+        self._skip_windows_ending_by(first_event_t_us)
+
+    def _skip_windows_ending_by(self, t_us: int) -> None:
+        """Step over the updates whose windows end at or before ``t_us`` (a start before the stream's
+        first event: those windows hold nothing; with a recording's Unix-time clock, billions of them)."""
+        segments = self.schedule.segments
+        while True:
+            t_first, tau_us = self._peek()
+            dt_us = segments[self._segment].dt_s * 1e6
+            steps = math.floor((t_us - tau_us / 2 - t_first) / dt_us) + 1  # those windows end by t_us
+            if steps > 0 and math.ceil(self._anchor_us + (self._count + steps - 1) * dt_us + tau_us / 2) > t_us:
+                steps -= 1  # rounding: the last of them, computed as take() does, ends after t_us
+            nxt = self._segment + 1
+            if nxt < len(segments):  # into the next segment only step by step (its grid starts there)
+                steps = min(steps, math.ceil((segments[nxt].t_from_s * 1e6 - t_first) / dt_us))
+            if steps <= 0:
+                return
+            self._count += steps
 
     def _peek(self) -> tuple[float, float]:
         """(t_us, tau_us) of the next update, advancing to a new segment when reached."""

@@ -10,6 +10,7 @@ import math
 from collections.abc import Iterable
 from typing import Any
 
+from flagtrack.daemon.core.windows import MAX_ABS_TIME_S
 from flagtrack.daemon.errors import ConfigError
 
 SECTION = "tracker"
@@ -17,7 +18,6 @@ SECTION = "tracker"
 MAX_JOINTS, MAX_LINK_RATIO = 1000, 1000.0
 MAX_SAMPLES = 100_001
 TIME_RANGE_S = (1e-6, 3600.0)
-MAX_ABS_TIME_S = 1e9
 MAX_COORDINATE = 1e9  # root and length, in pixels or plane units (1e308: the loss settings overflowed)
 
 

@@ -259,6 +259,24 @@ def test_a_source_horizon_completes_the_window_ending_there(events: np.ndarray) 
     _assert_same(track(events, params), CentrelineBatch.concatenate([*fed, tracker.finish()]))
 
 
+def test_a_start_long_before_the_first_event_skips_the_empty_windows() -> None:
+    """A start before the stream (``--t-start 0`` on a recording whose clock is Unix time) steps over
+    the windows that end before its first event, at once, on the same grid, and across segments."""
+    from flagtrack.daemon.core.windows import UpdateClock
+
+    first_us = 1_605_537_493_718_345  # an aedat4 recording's first event
+    schedule = WindowSchedule((WindowSegment(0.0, 2e-4, 2.5e-4),), t_start_s=0.0)
+    t_us, lo, hi = UpdateClock(schedule, first_us).take(first_us + 10_000)
+    assert 45 <= len(t_us) <= 51  # the windows from the first event on, not 8e12 of them
+    assert hi[0] > first_us and hi[0] - 200 <= first_us  # the first that can hold it
+    np.testing.assert_allclose(np.diff(t_us), 200.0)
+    assert abs(t_us[0] / 200 - round(t_us[0] / 200)) < 1e-3  # on the grid from t = 0
+    segments = (WindowSegment(0.0, 2e-4, 2e-4), WindowSegment(1.02, 5e-4, 1e-3))
+    late = UpdateClock(WindowSchedule(segments, t_start_s=0.0), 1_030_000).take(1_040_000)[0]
+    whole = UpdateClock(WindowSchedule(segments, t_start_s=0.0), 0).take(1_040_000)[0]
+    np.testing.assert_array_equal(late, whole[whole + 500 > 1_030_000])  # the second segment's own grid
+
+
 def test_window_ends_from_update_times_are_the_clocks() -> None:
     from flagtrack.daemon.core.windows import UpdateClock
 
