@@ -108,6 +108,8 @@ class FakeOutside:
         self.on_publish: Callable[[Report], None] = lambda report: None
         self.commands: list[RecorderCommand] = []
         self.lossy_stops = lossy_stops
+        self.failed_starts: tuple[int, ...] = ()  # the starts numbered here fail (a read-only folder)
+        self._starts = 0
         self.problem_text: str | None = None
         self._replies: dict[str, RecorderStatus] = {}
         self._stops = 0
@@ -141,6 +143,11 @@ class FakeOutside:
         self.sent.append((command.action, self.clock.now_s if self.clock is not None else math.nan))
         missing = 0
         if command.action == "start":
+            self._starts += 1
+            if self._starts in self.failed_starts:
+                why = f"start failed: [Errno 30] Read-only file system: '{command.path}.raw'"
+                self._replies[command.request_id] = RecorderStatus("error", message=why)
+                return
             Path(command.path + ".raw").write_bytes(b"\0" * 4000)
         else:
             self._stops += 1
@@ -279,6 +286,19 @@ def test_a_bad_point_with_no_retries_left_stops_the_sweep_safe(tmp_path: Path) -
     assert [p.status for p in record.points] == ["done", "lossy", "lossy"]
     assert [p.raw_file for p in record.points[1:]] == [f"points/{SECOND}.bad1.raw", f"points/{SECOND}.bad2.raw"]
     assert record.stop is not None and record.stop["reason"] == session.stop_reason
+
+
+def test_a_recording_that_cannot_start_fails_its_point_and_stops_the_sweep_safe(tmp_path: Path) -> None:
+    """The recorder answers a start with an error (a read-only or full disk): the point is failed, not
+    done with 0 bytes (a resumed run measures it), and the sweep stops with the tunnel at zero."""
+    outside = FakeOutside()
+    outside.failed_starts = (2,)
+    _, session, tunnel, _ = sweep(tmp_path, outside=outside)
+    assert session.stop_reason.startswith(f"point {SECOND} failed: recorder: start failed: [Errno 30]")
+    assert tunnel.speeds == [4.0, 5.5] and tunnel.calls[-2:] == ["safe_stop", "close"]
+    record = read_run(tmp_path / "runs" / "run")
+    assert [(p.point_id, p.status) for p in record.points] == [("000-up-4.00", "done"), (SECOND, "failed")]
+    assert not (tmp_path / "runs" / "run" / "points" / f"{SECOND}.raw").exists()
 
 
 def test_on_bad_point_stop_measures_no_point_again(tmp_path: Path) -> None:
