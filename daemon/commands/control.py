@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from flagtrack.daemon.commands._numbers import positive_seconds, seconds
+
 COMMAND = "control"
 HELP = "run your control law FUNCTION(state) -> speed_mps | None on the rig of -c rig.yaml, safely, recorded"
 DESCRIPTION = """\
@@ -27,12 +29,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the law (or 'pi': the built-in PI of the supervisor's feedback: section); "
         "default supervisor.control.controller",
     )
-    parser.add_argument("--duration", type=float, metavar="S", help="run this long, s (0: until Ctrl-C)")
+    parser.add_argument("--duration", type=seconds, metavar="S", help="run this long, s (0: until Ctrl-C)")
     parser.add_argument("--period", type=float, metavar="S", help="call the law at most this often, s")
     parser.add_argument(
         "--out", type=Path, metavar="DIR", help="the run folder (default: supervisor.runs_dir/control-<time>)"
     )
-    parser.add_argument("--shutdown-timeout", type=float, default=90.0, help="seconds to wait for services to stop")
+    parser.add_argument(
+        "--shutdown-timeout", type=positive_seconds, default=90.0, help="seconds to wait for services to stop"
+    )
     parser.add_argument("-q", "--quiet", action="store_true", help="only the result")
 
 

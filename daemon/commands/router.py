@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from flagtrack.daemon.commands._numbers import positive_seconds
+
 if TYPE_CHECKING:  # zenoh is imported only when the router runs (fast --help)
     import threading
 
@@ -39,7 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--connect", action="append", default=[], metavar="ENDPOINT", help="another router to join; repeatable"
     )
-    parser.add_argument("--shutdown-timeout", type=float, default=10.0, help="seconds to wait for the router to close")
+    parser.add_argument(
+        "--shutdown-timeout", type=positive_seconds, default=10.0, help="seconds to wait for the router to close"
+    )
     parser.add_argument(
         "--zenohd-config", action="store_true", help="print this router as a zenohd config (JSON5) and exit"
     )

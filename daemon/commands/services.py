@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from flagtrack.daemon.commands._numbers import positive_seconds
 from flagtrack.daemon.commands._registry import Command
 from flagtrack.daemon.rig.table import SERVICES
 
@@ -17,7 +18,9 @@ from flagtrack.daemon.rig.table import SERVICES
 def add_service_arguments(parser: argparse.ArgumentParser) -> None:
     """``-c rig.yaml`` and the shutdown timeout."""
     parser.add_argument("-c", "--config", type=Path, required=True, help="rig config (YAML)")
-    parser.add_argument("--shutdown-timeout", type=float, default=10.0, help="seconds to wait for the service to stop")
+    parser.add_argument(
+        "--shutdown-timeout", type=positive_seconds, default=10.0, help="seconds to wait for the service to stop"
+    )
 
 
 def run_one_service(name: str, args: argparse.Namespace) -> int:

@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from flagtrack.daemon.commands._numbers import positive_seconds
+
 COMMAND = "sweep"
 HELP = "run a wind-speed sweep with the rig of -c rig.yaml, or resume one (--resume RUN_DIR)"
 DESCRIPTION = """\
@@ -21,7 +23,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-c", "--config", type=Path, help="rig config with tunnel: and supervisor: sections")
     parser.add_argument("--resume", type=Path, metavar="RUN_DIR", help="resume this interrupted run")
     parser.add_argument("--runs-dir", type=Path, help="where run folders go (overrides supervisor.runs_dir)")
-    parser.add_argument("--shutdown-timeout", type=float, default=90.0, help="seconds to wait for services to stop")
+    parser.add_argument(
+        "--shutdown-timeout", type=positive_seconds, default=90.0, help="seconds to wait for services to stop"
+    )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines or bar, only the result")
 
 

@@ -7,6 +7,7 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from flagtrack.daemon.commands._numbers import positive_seconds
 from flagtrack.daemon.commands._tracking_args import OPTIONS, add_tracking_arguments
 
 if TYPE_CHECKING:
@@ -33,7 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--centrelines", type=Path, metavar="OUT.h5", help="write the centrelines to this file")
     parser.add_argument("--rrd", type=Path, metavar="OUT.rrd", help="write the Rerun view to this file (headless)")
     parser.add_argument("--record", type=Path, metavar="BASE", help="record the camera to BASE.raw (+ .json)")
-    parser.add_argument("--shutdown-timeout", type=float, default=10.0, help="seconds to wait for services to stop")
+    parser.add_argument(
+        "--shutdown-timeout", type=positive_seconds, default=10.0, help="seconds to wait for services to stop"
+    )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress or status lines (errors still print)")
     add_tracking_arguments(parser)
 

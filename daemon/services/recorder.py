@@ -96,6 +96,13 @@ class RecorderConfig:
     drain_timeout_s: float = 5.0
     min_free_mb: float = 64.0
 
+    def __post_init__(self) -> None:
+        if self.min_free_mb < 0:
+            raise ValueError(f"min_free_mb must be >= 0, got {self.min_free_mb}")
+        timeouts = (self.flush_interval_s, self.fsync_interval_s, self.drain_timeout_s)
+        if min(timeouts) <= 0:
+            raise ValueError(f"flush_interval_s, fsync_interval_s, drain_timeout_s must be positive, got {timeouts}")
+
 
 class RecorderService:
     """Records one camera's packets on command (or from launch)."""

@@ -154,3 +154,50 @@ def test_a_zero_byte_recording_is_one_line_whatever_its_format(
     (tmp_path / name).write_bytes(b"")
     assert main(["events", "info", str(tmp_path / name)]) == 2
     assert f"{name}: empty file (0 bytes)" in _one_line(capsys)
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["control", "--duration", "nan"], "argument --duration: must be a time in [0, 604800] s, got nan"),
+        (["control", "--duration", "inf"], "argument --duration: must be a time"),
+        (["control", "--shutdown-timeout", "nan"], "argument --shutdown-timeout: must be a time"),
+        (["sweep", "--shutdown-timeout", "-1"], "argument --shutdown-timeout: must be a time"),
+        (["up", "--shutdown-timeout", "0"], "argument --shutdown-timeout: must be above 0 s"),
+    ],
+)
+def test_a_time_option_that_never_ends_or_is_negative_is_refused(
+    capsys: pytest.CaptureFixture[str], argv: list[str], words: str
+) -> None:
+    """``control --duration nan`` ran 0 steps and said "finished"; ``--shutdown-timeout nan`` aborted
+    the process (rc 134) at its stop."""
+    rig = Path(__file__).resolve().parents[2] / "deploy" / "rig-control-sim.yaml"
+    with pytest.raises(SystemExit) as stopped:
+        main([argv[0], "-c", str(rig), *argv[1:]])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert stopped.value.code == 2 and err[-1].startswith(f"flagtrack {argv[0]}: error: {words}"), err
+    assert err[0].startswith("usage:") and not any("Traceback" in line for line in err)
+
+
+@pytest.mark.parametrize(
+    ("section", "key", "words"),
+    [
+        ("recorder", "min_free_mb", "min_free_mb must be >= 0, got -5.0"),
+        ("recorder", "drain_timeout_s", "drain_timeout_s must be positive"),
+        ("supervisor", "recorder_timeout_s", "recorder_timeout_s must be positive, got (3.0, 0.2, 20.0, -5.0)"),
+        ("supervisor", "startup_timeout_s", "must be positive, got (3.0, 0.2, -5.0, 10.0)"),
+    ],
+)
+def test_config_check_refuses_negative_timeouts_and_free_space(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], section: str, key: str, words: str
+) -> None:
+    """They passed ``config check``; at run time a -5 s timeout failed every point at once."""
+    import yaml
+
+    rig = yaml.safe_load((Path(__file__).resolve().parents[2] / "deploy" / "rig-sensor-sim.yaml").read_text())
+    rig.setdefault(section, {})[key] = -5
+    path = tmp_path / "rig.yaml"
+    path.write_text(yaml.safe_dump(rig))
+    assert main(["config", "check", str(path)]) == 2
+    line = _one_line(capsys)
+    assert f"key '{section}'" in line and words in line, line

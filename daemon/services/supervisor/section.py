@@ -141,8 +141,12 @@ class SupervisorConfig:
     def __post_init__(self) -> None:
         if self.mode == "sweep" and self.sweep is None:
             raise ValueError("mode 'sweep' needs a 'sweep:' section")
-        if self.silence_timeout_s <= 0 or self.publish_interval_s <= 0:
-            raise ValueError("silence_timeout_s and publish_interval_s must be positive")
+        timeouts = (self.silence_timeout_s, self.publish_interval_s, self.startup_timeout_s, self.recorder_timeout_s)
+        if min(timeouts) <= 0:
+            raise ValueError(
+                "silence_timeout_s, publish_interval_s, startup_timeout_s, recorder_timeout_s must be positive, "
+                f"got {timeouts}"
+            )
         if not 0 <= self.suspect_lost_fraction <= 1:
             raise ValueError(f"suspect_lost_fraction must be in [0, 1], got {self.suspect_lost_fraction}")
         if min(self.readback_grace_s, self.expected_rate_mev_s, self.bytes_per_event, self.free_space_margin_mb) < 0:
