@@ -131,6 +131,7 @@ class SafeTunnel:
         self._keepalive_failures = 0
         self._heartbeat_s: float | None = None  # the owner's loop, once it reports (None: not watched)
         self._withheld = False
+        self._owner_was_silent = False  # once the keep-alive was withheld, the owner's set-points are refused
         self._last_step_s: float | None = None  # when step_toward last wrote a set-point
 
     @property
@@ -170,6 +171,7 @@ class SafeTunnel:
                 three cases the tunnel has been ramped to zero (where it still answers).
         """
         self.check_setpoint(speed_mps)
+        self._refuse_after_silence()
         if self._setpoint_mps is None:
             self.start()
         try:
@@ -188,6 +190,7 @@ class SafeTunnel:
                 was called (in the last two cases the tunnel has been ramped to zero where it answers).
         """
         self.check_setpoint(target_mps)
+        self._refuse_after_silence()
         if self._setpoint_mps is None:
             self.start()
         now_s = time.monotonic()
@@ -205,6 +208,18 @@ class SafeTunnel:
         self._setpoint_mps = value
         self._beat_if_watched()
         return value
+
+    def _refuse_after_silence(self) -> None:
+        """A set-point from an owner whose loop went silent long enough for the keep-alive to be
+        withheld is refused (the tunnel ramped to zero): the controller's watchdog stopped the fan,
+        and an owner that comes back must not quietly bring it up again (its run stops, said)."""
+        if self._owner_was_silent:
+            silent = DriverError(
+                f"the owner's loop was silent for over {self.params.loop_timeout_s:g} s: the keep-alive was "
+                "withheld and the controller's watchdog stopped the fan; no set-point is taken after that",
+                device=self.device,
+            )
+            raise self._stop_after(silent)
 
     def read_speed_mps(self) -> float:
         """Speed read back from the controller, m/s."""
@@ -394,7 +409,7 @@ class SafeTunnel:
                         self.params.loop_timeout_s,
                         self.params.watchdog_s,
                     )
-                self._withheld = True
+                self._withheld = self._owner_was_silent = True
                 continue
             self._withheld = False
             try:

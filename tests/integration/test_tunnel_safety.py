@@ -203,6 +203,12 @@ def test_a_hung_owner_loop_lets_the_controllers_watchdog_stop_the_fan(sim: Simul
         assert tunnel.owner_silent
         wait_until(lambda: sim.speed_mps < 0.1, 2, "the fan stopped")
         assert tunnel.status().link_ok  # the link itself was fine all along
+        # the loop comes back: its set-points are refused, said, and the tunnel stays at zero
+        tunnel.heartbeat()
+        for command in (lambda: tunnel.step_toward(5.0), lambda: tunnel.set_speed_mps(5.0)):
+            with pytest.raises(DriverError, match="owner's loop was silent .* no set-point is taken"):
+                command()
+        assert sim.setpoint_mps == 0.0
 
 
 def test_a_controller_fault_is_read_through_the_protocol_and_spoils_a_point(sim: SimulatedTunnel) -> None:
