@@ -84,4 +84,7 @@ def run(args: argparse.Namespace) -> int:
         if supervisor_service.stop_reason != "finished":
             print(f"  resume with: flagtrack sweep --resume {run_dir}", file=sys.stderr)
             return result.code or 1
-    return result.code
+        return result.code
+    # no run folder: the sweep never began (services that did not appear, a run in use): said, not 0
+    print("flagtrack sweep: no run was started (the lines above say why)", file=sys.stderr)
+    return result.code or 1
