@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.tracking.section import TrackingConfig
     from flagtrack.daemon.tracking.setup import TrackingSetup
 
@@ -88,11 +89,17 @@ def setup_from_arguments(config: TrackingConfig, args: argparse.Namespace, *, pa
     try:
         return tracking_setup(apply_tracking_arguments(config, args), path=path)
     except ConfigError as exc:
-        key = (exc.key or "").removeprefix("tracker.")
-        if key == "t_start_s" and getattr(args, "t_stop", None) is not None and getattr(args, "t_start", None) is None:
-            key = "t_stop_s"  # the flag given is the one to name
-        dest, option = OPTIONS.get(key, (None, None))
-        if dest is None or getattr(args, dest, None) is None:
+        option = option_that_set(exc, args)
+        if option is None:
             raise
-        message = str(exc).split(": ", 1)[1] if exc.key else str(exc)
-        raise ConfigError(f"{option}: {message}") from exc
+        raise ConfigError(f"{option}: {exc.message if exc.key else exc}") from exc
+
+
+def option_that_set(exc: ConfigError, args: argparse.Namespace) -> str | None:
+    """The tracker flag (``--joints``) that gave the value ``exc`` refuses, or None when the value
+    came from the config file (then its key names it)."""
+    key = (exc.key or "").removeprefix("tracker.")
+    if key == "t_start_s" and getattr(args, "t_stop", None) is not None and getattr(args, "t_start", None) is None:
+        key = "t_stop_s"  # the flag given is the one to name
+    dest, option = OPTIONS.get(key, (None, None))
+    return option if dest is not None and getattr(args, dest, None) is not None else None

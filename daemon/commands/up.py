@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from flagtrack.daemon.commands._numbers import positive_seconds
-from flagtrack.daemon.commands._tracking_args import OPTIONS, add_tracking_arguments
+from flagtrack.daemon.commands._tracking_args import add_tracking_arguments, option_that_set
 
 if TYPE_CHECKING:
     from flagtrack.daemon.rig.config import RigConfig
@@ -61,8 +61,8 @@ def run(args: argparse.Namespace) -> int:
                 on_supervisor_state=progress,
             ).code
     except ConfigError as exc:  # a value the command line gave is named as such, not as the file's key
-        dest, option = OPTIONS.get((exc.key or "").removeprefix("tracker."), (None, None))
-        if dest is not None and getattr(args, dest, None) is not None:
+        option = option_that_set(exc, args)
+        if option is not None:
             raise ConfigError(exc.message, key=option) from None
         raise
 
