@@ -151,6 +151,54 @@ def test_a_law_is_bounded_held_on_faults_and_stopped_safe(tmp_path: Path, caplog
 
 @pytest.mark.slow
 @pytest.mark.timeout(240)
+def test_a_law_that_never_returns_stops_the_run_safe_within_its_timeouts(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    law = law_file(
+        tmp_path,
+        """
+        import threading
+        import time
+
+        calls = 0
+
+        def law(state):
+            global calls
+            calls += 1
+            if calls == 1:
+                time.sleep(0.2)  # slower than its period: said once
+                return 6.0
+            if calls == 2:
+                raise SystemExit("leaving")  # not the supervisor's exit: a fault
+            threading.Event().wait()  # never returns
+        """,
+    )
+    port = free_port()
+    states: list[TunnelState] = []
+    done = watch_tunnel(port, f"flagtrack/ctl{port}", states)
+    out = tmp_path / "runs" / "exp3"
+    caplog.set_level(logging.WARNING)
+    rig = rig_file(tmp_path, port, duration_s=0, law_timeout_s=0.5)  # until stopped: only the faults end it
+    code = main(["control", "-c", str(rig), "--controller", f"{law}:law", "--out", str(out), "-q"])
+    wait_until(lambda: states and states[-1].setpoint_mps == 0.0, 10, "the tunnel's last state (at zero) to arrive")
+    done.set()
+    assert code == 1
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "stopped" and "faulted 3 times in a row" in run["stop_reason"], run["stop_reason"]
+    assert "has not returned for" in run["stop_reason"]
+    reasons = [r.get("reason", "") for r in records(out) if r["requester"] == "law"]
+    assert reasons[0] == "" and [r.split(";")[0] for r in reasons[1:]] == [
+        "fault: raised SystemExit: leaving",
+        "fault: did not return within 0.5 s",
+        reasons[3].split(";")[0],
+    ]
+    assert "has not returned for" in reasons[3]
+    slow = [r.getMessage() for r in caplog.records if "longer than supervisor.control.period_s" in r.getMessage()]
+    assert len(slow) == 1, slow
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(240)
 def test_sigterm_stops_the_loop_safe_and_the_record_says_so(tmp_path: Path) -> None:
     law = law_file(tmp_path, "def law(state):\n    return 5.0\n")
     port = free_port()

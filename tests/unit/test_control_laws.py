@@ -97,6 +97,9 @@ def test_the_control_section_checks_itself() -> None:
         ControlConfig(period_s=0.0)
     with pytest.raises(ValueError, match="max_faults"):
         ControlConfig(max_faults=0)
+    for timeout_s in (0.0, -1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match="law_timeout_s"):
+            ControlConfig(law_timeout_s=timeout_s)
 
 
 def test_the_new_messages_round_trip_and_their_keys_are_words() -> None:

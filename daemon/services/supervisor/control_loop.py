@@ -5,9 +5,10 @@ Each step, the law is called with the newest flag state (at most once per ``peri
 state newer than the last one has come); what it asks is bounded by ``tunnel.safety`` and written as
 the next set-point of the tunnel's ramp at once (no wait for the readback), and the step is recorded
 with the latency from the camera packet behind the state to that write (the serial driver's flush
-to the port when it says when, else the end of the exchange). A law that raises or returns
-what is not a speed holds the speed (said once, in one line); ``max_faults`` in a row stop the run
-safe. Requests from the bus go through the same bounds and are answered. The session ends the run
+to the port when it says when, else the end of the exchange). The law runs in a thread of its own
+(:class:`~flagtrack.daemon.services.supervisor.law_call.LawCall`): a law that raises, returns what is
+not a speed, or does not return within ``law_timeout_s`` holds the speed (said once, in one line);
+``max_faults`` in a row stop the run safe, and a law slower than ``period_s`` is said once. Requests from the bus go through the same bounds and are answered. The session ends the run
 with the tunnel ramped to zero, whatever ends it (the duration, a signal, a service gone, an error).
 """
 
@@ -23,6 +24,7 @@ from typing import Any, Protocol
 
 from flagtrack.daemon.schema import FlagState, RecorderCommand
 from flagtrack.daemon.services.supervisor.control_record import ControlRecord
+from flagtrack.daemon.services.supervisor.law_call import LawCall
 from flagtrack.daemon.services.supervisor.laws import Law, bound_speed, checked_output
 from flagtrack.daemon.services.supervisor.requests import Asked, SpeedDesk
 from flagtrack.daemon.services.supervisor.section import ControlConfig
@@ -74,6 +76,9 @@ class ControlLoop:
         self.state: FlagState | None = None
         self.faults_in_a_row = 0
         self.fault_said = False
+        self.slow_said = False
+        self.calling: LawCall | None = None
+        self._out_faults = 0  # the faults charged to the call still out
         self._used: FlagState | None = None
         self._t0_s = math.nan
         self._last_step_s = -math.inf
@@ -99,6 +104,8 @@ class ControlLoop:
         self._t0_s = session.clock.monotonic()
         if self.desk is not None:
             self.desk.taking = True
+        if self.law is not None:
+            self.calling = LawCall(self.law.function, self.cfg.law_timeout_s)
         held = False
         while self.cfg.duration_s == 0 or session.clock.monotonic() - self._t0_s < self.cfg.duration_s:
             session.idle(0)  # the rig watched: a stop request
@@ -106,7 +113,9 @@ class ControlLoop:
             if problem:  # a service gone, the camera silent
                 raise RunStopped(problem)
             self._take_requests(session)
-            if not held and self.law is not None and self._law_due(session):
+            if not held and self.calling is not None and self.calling.busy:
+                held = self._law_still_out(session)
+            elif not held and self.law is not None and self._law_due(session):
                 held = self._law_step(session)
             elif held or self.law is None:
                 self._newest_state(WATCH_S)
@@ -115,6 +124,8 @@ class ControlLoop:
         session.mode = "done"
 
     def close(self, reason: str, error: str | None) -> None:
+        if self.calling is not None:
+            self.calling.close()
         if self.desk is not None:
             self.desk.taking = False
         if self.faults_in_a_row and self.fault_said:
@@ -141,13 +152,14 @@ class ControlLoop:
 
     def _law_step(self, session: Session) -> bool:
         """Call the law with the newest state and apply what it asks; True once the run holds safe."""
-        assert self.law is not None and self.state is not None
+        assert self.law is not None and self.calling is not None and self.state is not None
         state, self._used = self.state, self.state
         self._last_step_s = session.clock.monotonic()
-        try:
-            asked, fault = checked_output(self.law.function(state))
-        except Exception as exc:  # noqa: BLE001 - a user's law: whatever it raises holds the speed
-            asked, fault = None, f"raised {type(exc).__name__}: {exc}"
+        answer = self.calling.call(state)
+        self._out_faults = int(self.calling.busy)
+        asked, fault = checked_output(answer.value) if not answer.fault else (None, answer.fault)
+        if not fault:
+            self._say_if_slow(answer.took_s)
         record: dict[str, Any] = {"asked_mps": asked, "applied_mps": self.target_mps, "setpoint": self.law.setpoint()}
         if fault:
             return self._fault(session, state, fault, record)
@@ -163,6 +175,40 @@ class ControlLoop:
                 record["reason"] = reason
         self._write(session, state, record)
         return False
+
+    def _law_still_out(self, session: Session) -> bool:
+        """A call that did not return in time: each further ``law_timeout_s`` out is another fault;
+        its late answer is dropped. True once the run holds safe."""
+        assert self.law is not None and self.calling is not None
+        late = self.calling.late(WATCH_S)
+        self._newest_state(0.0)
+        if late is not None:
+            log.warning(
+                "supervisor: the law %s returned after %.3g s; that answer is dropped (its state is old)",
+                self.law.name,
+                late.took_s,
+            )
+            return False
+        out_s = self.calling.out_for_s()
+        if out_s < (self._out_faults + 1) * self.cfg.law_timeout_s:
+            return False
+        assert self._used is not None  # (the state of the call still out)
+        self._out_faults += 1
+        fault = f"has not returned for {out_s:.3g} s (supervisor.control.law_timeout_s {self.cfg.law_timeout_s:g})"
+        record = {"asked_mps": None, "applied_mps": self.target_mps, "setpoint": self.law.setpoint()}
+        return self._fault(session, self._used, fault, record)
+
+    def _say_if_slow(self, took_s: float) -> None:
+        """Say once that the law takes longer than its period (it is then called as often as it returns)."""
+        if took_s > self.cfg.period_s and not self.slow_said and self.law is not None:
+            log.warning(
+                "supervisor: the law %s took %.3g s, longer than supervisor.control.period_s %g s; "
+                "it is called as often as it returns",
+                self.law.name,
+                took_s,
+                self.cfg.period_s,
+            )
+            self.slow_said = True
 
     def _fault(self, session: Session, state: FlagState, fault: str, record: dict[str, Any]) -> bool:
         """Hold the speed; say the first fault in one line; stop safe after ``max_faults`` in a row."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -61,8 +62,10 @@ class ControlConfig:
         duration_s: run this long once the loop starts (0: until stopped).
         start_speed_mps: speed set before the loop starts (0: none).
         settle_s: wait after the start speed is reached before the loop starts, s.
-        max_faults: the run stops safe after this many faults of the law in a row (it raised or
-            returned what is not a speed).
+        max_faults: the run stops safe after this many faults of the law in a row (it raised,
+            returned what is not a speed, or did not return within ``law_timeout_s``).
+        law_timeout_s: a call of the law that has not returned after this long is a fault, and each
+            further ``law_timeout_s`` it stays out another; its late answer is dropped, s.
         safe_speed_mps: after those faults, the tunnel holds this speed, and no law runs, until the
             run ends (0: the run ends at once, the tunnel ramped to zero).
         requests: take speed requests from the bus (on a secured bus, from operators only).
@@ -75,6 +78,7 @@ class ControlConfig:
     start_speed_mps: float = 0.0
     settle_s: float = 0.0
     max_faults: int = 3
+    law_timeout_s: float = 1.0
     safe_speed_mps: float = 0.0
     requests: bool = True
     record: bool = True
@@ -84,6 +88,8 @@ class ControlConfig:
             raise ValueError("period_s must be positive, duration_s and settle_s >= 0")
         if self.max_faults < 1 or self.start_speed_mps < 0 or self.safe_speed_mps < 0:
             raise ValueError("max_faults must be >= 1, start_speed_mps and safe_speed_mps >= 0")
+        if not 0 < self.law_timeout_s < math.inf:
+            raise ValueError("law_timeout_s must be a positive number of seconds")
 
 
 @dataclass(frozen=True)

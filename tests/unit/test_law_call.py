@@ -1,0 +1,64 @@
+"""A law called in its own thread (daemon/services/supervisor/law_call.py): its answer comes back; a
+law that does not return in time is a fault and is not called again until it has; what it raises,
+SystemExit included, is a fault named by its type."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from flagtrack.daemon.services.supervisor.law_call import LawCall
+
+
+def test_an_answer_comes_back_with_the_time_it_took() -> None:
+    calling = LawCall(lambda state: state * 2.0, timeout_s=5.0)
+    answer = calling.call(2.0)
+    assert (answer.value, answer.fault, calling.busy) == (4.0, "", False)
+    assert 0 <= answer.took_s < 5.0
+    calling.close()
+
+
+@pytest.mark.parametrize(
+    ("error", "named"),
+    [
+        (ZeroDivisionError("gain over zero"), "ZeroDivisionError: gain over zero"),
+        (SystemExit(3), "SystemExit: 3"),
+        (KeyboardInterrupt(), "KeyboardInterrupt"),
+    ],  # fmt: skip
+)
+def test_whatever_a_law_raises_is_a_fault_named_by_its_type(error: BaseException, named: str) -> None:
+    def law(state: object) -> float:
+        raise error
+
+    calling = LawCall(law, timeout_s=5.0)
+    answer = calling.call(None)
+    assert answer.value is None and answer.fault == f"raised {named}"
+    assert calling.call(None).fault == f"raised {named}"  # the thread lives on
+    calling.close()
+
+
+def test_a_law_that_does_not_return_in_time_is_a_fault_and_is_not_called_again_until_it_has() -> None:
+    release = threading.Event()
+    calls: list[object] = []
+
+    def law(state: object) -> float:
+        calls.append(state)
+        if state == "stuck":
+            release.wait(30)
+        return 1.0
+
+    calling = LawCall(law, timeout_s=0.05)
+    answer = calling.call("stuck")
+    assert answer.fault == "did not return within 0.05 s" and answer.value is None
+    assert calling.busy and calling.out_for_s() >= 0.05
+    with pytest.raises(RuntimeError, match="not returned"):
+        calling.call("next")
+    assert calling.late(0.0) is None and calling.busy
+    release.set()
+    late = calling.late(10.0)
+    assert late is not None and late.value == 1.0 and late.took_s >= 0.05
+    assert not calling.busy and calling.out_for_s() == 0.0
+    assert calling.call("next").value == 1.0
+    assert calls == ["stuck", "next"]
+    calling.close()
