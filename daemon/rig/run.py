@@ -3,9 +3,11 @@ a failure or the end of the work, and report how the run ended."""
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -104,6 +106,7 @@ def run_rig(
                 services,
                 shutdown_timeout_s=shutdown_timeout_s,
                 stop_when_any_finishes=finishers,
+                on_force=partial(_tunnel_left_running, services),
                 on_service_end=bus.undeclare_alive,
             )
     finally:
@@ -112,6 +115,21 @@ def run_rig(
     _report_end(report, services, centrelines, say)
     code = 1 if report.errors else (130 if report.signal_count else 0)
     return RigRun(code, services, report)
+
+
+def _tunnel_left_running(services: Sequence[Service]) -> str:
+    """On a forced exit: the line saying a tunnel was left running and what stops it ("" if none)."""
+    for service in services:
+        tunnel = getattr(service, "tunnel", None)
+        setpoint_mps = getattr(tunnel, "setpoint_mps", 0.0)
+        if tunnel is not None and not setpoint_mps <= 0:  # (NaN: not known)
+            watchdog_s = getattr(getattr(tunnel, "params", None), "watchdog_s", math.nan)
+            last = f"{setpoint_mps:g} m/s" if math.isfinite(setpoint_mps) else "not known"
+            return (
+                f"flagtrack: the tunnel was not ramped down (last set-point {last}): with the keep-alive "
+                f"gone, the controller's watchdog ({watchdog_s:g} s) must stop the fan; check it"
+            )
+    return ""
 
 
 def _stop_time_s(rig: RigConfig, names: Sequence[str], timeout_s: float, say: Callable[[str], None]) -> float:

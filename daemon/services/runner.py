@@ -221,12 +221,13 @@ def _say(line: str) -> None:
 @contextlib.contextmanager
 def stop_on_signals(
     stop: StopEvent,
-    on_force: Callable[[], None] | None = None,
+    on_force: Callable[[], str] | None = None,
     on_signal: Callable[[int], None] | None = None,
 ) -> Iterator[StopEvent]:
     """While inside: the first SIGINT/SIGTERM asks ``stop`` (the work under way, a compile included,
-    is never interrupted in the middle), the second forces the process out (exit 130);
-    ``on_signal`` gets the count so far. The previous handlers are restored on the way out
+    is never interrupted in the middle), the second forces the process out (exit 130), after saying
+    the line ``on_force`` gives (what is left undone; "" for nothing); ``on_signal`` gets the count
+    so far. The previous handlers are restored on the way out
     (uvicorn's ``capture_signals``)."""
     count = 0
 
@@ -242,7 +243,10 @@ def stop_on_signals(
             return
         _say(f"flagtrack: second {name}, forcing exit")
         if on_force is not None:
-            on_force()
+            with contextlib.suppress(Exception):  # (the exit is what was asked: nothing may stop it)
+                left = on_force()
+                if left:
+                    _say(left)
         os._exit(130)
 
     previous = {signum: signal.signal(signum, handler) for signum in (signal.SIGINT, signal.SIGTERM)}
@@ -254,7 +258,7 @@ def stop_on_signals(
 
 
 def capture_signals(
-    group: ServiceGroup, on_force: Callable[[], None] | None = None
+    group: ServiceGroup, on_force: Callable[[], str] | None = None
 ) -> contextlib.AbstractContextManager[StopEvent]:
     """While inside: the first SIGINT/SIGTERM stops the group gracefully, the second forces the process
     out (exit 130); the signals are counted in the group's report (:func:`stop_on_signals`)."""
@@ -271,7 +275,7 @@ def run_services(
     stop_when_any_finishes: Sequence[str] = (),
     shutdown_timeout_s: float = 10.0,
     handle_signals: bool = True,
-    on_force: Callable[[], None] | None = None,
+    on_force: Callable[[], str] | None = None,
     on_service_end: Callable[[str], object] | None = None,
 ) -> RunReport:
     """Start the services (in order), run them until a signal, a failure, or a finishing service;

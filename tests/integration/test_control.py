@@ -275,3 +275,31 @@ def live_and_offline_agree(run_dir: Path) -> None:
         offline = point_metrics([batch.select(rows)], 300.0, (150.0, 240.0), 0.0)
         per_s = len(run) / (run[-1]["cycle_end_s"] - run[0]["cycle_start_s"])
         assert per_s == pytest.approx(offline.frequency_hz, rel=0.01)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(240)
+def test_a_forced_exit_says_the_tunnel_was_left_to_its_watchdog(tmp_path: Path) -> None:
+    law = law_file(tmp_path, "def law(state):\n    return 5.0\n")
+    port = free_port()
+    out = tmp_path / "runs" / "exp4"
+    proc = start("control", "-c", str(rig_file(tmp_path, port, duration_s=0)), "--controller", f"{law}:law",
+                 "--out", str(out), "-q")  # fmt: skip
+    try:
+        wait_until(lambda: (out / "control.jsonl").exists() and len(records(out)) >= 3, 150, "three control steps")
+        lines: list[str] = []
+        reader = threading.Thread(target=lambda: lines.extend(iter(proc.stderr.readline, "")), daemon=True)
+        reader.start()
+        proc.send_signal(signal.SIGINT)
+        wait_until(lambda: any("SIGINT received" in line for line in lines), 30, "the first SIGINT to be taken")
+        proc.send_signal(signal.SIGINT)  # while the tunnel ramps down from 5 m/s (over a second)
+        proc.wait(timeout=60)
+    finally:
+        proc.kill()
+    reader.join(10)  # (the pipe closed with the process)
+    proc.stdout.close()
+    proc.stderr.close()
+    err = "".join(lines)
+    assert proc.returncode == 130, err
+    assert "second SIGINT, forcing exit" in err
+    assert "the tunnel was not ramped down (last set-point" in err and "watchdog (1 s) must stop the fan" in err
