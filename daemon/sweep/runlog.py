@@ -38,6 +38,7 @@ from flagtrack.daemon.security.names import identifier_problem
 from flagtrack.daemon.sweep.plan import Point, SweepConfig, plan_points
 from flagtrack.daemon.sweep.quantities import POINT_ALIASES
 from flagtrack.daemon.typed_yaml import from_mapping, to_mapping
+from flagtrack.drivers.formats.recording.reserve import DiskReserve
 
 log = logging.getLogger(__name__)
 
@@ -427,11 +428,9 @@ def _make_reserve(path: Path) -> None:
     if path.exists():
         return
     try:
-        with open(path, "wb") as reserve:
-            os.posix_fallocate(reserve.fileno(), 0, RESERVE_BYTES)
+        DiskReserve(path, RESERVE_BYTES).take()
     except OSError as exc:
         log.warning("%s: no reserve for the run log's last records: %s", path, exc.strerror or exc)
-        path.unlink(missing_ok=True)
 
 
 def _now(t_unix: float | None) -> float:

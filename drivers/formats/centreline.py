@@ -40,6 +40,10 @@ _MAX_PENDING_VALUES = 1 << 23
 _LAYOUT = ("t", "s", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost", "stale", "shed")
 
 
+_SERIES = ("t", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events", "lost", "stale", "shed")
+"""The datasets that grow by one row per update."""
+
+
 class CentrelineWriter:
     """Append centreline batches to an HDF5 file; use as a context manager.
 
@@ -66,6 +70,9 @@ class CentrelineWriter:
             self._file.create_dataset(name, (0,), maxshape=(None,), dtype="u1", chunks=(chunk_t,))
         self._file.create_dataset("shed", (0,), maxshape=(None,), dtype="f4", chunks=(chunk_t,))
         write_attrs(self._file, {"flagtrack_version": __version__, **attrs, **root_format_attrs(attrs)})
+        # held open: a dataset object let go after each append closes its HDF5 handle then, and on a
+        # full disk that close fails where nothing can catch it (a traceback per dataset per append)
+        self._datasets = {name: self._file[name] for name in _SERIES}
         self.n_updates = 0
         self.describe()
 
@@ -92,7 +99,7 @@ class CentrelineWriter:
         }
         start = self.n_updates
         for name, values in columns.items():
-            dataset = self._file[name]
+            dataset = self._datasets[name]
             dataset.resize(start + n, axis=0)
             dataset[start:] = values
         self.n_updates += n

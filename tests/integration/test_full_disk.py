@@ -12,10 +12,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from flagtrack.daemon.sweep.runlog import read_run
-from flagtrack.drivers.formats import read_events
+from flagtrack.drivers.formats import read_events, write_events
+from flagtrack.drivers.formats.centreline import read_centrelines
+from flagtrack.drivers.formats.recording.reserve import RESERVE_BYTES
+from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
 from tests.fakes.tunnel import SWEEP_SIM
@@ -45,7 +49,7 @@ def test_a_disk_filling_up_mid_point_ends_the_sweep_safe_with_the_file_readable(
     if why:
         pytest.skip(why)
     sweep = {"speeds": [5.5, 6.0], "branches": ["up"], "settle_s": 0.5, "record_s": 8.0}
-    recorder = {"min_free_mb": 1.0}  # the recorder stops short of a full disk (the HDF5 library would crash)
+    recorder = {"min_free_mb": 0.0}
     rig = rig_file(tmp_path, sim.port, sweep, recorder, expected_rate_mev_s=0.0, free_space_margin_mb=0.0)
     runs, out = tmp_path / "runs", tmp_path / "copy"
     runs.mkdir()
@@ -144,3 +148,37 @@ def test_the_recorder_on_a_full_disk_stops_cleanly_and_keeps_its_file_to_the_las
     assert result["alive"]  # the recorder went on (idle) and stopped when asked
     assert 0 < result["events"] < result["sent"] and result["prefix"]  # whole up to its last flush
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.slow
+def test_a_full_disk_under_the_centrelines_file_is_one_error_line_and_both_files_read_back(tmp_path: Path) -> None:
+    why = _namespaces_work()
+    if why:
+        pytest.skip(why)
+    flag = WavyFlag(length=200.0, root=(100.0, 240.0))
+    events = np.concatenate(list(line_events(flag, 0, 1_500_000, 640, 480, QuickLineParams(noise_rate_hz=1e5))))
+    recording = tmp_path / "flag.raw"
+    write_events(recording, events, width=640, height=480, encoding="evt3")
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    rig = tmp_path / "rig.yaml"
+    rig.write_text(
+        f"rig: fullh5\ntracker: {{root: [100, 240], length: 200}}\n"
+        f"recorder: {{directory: {disk}, path: {disk}/rec, centrelines: true, min_free_mb: 0, "
+        "flush_interval_s: 0.05}\nservices: [camera, tracker, recorder]\n"
+    )
+    size_k = (RESERVE_BYTES + recording.stat().st_size // 2) // 1024  # half the recording fits
+    flagtrack = " ".join(FLAGTRACK)
+    up = f"{flagtrack} up -c {rig} --replay {recording} --speed 1 --exit-at-eof -q"
+    script = f"mount -t tmpfs -o size={size_k}k tmpfs {disk} && {up}; rc=$?; cp -a {disk}/. {tmp_path}/out/; exit $rc"
+    (tmp_path / "out").mkdir()
+    done = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True, timeout=180)
+    errors = [line for line in done.stderr.splitlines() if line.startswith("ERROR flagtrack.daemon.services.recorder")]
+    assert len(errors) == 1 and "No space left on device" in errors[0], done.stderr[-3000:]
+    assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr, done.stderr[-3000:]
+    failed = errors[0].split("writing ", 1)[1].split(" failed", 1)[0]
+    assert failed in (f"{disk}/rec.raw", f"{disk}/rec_centrelines.h5"), errors[0]
+    got = read_events(tmp_path / "out" / "rec.raw", strict=True).events  # whole up to its last flush
+    assert 0 < len(got) < len(events)
+    lines, _ = read_centrelines(tmp_path / "out" / "rec_centrelines.h5")
+    assert len(lines.t_s) > 0 and np.all(np.diff(lines.t_s) > 0)

@@ -21,6 +21,8 @@ from flagtrack.drivers.formats import read_events
 from flagtrack.drivers.formats.centreline import read_centrelines
 from flagtrack.drivers.formats.packets import Packetizer, PacketParams
 from flagtrack.drivers.formats.recording import FreeSpaceGuard, PartChain, RecordingPart, drop_summary
+from flagtrack.drivers.formats.recording.chain import failed_write
+from flagtrack.drivers.formats.recording.reserve import RESERVE_BYTES, DiskReserve
 from flagtrack.drivers.sim.quickline import WavyFlag, line_events
 from tests.integration.test_centreline_file_service import message
 
@@ -238,3 +240,49 @@ def test_the_drops_a_camera_reports_while_a_part_records_are_in_its_sidecar(tmp_
     assert drop_summary(doc["device_drops"]) == (
         "skipped ahead (0.25 s); reported on packets missing from the recording (see its gaps) (2 times)"
     )
+
+
+def test_a_failed_write_names_the_file_that_failed_in_one_line(tmp_path: Path) -> None:
+    raw = tmp_path / "rec.raw"
+    hdf5 = RuntimeError(  # h5py's text for a full disk under an HDF5 flush
+        "Can't flush entry (file write failed: time = Sun Dec  6 16:39:28 2026\n, filename = "
+        f"'{tmp_path / 'rec_centrelines.h5'}', file descriptor = 11, errno = 28, error message = 'No space left "
+        "on device', buf = 0x7fc778401f68, total write size = 18592, bytes this sub-write = 18592, offset = 1142784)"
+    )
+    assert failed_write(hdf5, raw) == (tmp_path / "rec_centrelines.h5", "No space left on device")
+    assert failed_write(RuntimeError("Can't close dataset (other)\nmore"), raw) == (raw, "Can't close dataset (other)")
+    assert failed_write(OSError(errno.ENOSPC, "No space left on device", str(raw)), tmp_path / "x") == (
+        raw,
+        "No space left on device",
+    )
+    h5py_os = OSError(
+        errno.ENOSPC, f"File write failed (time = x\n, filename = '{raw}', error message = 'No space left')"
+    )
+    assert failed_write(h5py_os, tmp_path / "x") == (raw, "No space left")
+    assert failed_write(OSError(errno.ENOSPC, "File write failed (time = x\n, more)"), raw) == (
+        raw,
+        "File write failed (time = x",
+    )
+
+
+def test_the_room_kept_to_close_the_files_is_on_the_disk_and_never_follows_a_link(tmp_path: Path) -> None:
+    target = tmp_path / "precious.txt"
+    target.write_text("keep me")
+    path = tmp_path / ".rec.reserve"
+    path.symlink_to(target)  # planted where the reserve goes
+    reserve = DiskReserve(path, 256 * 1024)
+    reserve.take()
+    assert target.read_text() == "keep me" and not path.is_symlink()
+    assert path.stat().st_size == 256 * 1024 and path.stat().st_blocks * 512 >= 256 * 1024  # allocated, not sparse
+    reserve.release()
+    reserve.release()
+    assert not path.exists() and target.read_text() == "keep me"
+
+
+def test_a_part_holds_its_room_while_it_records_and_gives_it_back_when_it_closes(tmp_path: Path) -> None:
+    _, packets = camera()
+    part = RecordingPart(base=tmp_path / "rec", config={}, want_centrelines=True)
+    part.write_packet(packets[0])
+    assert (tmp_path / ".rec.reserve").stat().st_size == RESERVE_BYTES
+    part.close()
+    assert not (tmp_path / ".rec.reserve").exists()

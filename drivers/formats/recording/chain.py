@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -72,11 +73,13 @@ class PartChain:
             part, self.current = self.current, None
         if part is None:
             return
-        why = getattr(exc, "strerror", None) or str(exc)
-        message = (
-            f"recording stopped: writing {part.raw_path} failed: {why}; the file is kept up to its "
-            f"last flush ({part.flushed_at} bytes)"
-        )
+        path, why = failed_write(exc, part.raw_path)
+        message = f"recording stopped: writing {path} failed: {why}; "
+        if path == part.raw_path:
+            message += f"the file is kept up to its last flush ({part.flushed_at} bytes)"
+        else:
+            message += f"{part.raw_path.name} is kept up to its last flush ({part.flushed_at} bytes)"
+
         part.abandon()
         self.finished.append(part.raw_path)
         self._on_failure(part, message)
@@ -129,3 +132,16 @@ class PartChain:
         part's first (an empty one, such as a final message, goes with the previous part). O(1)."""
         first_ns = self.current.first_sent_ns if self.current is not None else None
         return len(msg.source_ns) == 0 or first_ns is not None and 0 < msg.source_ns[-1] < first_ns
+
+
+def failed_write(exc: BaseException, default: Path) -> tuple[Path, str]:
+    """The file a failed write names (``default`` if it names none) and why, in one line: an
+    ``OSError``'s own, or what HDF5's error text (h5py's ``OSError`` or ``RuntimeError``, several
+    lines) says of the file and the system's error."""
+    filename = exc.filename if isinstance(exc, OSError) else None
+    text = (exc.strerror if isinstance(exc, OSError) else None) or str(exc)
+    named = re.search(r"filename = '([^']+)'", text)
+    system = re.search(r"error message = '([^']+)'", text)
+    path = Path(filename) if filename else Path(named.group(1)) if named else default
+    first_line = text.splitlines()[0] if text else type(exc).__name__
+    return path, system.group(1) if system else first_line

@@ -18,6 +18,7 @@ from flagtrack.drivers.formats.centreline import CentrelineShapeError, Centrelin
 from flagtrack.drivers.formats.recording.inputs import CameraPacket, CentrelineUpdates, SyncIntervals
 from flagtrack.drivers.formats.recording.paths import part_base, recording_file
 from flagtrack.drivers.formats.recording.raw_part import RawPartFile
+from flagtrack.drivers.formats.recording.reserve import RESERVE_BYTES, RESERVE_BYTES_RAW_ONLY, DiskReserve
 
 log = logging.getLogger(__name__)
 
@@ -61,11 +62,14 @@ class RecordingPart:
     continues: str | None = None
     continued_in: str | None = None
     raw: RawPartFile = field(init=False, repr=False)
+    reserve: DiskReserve = field(init=False, repr=False)
     _last_flush: float = field(default_factory=time.monotonic)
     _last_fsync: float = field(default_factory=time.monotonic)
 
     def __post_init__(self) -> None:
         self.raw = RawPartFile(self.raw_path)
+        room = RESERVE_BYTES if self.want_centrelines else RESERVE_BYTES_RAW_ONLY
+        self.reserve = DiskReserve(self.base.with_name(f".{self.base.name}.reserve"), room)
         if self.want_centrelines:  # the file is created at the first update
             self.centrelines = CentrelineSink(
                 self.centrelines_path, {**self.centreline_attrs, "input_file": str(self.raw_path)}
@@ -121,9 +125,16 @@ class RecordingPart:
             OSError: the write failed (a full disk): :meth:`abandon` the part.
         """
         if not self.raw.opened:
+            self._take_reserve()
             camera = self.config.get("camera")
             simulated = isinstance(camera, dict) and camera.get("adapter") == "simulated"
-            self.raw.open(packet.encoding, packet.width, packet.height, packet.camera_id, packet.t_offset_us, simulated)
+            try:
+                self.raw.open(
+                    packet.encoding, packet.width, packet.height, packet.camera_id, packet.t_offset_us, simulated
+                )
+            except BaseException:
+                self.reserve.release()
+                raise
             self.geometry = {"width": packet.width, "height": packet.height, "encoding": packet.encoding}
             if self.centrelines is not None:  # the centreline file says the sensor's size
                 self.centrelines.set_attrs({"sensor_width_px": packet.width, "sensor_height_px": packet.height})
@@ -148,6 +159,14 @@ class RecordingPart:
         self.first_sent_ns = packet.sent_ns if self.first_sent_ns is None else self.first_sent_ns
         self.last_t_us = packet.t_last_us
         self.ended = packet.end_of_stream
+
+    def _take_reserve(self) -> None:
+        """Keep the room the files need to close on a full disk (:mod:`.reserve`)."""
+        try:
+            self.reserve.take()
+        except OSError as exc:
+            kept = f"keeping {self.reserve.size // 1024} KiB to close the files"
+            raise OSError(exc.errno, f"{exc.strerror} ({kept})", str(self.raw_path)) from exc
 
     def _note_device_drops(self, packet: CameraPacket) -> None:
         """Record the drops the camera reported since the last packet written (its stream's count
@@ -228,6 +247,7 @@ class RecordingPart:
 
     def close(self) -> None:
         """Flush, fsync and close everything; final sidecar."""
+        self.reserve.release()  # (the room for the last flushes)
         self.close_raw()
         if self.centrelines is not None:
             self.centrelines.close()
@@ -236,7 +256,8 @@ class RecordingPart:
     def abandon(self) -> None:
         """After a failed write (a full disk): close everything as far as it goes and cut the .raw
         file back to its last flush, so it reads back whole up to there. Never raises."""
-        for step in (self.raw.abandon, self._close_centrelines, lambda: self.write_sidecar(True)):
+        steps = (self.raw.abandon, self.reserve.release, self._close_centrelines, lambda: self.write_sidecar(True))
+        for step in steps:
             try:
                 step()
             except (OSError, RuntimeError, ValueError) as exc:
