@@ -5,7 +5,8 @@ reconstruction of the raw file), the camera's trigger events from the raw file, 
 record go through the same :func:`~flagtrack.daemon.validation.point.validate_point` as live.
 Results go to ``RUN_DIR/validation/`` (or ``out_dir``): one figure per point, ``validation.csv``
 (the summary's columns, with the recomputed sensor and Delta_RMS/L numbers) and ``validation.png``.
-The run log is never rewritten.
+A point whose files cannot be read (damaged, cut, missing) is said in one line and gets the status
+``damaged: <file: why>``; the other points go on. The run log is never rewritten.
 """
 
 from __future__ import annotations
@@ -34,6 +35,9 @@ from flagtrack.drivers.sensor.setup import SensorConfig
 log = logging.getLogger(__name__)
 
 VALIDATION_DIR = "validation"
+
+DAMAGED = "damaged: "
+"""The start of the status of a point whose files could not be read (then the file and why)."""
 
 
 @dataclass(frozen=True)
@@ -113,8 +117,12 @@ def validate_run(
         if point.sensor_file is None:
             points.append(point)
             continue
-        updated, figure = _validate_one(run_dir, point, out, frame, sensor, centrelines_dir, reconstruct, window_s,
-                                        str(record.start.get("run_id", "?")))  # fmt: skip
+        try:
+            updated, figure = _validate_one(run_dir, point, out, frame, sensor, centrelines_dir, reconstruct,
+                                            window_s, str(record.start.get("run_id", "?")))  # fmt: skip
+        except (FormatError, OSError) as exc:  # this point's files: the others go on
+            log.warning("validate: point %s not validated: %s", point.point_id, exc)
+            updated, figure = dataclasses.replace(point, sensor_status=f"{DAMAGED}{exc}"), None
         points.append(updated)
         if figure is not None:
             figures[point.point_id] = figure

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import json
+import shutil
 import threading
 import time
 from pathlib import Path
@@ -121,3 +122,27 @@ def test_a_bad_reconstruct_option_is_named_by_its_option(
     assert main(["validate", str(run_dir), "--reconstruct", "--tau", "nan", "-o", str(run_dir.parent / "t")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("flagtrack validate: error: --tau: ") and "run.jsonl" not in err[0], err
+
+
+@pytest.mark.slow
+def test_a_damaged_point_is_said_and_the_others_are_validated(
+    sweep: tuple[Path, object], tmp_path: Path, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    run_dir, _ = sweep
+    copy = tmp_path / "run"
+    shutil.copytree(run_dir, copy)
+    still, flapping, _ = read_run(copy).latest_points().values()
+    lines = copy / flapping.centreline_file
+    lines.write_bytes(lines.read_bytes()[:300])  # cut short
+    (copy / still.sensor_file).write_bytes(b"\x00garbage" * 10)
+    code = main(["validate", str(copy), "--json"])
+    captured = capsys.readouterr()
+    assert code == 1, captured.err
+    rows = {r["point_id"]: r for r in json.loads(captured.out)["points"]}
+    assert rows[flapping.point_id]["sensor_status"].startswith(f"damaged: {lines}")
+    assert rows[still.point_id]["sensor_status"].startswith(f"damaged: {copy / still.sensor_file}")
+    said = [r.getMessage() for r in caplog.records if "not validated" in r.getMessage()]
+    assert [p in m for p, m in zip((still.point_id, flapping.point_id), said, strict=True)] == [True, True]
+    assert f"{flapping.point_id} (the lines above" in captured.err.splitlines()[-1], captured.err
+    assert "Traceback" not in captured.err
+    assert len(rows) == 3 and (copy / "validation" / "validation.csv").exists()
