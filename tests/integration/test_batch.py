@@ -21,6 +21,7 @@ import h5py
 import numpy as np
 import pytest
 
+from flagtrack.daemon.batch.tasks import RUN_STAMP
 from flagtrack.daemon.cli import main
 from flagtrack.drivers.formats import write_events
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
@@ -361,3 +362,9 @@ def test_batch_validate_rewrites_each_run_as_validate_reconstruct_does(sweep_run
     code, stdout, stderr = batch("validate", *args)
     assert code == 0 and json.loads(stdout)["counts"] == {"done": 0, "skipped": 2, "failed": 0}
     assert "run run-a: skipped (up to date)" in stderr
+    # a damaged sensor record: the run is done with that point's status, said, and not stamped up to date
+    (runs / "run-b" / "points" / "000-up-5.50_sensor.h5").write_bytes(b"\x00damaged" * 8)
+    (runs / "run-b" / "validation" / RUN_STAMP).unlink()
+    code, stdout, stderr = batch("validate", str(runs / "run-b"), "-o", str(tmp_path / "study-b"), "--tau", "0.0008")
+    assert code == 0 and "warning: " in stderr and "point 000-up-5.50 damaged: " in stderr, stderr
+    assert not (runs / "run-b" / "validation" / RUN_STAMP).exists()
