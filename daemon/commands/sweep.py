@@ -37,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.rig.config import RigConfig, load_rig
     from flagtrack.daemon.rig.run import run_rig
+    from flagtrack.daemon.sweep.runlock import held_by
     from flagtrack.daemon.sweep.runlog import read_run
     from flagtrack.daemon.typed_yaml import from_mapping
 
@@ -45,6 +46,9 @@ def run(args: argparse.Namespace) -> int:
     if args.config is not None:
         rig = load_rig(args.config, services=())  # checked by run_rig once --runs-dir has changed it
     else:
+        holder = held_by(args.resume)  # (said before the rig starts; the supervisor takes the lock)
+        if holder is not None:
+            raise ConfigError(f"the run is in use by {holder}; not started", path=str(args.resume))
         stored = dict(read_run(args.resume).start.get("config", {}))
         stored.pop("sweep", None)
         stored.pop("path", None)

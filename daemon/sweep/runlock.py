@@ -72,6 +72,22 @@ class RunLock:
         self.release()
 
 
+def held_by(run_dir: str | Path) -> str | None:
+    """Who holds ``run_dir`` now (as :func:`describe_holder` says), or None when nobody does; nothing
+    is made or changed (a command asks before it opens the rig; :meth:`RunLock.acquire` is the lock)."""
+    try:
+        handle = open(Path(run_dir) / LOCK_FILE, encoding="utf-8")  # noqa: SIM115 - closed below
+    except OSError:
+        return None  # no lock file: nobody holds it (or acquire will say why it cannot lock it)
+    with handle:
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except OSError:
+            return describe_holder(handle.read())
+        fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+    return None
+
+
 def _open_locked(run_dir: Path, path: Path) -> IO[str]:
     """``path`` opened (made if missing) and ``flock``-ed, or ConfigError naming its holder."""
     try:

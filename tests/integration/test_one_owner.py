@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from flagtrack.daemon.errors import ConfigError
-from flagtrack.daemon.sweep.runlock import LOCK_FILE, RunLock
+from flagtrack.daemon.sweep.runlock import LOCK_FILE, RunLock, held_by
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
 from tests.integration.test_tunnel_cli import FLAGTRACK, rig_config, start_set
 
@@ -92,3 +92,23 @@ def test_a_finished_run_leaves_no_lock_file_and_a_removed_one_is_not_locked(tmp_
             with pytest.raises(ConfigError, match="in use by pid"):
                 RunLock.acquire(run_dir, "flagtrack sweep --resume run")
     assert not (run_dir / LOCK_FILE).exists()
+
+
+def test_resuming_a_run_in_use_is_refused_before_the_rig_starts(tmp_path: Path) -> None:
+    run_dir = tmp_path / "runs" / "run"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLD, str(run_dir)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "locked\n"
+        assert held_by(run_dir) is not None and held_by(tmp_path) is None
+        resume = subprocess.run(
+            [*FLAGTRACK, "sweep", "--resume", str(run_dir)], capture_output=True, text=True, timeout=60
+        )
+    finally:
+        holder.kill()
+        holder.communicate(timeout=10)
+    lines = resume.stderr.strip().splitlines()
+    assert resume.returncode == 2 and len(lines) == 1, resume.stderr  # before reading the run or opening the rig
+    assert f"the run is in use by pid {holder.pid} on host " in lines[0] and str(run_dir) in lines[0]
+    assert held_by(run_dir) is None  # the killed holder's file locks nothing
