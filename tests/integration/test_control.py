@@ -303,3 +303,23 @@ def test_a_forced_exit_says_the_tunnel_was_left_to_its_watchdog(tmp_path: Path) 
     assert proc.returncode == 130, err
     assert "second SIGINT, forcing exit" in err
     assert "the tunnel was not ramped down (last set-point" in err and "watchdog (1 s) must stop the fan" in err
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(240)
+def test_a_law_that_faults_into_the_safe_speed_is_recorded_there_and_not_called_finished(tmp_path: Path) -> None:
+    law = law_file(tmp_path, "def law(state):\n    raise RuntimeError('no gain')\n")
+    port = free_port()
+    out = tmp_path / "runs" / "exp5"
+    rig = rig_file(tmp_path, port, duration_s=2.0, max_faults=2, safe_speed_mps=4.5)
+    code = main(["control", "-c", str(rig), "--controller", f"{law}:law", "--out", str(out), "-q"])
+    assert code == 1
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "stopped", run
+    assert (
+        "faulted 2 times in a row" in run["stop_reason"]
+        and "held the safe speed 4.5 m/s to the end" in run["stop_reason"]
+    )
+    safe = [r for r in records(out) if r.get("reason") == "safe speed after the law's faults"]
+    assert len(safe) >= 5 and all(r["applied_mps"] == 4.5 and r["state"]["source"] == "cam0" for r in safe)
+    assert run["counts"]["faults"] == 2

@@ -77,6 +77,7 @@ class ControlLoop:
         self.faults_in_a_row = 0
         self.fault_said = False
         self.slow_said = False
+        self.safe_reason = ""  # why the run holds the safe speed with no law ("" while the law runs)
         self.calling: LawCall | None = None
         self._out_faults = 0  # the faults charged to the call still out
         self._used: FlagState | None = None
@@ -106,21 +107,17 @@ class ControlLoop:
             self.desk.taking = True
         if self.law is not None:
             self.calling = LawCall(self.law.function, self.cfg.law_timeout_s)
-        held = False
         while self.cfg.duration_s == 0 or session.clock.monotonic() - self._t0_s < self.cfg.duration_s:
             session.idle(0)  # the rig watched: a stop request
             problem = session.outside.problem()
             if problem:  # a service gone, the camera silent
                 raise RunStopped(problem)
             self._take_requests(session)
-            if not held and self.calling is not None and self.calling.busy:
-                held = self._law_still_out(session)
-            elif not held and self.law is not None and self._law_due(session):
-                held = self._law_step(session)
-            elif held or self.law is None:
-                self._newest_state(WATCH_S)
+            self._law_turn(session)
             if session.clock.monotonic() - self._last_write_s >= self.cfg.period_s:
                 self._ramp_on(session)
+        if self.safe_reason:  # the run went to its end, but not under its law
+            raise RunStopped(f"{self.safe_reason}; held the safe speed {self.cfg.safe_speed_mps:g} m/s to the end")
         session.mode = "done"
 
     def close(self, reason: str, error: str | None) -> None:
@@ -133,6 +130,18 @@ class ControlLoop:
         self.record.close(reason, error)
 
     # -- the law -------------------------------------------------------------------------------
+
+    def _law_turn(self, session: Session) -> None:
+        """The law's part of one turn of the loop: its call (or the one still out), or, with no law or
+        after its faults, the newest state (recorded at the safe speed)."""
+        if self.safe_reason:
+            self._hold_safe(session)
+        elif self.law is None:
+            self._newest_state(WATCH_S)
+        elif self.calling is not None and self.calling.busy:
+            self._law_still_out(session)
+        elif self._law_due(session):
+            self._law_step(session)
 
     def _law_due(self, session: Session) -> bool:
         """Wait (at most ``WATCH_S``) for a state the law has not seen, once ``period_s`` has passed."""
@@ -150,8 +159,8 @@ class ControlLoop:
             self.state = state
             state = self.states.recv(timeout_s=0)
 
-    def _law_step(self, session: Session) -> bool:
-        """Call the law with the newest state and apply what it asks; True once the run holds safe."""
+    def _law_step(self, session: Session) -> None:
+        """Call the law with the newest state and apply what it asks."""
         assert self.law is not None and self.calling is not None and self.state is not None
         state, self._used = self.state, self.state
         self._last_step_s = session.clock.monotonic()
@@ -162,7 +171,8 @@ class ControlLoop:
             self._say_if_slow(answer.took_s)
         record: dict[str, Any] = {"asked_mps": asked, "applied_mps": self.target_mps, "setpoint": self.law.setpoint()}
         if fault:
-            return self._fault(session, state, fault, record)
+            self._fault(session, state, fault, record)
+            return
         self.faults_in_a_row = 0
         if asked is not None:
             applied, reason = bound_speed(asked, self.bounds.min_speed_mps, self.bounds.max_speed_mps)
@@ -174,11 +184,10 @@ class ControlLoop:
             if reason:
                 record["reason"] = reason
         self._write(session, state, record)
-        return False
 
-    def _law_still_out(self, session: Session) -> bool:
+    def _law_still_out(self, session: Session) -> None:
         """A call that did not return in time: each further ``law_timeout_s`` out is another fault;
-        its late answer is dropped. True once the run holds safe."""
+        its late answer is dropped."""
         assert self.law is not None and self.calling is not None
         late = self.calling.late(WATCH_S)
         self._newest_state(0.0)
@@ -188,15 +197,26 @@ class ControlLoop:
                 self.law.name,
                 late.took_s,
             )
-            return False
+            return
         out_s = self.calling.out_for_s()
         if out_s < (self._out_faults + 1) * self.cfg.law_timeout_s:
-            return False
+            return
         assert self._used is not None  # (the state of the call still out)
         self._out_faults += 1
         fault = f"has not returned for {out_s:.3g} s (supervisor.control.law_timeout_s {self.cfg.law_timeout_s:g})"
         record = {"asked_mps": None, "applied_mps": self.target_mps, "setpoint": self.law.setpoint()}
-        return self._fault(session, self._used, fault, record)
+        self._fault(session, self._used, fault, record)
+
+    def _hold_safe(self, session: Session) -> None:
+        """After the law's faults: record the flag at the safe speed, at most once per ``period_s``."""
+        self._newest_state(WATCH_S)
+        if self.state is None or self.state is self._used:
+            return
+        if session.clock.monotonic() - self._last_step_s < self.cfg.period_s:
+            return
+        self._used, self._last_step_s = self.state, session.clock.monotonic()
+        record = {"asked_mps": None, "applied_mps": self.target_mps, "reason": "safe speed after the law's faults"}
+        self._write(session, self.state, record)
 
     def _say_if_slow(self, took_s: float) -> None:
         """Say once that the law takes longer than its period (it is then called as often as it returns)."""
@@ -210,7 +230,7 @@ class ControlLoop:
             )
             self.slow_said = True
 
-    def _fault(self, session: Session, state: FlagState, fault: str, record: dict[str, Any]) -> bool:
+    def _fault(self, session: Session, state: FlagState, fault: str, record: dict[str, Any]) -> None:
         """Hold the speed; say the first fault in one line; stop safe after ``max_faults`` in a row."""
         assert self.law is not None
         self.faults_in_a_row += 1
@@ -225,14 +245,14 @@ class ControlLoop:
             self.fault_said = True
         self._write(session, state, {**record, "reason": f"fault: {fault}; speed held"})
         if self.faults_in_a_row < self.cfg.max_faults:
-            return False
+            return
         why = f"the law {self.law.name} faulted {self.faults_in_a_row} times in a row (last: {fault})"
         if self.cfg.safe_speed_mps <= 0:
             raise RunStopped(f"{why}; stopped safe")
         log.error("supervisor: %s; holding the safe speed %g m/s until the run ends", why, self.cfg.safe_speed_mps)
+        self.safe_reason = why
         self.target_mps = self.cfg.safe_speed_mps
         session.set_speed(self.target_mps)
-        return True
 
     # -- requests ------------------------------------------------------------------------------
 
