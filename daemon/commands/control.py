@@ -26,8 +26,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--controller",
         metavar="FILE.py:FUNCTION",
-        help="the law (or 'pi': the built-in PI of the supervisor's feedback: section); "
-        "default supervisor.control.controller",
+        help="the law (or 'pi': the built-in PI of the supervisor's feedback: section; 'none': no law, "
+        "speed requests from the bus only); default supervisor.control.controller",
     )
     parser.add_argument("--duration", type=seconds, metavar="S", help="run this long, s (0: until Ctrl-C)")
     parser.add_argument("--period", type=float, metavar="S", help="call the law at most this often, s")

@@ -10,6 +10,9 @@ from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.rig.config import RigConfig
 from flagtrack.daemon.services.supervisor.laws import BUILT_IN, law_file
 
+NO_LAW = "none"
+"""``--controller none``: no law, the speed moves on requests from the bus only."""
+
 LOOP_SERVICES = ("flagstate", "supervisor")
 """Services every control run needs beside the rig's own (the recorder too when the run is recorded)."""
 
@@ -35,11 +38,19 @@ def control_rig(
     key = "--controller" if controller is not None else "supervisor.control.controller"
     if law is None:
         raise ConfigError(
-            f"no control law: give --controller FILE.py:FUNCTION (or {', '.join(BUILT_IN)})",
+            f"no control law: give --controller FILE.py:FUNCTION, {', '.join(BUILT_IN)}, or {NO_LAW} (speed "
+            "requests only)",
             key="--controller",
             path=rig.path,
         )
-    if law not in BUILT_IN:
+    if law == NO_LAW:
+        if not control.requests:
+            raise ConfigError(
+                f"{NO_LAW}: no law and supervisor.control.requests false: nothing would move the speed",
+                key=key,
+                path=rig.path if key != "--controller" else None,
+            )
+    elif law not in BUILT_IN:
         law_file(law, key=key, path=rig.path if key != "--controller" else None)
     supervisor = rig.supervisor
     runs_dir, run_name = supervisor.runs_dir, supervisor.run_name
@@ -48,7 +59,7 @@ def control_rig(
         if (out / "control.jsonl").exists():
             raise ConfigError(f"{out} holds a control run already; choose another folder", key="--out")
         runs_dir, run_name = out.parent, out.name
-    changes = {"controller": law}
+    changes = {"controller": None if law == NO_LAW else law}
     if duration_s is not None:
         changes["duration_s"] = duration_s  # type: ignore[assignment]
     if period_s is not None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 import logging
 import signal
 import textwrap
@@ -93,6 +94,12 @@ def test_a_script_reads_the_flag_and_asks_for_speeds(tmp_path: Path) -> None:
         _, err = proc.communicate(timeout=90)
     assert "speed request" in err and "from client (not authenticated: plain bus): 99 m/s" in err
     assert "applied 8 m/s (asked 99 m/s, above tunnel.safety.max_speed_mps 8 m/s)" in err
+    steps = [json.loads(line) for line in (tmp_path / "runs" / "requests" / "control.jsonl").read_text().splitlines()]
+    refusals = [r for r in steps if r.get("reason", "").startswith("refused: ")]
+    assert (
+        len(refusals) == 1 and refusals[0]["requester"].startswith("client") and "not a speed" in refusals[0]["reason"]
+    )
+    assert refusals[0]["asked_mps"] is None and refusals[0]["request_id"] == refused.request_id
 
 
 def _asked(rig: Rig, speed_mps: float, loop_running: bool = False) -> SpeedReply | None:

@@ -119,3 +119,25 @@ def test_the_new_messages_round_trip_and_their_keys_are_words() -> None:
     assert keys.speed_requests() == "flagtrack/rig1/tunnel/request/*"
     unknown = dataclasses.replace(state(), frequency_hz=-1.0)
     assert not math.isnan(decode(encode(unknown)).frequency_hz)  # "not known" is -1.0, no NaN on the wire
+
+
+def test_controller_none_runs_on_requests_only_and_needs_them(tmp_path: Path) -> None:
+    from flagtrack.daemon.rig.config import load_rig
+    from flagtrack.daemon.rig.control import control_rig
+
+    deploy = Path(__file__).parents[2] / "deploy" / "rig-control-sim.yaml"
+    rig, services = control_rig(load_rig(deploy, services=()), "none", out=tmp_path / "run")
+    assert rig.supervisor.control.controller is None and rig.supervisor.mode == "control"
+    assert "supervisor" in services
+    with pytest.raises(ConfigError, match="no control law: .* or none"):
+        control_rig(load_rig(deploy, services=()), None)
+    quiet = load_rig(deploy, services=())
+    quiet = dataclasses.replace(
+        quiet,
+        supervisor=dataclasses.replace(
+            quiet.supervisor, control=dataclasses.replace(quiet.supervisor.control, requests=False)
+        ),
+    )
+    with pytest.raises(ConfigError, match="nothing would move the speed") as refused:
+        control_rig(quiet, "none")
+    assert refused.value.key == "--controller"

@@ -267,6 +267,10 @@ class ControlLoop:
         speed, problem = checked_output(asked.request.speed_mps)
         if speed is None:
             self.desk.answer(asked, False, -1.0, problem or "no speed")  # type: ignore[union-attr]
+            record: dict[str, Any] = {"requester": asked.who, "request_id": asked.request.request_id, "asked_mps": None}
+            self._write(
+                session, self.state, {**record, "applied_mps": self.target_mps, "reason": f"refused: {problem}"}
+            )
             return
         applied, reason = bound_speed(speed, self.bounds.min_speed_mps, self.bounds.max_speed_mps)
         written = self._command(session, applied)
