@@ -78,7 +78,7 @@ def run_feedback_demo(args: argparse.Namespace) -> int:
     )
     prepare_services(rig, names, lambda text: say(f"{text} ..."))
     started = time.monotonic()
-    result = run_rig(rig, names, shutdown_timeout_s=30.0, quiet=True, prepared=True)
+    result = run_rig(rig, names, shutdown_timeout_s=30.0, quiet=True, prepared=True, command="demo")
     supervisor = result.service("supervisor")
     run_dir = out / "control"
     found = figures(run_dir, list(TARGETS), SETTLE_S)

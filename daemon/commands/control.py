@@ -46,13 +46,16 @@ def run(args: argparse.Namespace) -> int:
     from flagtrack.daemon.rig.control import control_rig
     from flagtrack.daemon.rig.run import run_rig
 
-    if args.out is not None and args.out.exists() and not args.out.is_dir():  # (found only once the rig was up)
+    if args.out is not None:  # (found only once the rig was up, blamed on supervisor.runs_dir)
         from flagtrack.daemon.errors import ConfigError
+        from flagtrack.daemon.typed_yaml import require_folder
 
-        raise ConfigError(f"{args.out} is a file: give the run folder to make", key="--out")
+        if args.out.exists() and not args.out.is_dir():
+            raise ConfigError(f"{args.out} is a file: give the run folder to make", key="--out")
+        require_folder(args.out, key="--out", path=None)
     rig = load_rig(args.config, services=())
     rig, names = control_rig(rig, args.controller, duration_s=args.duration, period_s=args.period, out=args.out)
-    result = run_rig(rig, names, shutdown_timeout_s=args.shutdown_timeout, quiet=args.quiet)
+    result = run_rig(rig, names, shutdown_timeout_s=args.shutdown_timeout, quiet=args.quiet, command="control")
     supervisor = result.service("supervisor")
     run_dir = None if supervisor is None else supervisor.run_dir
     if run_dir is None or not (run_dir / "run.json").exists():

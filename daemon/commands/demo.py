@@ -139,7 +139,13 @@ def run(args: argparse.Namespace) -> int:
     started = time.monotonic()
     with SweepProgressView(quiet=args.quiet) as progress:
         result = run_rig(
-            rig, list(rig.services), shutdown_timeout_s=30.0, quiet=True, prepared=True, on_supervisor_state=progress
+            rig,
+            list(rig.services),
+            shutdown_timeout_s=30.0,
+            quiet=True,
+            prepared=True,
+            on_supervisor_state=progress,
+            command="demo",
         )
     supervisor = result.service("supervisor")
     viewer = result.service("viewer")

@@ -29,7 +29,9 @@ def run_one_service(name: str, args: argparse.Namespace) -> int:
     from flagtrack.daemon.rig.run import run_rig
 
     # run_rig checks the files and folders of this service, before anything opens
-    return run_rig(load_rig(args.config, services=()), [name], shutdown_timeout_s=args.shutdown_timeout).code
+    return run_rig(
+        load_rig(args.config, services=()), [name], shutdown_timeout_s=args.shutdown_timeout, command="services"
+    ).code
 
 
 def _command(name: str, help_text: str) -> Command:

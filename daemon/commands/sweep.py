@@ -75,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
             resume_dir=args.resume,
             quiet=args.quiet,
             on_supervisor_state=progress,
+            command="sweep",
         )
     supervisor_service = result.service("supervisor")
     if supervisor_service is not None and supervisor_service.run_dir is not None:

@@ -38,6 +38,7 @@ def run_rig(
     quiet: bool = False,
     prepared: bool = False,
     on_supervisor_state: Callable[[SupervisorState], None] | None = None,
+    command: str = "up",
 ) -> RigRun:
     """Open the bus, build the services, start them (in table order) and run them until a signal, a
     failure or the end of the work.
@@ -45,6 +46,7 @@ def run_rig(
     ``prepared``: the caller already ran :func:`prepare_services` (to time the run without it).
     ``on_supervisor_state``: called with every state the supervisor publishes, in its thread (a
     command draws the sweep's progress with it; see ``SupervisorService.add_observer``).
+    ``command``: the command running the rig, named in the lines it prints (``flagtrack up: ...``).
 
     Returns:
         A :class:`RigRun` (exit code, the services, the runner's report).
@@ -56,7 +58,7 @@ def run_rig(
 
     def say(text: str) -> None:
         if not quiet:
-            print(f"flagtrack up: {text}", file=sys.stderr)
+            print(f"flagtrack {command}: {text}", file=sys.stderr)
 
     # bad config: one clear line, before anything opens (the tracker setup then serves every step)
     check_rig(rig, names)
@@ -112,7 +114,7 @@ def run_rig(
     finally:
         if camera is not None and not camera.handed_over:
             camera.close()  # the rig failed before the camera service took it
-    _report_end(report, services, centrelines, say)
+    _report_end(report, services, centrelines, say, command)
     code = 1 if report.errors else (130 if report.signal_count else 0)
     return RigRun(code, services, report)
 
@@ -144,13 +146,13 @@ def _stop_time_s(rig: RigConfig, names: Sequence[str], timeout_s: float, say: Ca
 
 
 def _report_end(
-    report: RunReport, services: list[Service], centrelines: Path | None, say: Callable[[str], None]
+    report: RunReport, services: list[Service], centrelines: Path | None, say: Callable[[str], None], command: str
 ) -> None:
     """Failures and stragglers always, on stderr; where the outputs are unless quiet (``say``)."""
     for name, exc in report.errors.items():
-        print(f"flagtrack up: {name} failed: {exc}", file=sys.stderr)
+        print(f"flagtrack {command}: {name} failed: {exc}", file=sys.stderr)
     if report.abandoned:
-        print(f"flagtrack up: did not stop in time: {', '.join(report.abandoned)}", file=sys.stderr)
+        print(f"flagtrack {command}: did not stop in time: {', '.join(report.abandoned)}", file=sys.stderr)
     if centrelines is not None:
         say(f"centrelines in {centrelines}")
     for service in services:

@@ -101,6 +101,9 @@ def test_control_out_onto_a_file_is_refused_before_the_rig_starts(
     rig = Path(__file__).resolve().parents[2] / "deploy" / "rig-control-sim.yaml"
     assert main(["control", "-c", str(rig), "--out", str(tmp_path / "afile")]) == 2
     assert "key '--out'" in _one_line(capsys) and (tmp_path / "afile").read_text() == "kept"
+    assert main(["control", "-c", str(rig), "--out", str(tmp_path / "afile" / "run1")]) == 2  # under a file
+    line = _one_line(capsys)
+    assert "key '--out'" in line and f"{tmp_path / 'afile'} is a file" in line, line
 
 
 def test_no_updates_at_all_is_not_blamed_on_the_geometry(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
