@@ -49,6 +49,9 @@ from flagtrack.daemon.transport import Bus, Publisher, Subscription
 from flagtrack.drivers.formats.packets import decode_packet
 
 log = logging.getLogger(__name__)
+
+SHED = "packets shed"
+"""The kind of the console line that says the live tracker skips packets (its problem log)."""
 _NO_NS = np.zeros(0, dtype=np.int64)
 
 
@@ -294,6 +297,8 @@ class TrackerService:
         lo_us = horizon + 1 if horizon is not None else packet.t_first_us
         self._sequence.follow_horizon(packet.t_last_us)
         self.shed.add(lo_us, packet.t_last_us + 1, packet.n_events)
+        self.problems.add(SHED, f"packet {packet.seq} ({packet.n_events} events) not tracked, to stay within the "
+                          "latency budget (the recording keeps every packet)")  # fmt: skip
         try:
             self.tracker.skip_to(packet.t_last_us + 1)
         except Exception as exc:  # noqa: BLE001 - as any chunk the core cannot take: a fresh tracker goes on

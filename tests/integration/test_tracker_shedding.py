@@ -4,6 +4,7 @@ the updates are those of the offline tracker."""
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Iterator
@@ -15,7 +16,7 @@ import pytest
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.tracker import Tracker
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, TrackerStatus
-from flagtrack.daemon.services.tracker import TrackerService, TrackerServiceConfig
+from flagtrack.daemon.services.tracker import SHED, TrackerService, TrackerServiceConfig
 from flagtrack.daemon.transport import Bus, BusConfig
 from flagtrack.drivers.sim.quickline import line_events
 from tests.fakes.helpers import wait_subscribed
@@ -107,9 +108,15 @@ def _offline(packets: list) -> CentrelineBatch:
     return CentrelineBatch.concatenate([*out, tracker.finish()])
 
 
-def test_a_backlog_older_than_the_budget_is_shed_as_a_gap_that_the_next_update_reports() -> None:
+def test_a_backlog_older_than_the_budget_is_shed_as_a_gap_that_the_next_update_reports(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
     late = range(20, 40)
+    caplog.set_level(logging.WARNING)
     got, statuses, service, packets = _run(late)
+    said = [r.getMessage() for r in caplog.records if "packets shed" in r.getMessage()]
+    assert said and "not tracked, to stay within the latency budget" in said[0]  # on the console, not only the status
+    assert service.problems.totals[SHED] == 20
     want = _offline(packets)
     assert service.shed.packets == 20 and service.missing_packets == 0  # skipped, not missing
     skip_lo_us, skip_hi_us = packets[late.start - 1].t_last_us + 1, packets[late.stop - 1].t_last_us + 1
