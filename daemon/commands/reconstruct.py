@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         )
     print(f"{args.output}: {summary.verdicts()}", file=sys.stderr)
     if summary.updates == 0:  # (not the geometry: no window had a place to be)
-        print(f"warning: {_why_no_updates(summary)}", file=sys.stderr)
+        print(f"warning: {_why_no_updates(summary, setup.config.t_start_s, setup.config.t_stop_s)}", file=sys.stderr)
     elif summary.mostly_unmeasured:
         geometry = (
             "the calibration, --root, --length, --direction" if setup.mapping else "--root, --length, --direction"
@@ -88,13 +88,19 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _why_no_updates(summary: ReconstructSummary) -> str:
+def _why_no_updates(summary: ReconstructSummary, t_start_s: float | None, t_stop_s: float | None) -> str:
     """What to check when a recording gave no update at all."""
     if summary.events_in == 0:
         return "the recording holds no events"
     if summary.events_kept == 0:
         return f"the noise filter kept none of its {summary.events_in} events (tracker.denoise)"
-    span_s = ((summary.last_t_us or 0) - (summary.first_t_us or 0)) * 1e-6
+    first_s, last_s = (summary.first_t_us or 0) * 1e-6, (summary.last_t_us or 0) * 1e-6
+    events = f"the recording's events run from {first_s:.6g} s to {last_s:.6g} s"
+    if t_stop_s is not None and t_stop_s < first_s:
+        return f"--t-stop (tracker.t_stop_s) {t_stop_s:g} s is before its first event: {events}"
+    if t_start_s is not None and t_start_s > last_s:
+        return f"--t-start (tracker.t_start_s) {t_start_s:g} s is after its last event: {events}"
+    span_s = last_s - first_s
     return (
         f"no window fits in the recording's {span_s:.3f} s of events: check --t-start, --t-stop "
         "(tracker.t_start_s, tracker.t_stop_s) and --tau"

@@ -204,3 +204,21 @@ def test_config_check_refuses_negative_timeouts_and_free_space(
     assert main(["config", "check", str(path)]) == 2
     line = _one_line(capsys)
     assert f"key '{section}'" in line and words in line, line
+
+
+@pytest.mark.parametrize(
+    ("option", "words"),
+    [
+        (["--t-stop", "0.5"], "--t-stop (tracker.t_stop_s) 0.5 s is before its first event"),
+        (["--t-start", "3"], "--t-start (tracker.t_start_s) 3 s is after its last event"),
+    ],  # fmt: skip
+)
+def test_a_time_window_outside_the_recording_says_where_its_events_are(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], option: list[str], words: str
+) -> None:
+    rows = "".join(f"{1_000_000 + 100 * i},{150 + i % 50},240,1\n" for i in range(2000))
+    (tmp_path / "late.csv").write_text("t,x,y,p\n" + rows)
+    argv = ["reconstruct", str(tmp_path / "late.csv"), "-o", str(tmp_path / "e.h5"), "--root", "150", "240"]
+    assert main([*argv, "--length", "300", *option]) == 0
+    err = capsys.readouterr().err
+    assert words in err and "the recording's events run from 1 s to 1.1999 s" in err, err
