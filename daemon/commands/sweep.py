@@ -43,12 +43,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.config is None and args.resume is None:
         raise ConfigError("give a rig config (-c rig.yaml) or a run to resume (--resume RUN_DIR)")
+    if args.resume is not None and (holder := held_by(args.resume)) is not None:  # (before the rig starts)
+        raise ConfigError(f"the run is in use by {holder}; not started", path=str(args.resume))
     if args.config is not None:
         rig = load_rig(args.config, services=())  # checked by run_rig once --runs-dir has changed it
     else:
-        holder = held_by(args.resume)  # (said before the rig starts; the supervisor takes the lock)
-        if holder is not None:
-            raise ConfigError(f"the run is in use by {holder}; not started", path=str(args.resume))
         stored = dict(read_run(args.resume).start.get("config", {}))
         stored.pop("sweep", None)
         stored.pop("path", None)

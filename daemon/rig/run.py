@@ -124,12 +124,11 @@ def _tunnel_left_running(services: Sequence[Service]) -> str:
     for service in services:
         tunnel = getattr(service, "tunnel", None)
         setpoint_mps = getattr(tunnel, "setpoint_mps", 0.0)
-        if tunnel is not None and not setpoint_mps <= 0:  # (NaN: not known)
+        if tunnel is not None and setpoint_mps > 0:  # (NaN: never commanded by this run)
             watchdog_s = getattr(getattr(tunnel, "params", None), "watchdog_s", math.nan)
-            last = f"{setpoint_mps:g} m/s" if math.isfinite(setpoint_mps) else "not known"
             return (
-                f"flagtrack: the tunnel was not ramped down (last set-point {last}): with the keep-alive "
-                f"gone, the controller's watchdog ({watchdog_s:g} s) must stop the fan; check it"
+                f"flagtrack: the tunnel was not ramped down (last set-point {setpoint_mps:g} m/s): with the "
+                f"keep-alive gone, the controller's watchdog ({watchdog_s:g} s) must stop the fan; check it"
             )
     return ""
 

@@ -78,6 +78,13 @@ class RigSections:
             problem = identifier_problem(value, "the name")
             if problem is not None:
                 raise ConfigError(problem, key=key)
+        law_timeout_s = self.supervisor.control.law_timeout_s
+        if self.tunnel is not None and law_timeout_s * 2 > self.tunnel.safety.loop_timeout_s:
+            raise ConfigError(  # (the loop waits up to law_timeout_s for the law: the keep-alive must outlast it)
+                f"{law_timeout_s:g} s must be at most half of tunnel.safety.loop_timeout_s "
+                f"({self.tunnel.safety.loop_timeout_s:g} s)",
+                key="supervisor.control.law_timeout_s",
+            )
 
     def identifiers(self) -> dict[str, str]:
         """The names of this rig that become parts of file names or keys, by their key."""

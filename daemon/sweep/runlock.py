@@ -24,6 +24,7 @@ from typing import IO
 from flagtrack.daemon.errors import ConfigError
 
 LOCK_FILE = ".lock"
+_ATTEMPTS, _RETRY_S = 5, 0.02  # an exclusive lock is tried this often, this far apart, before refusing
 
 
 class RunLock:
@@ -95,9 +96,14 @@ def _open_locked(run_dir: Path, path: Path) -> IO[str]:
         handle = open(path, "a+", encoding="utf-8")  # noqa: SIM115 - closed by release()
     except OSError as exc:
         raise ConfigError(f"cannot lock the run folder: {exc.strerror or exc}", path=str(path)) from exc
-    try:
-        fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
+    for attempt in range(_ATTEMPTS):  # (a moment: a probe of held_by may hold it shared)
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            break
+        except OSError:
+            if attempt + 1 < _ATTEMPTS:
+                time.sleep(_RETRY_S)
+    else:
         handle.seek(0)
         holder = describe_holder(handle.read())
         handle.close()

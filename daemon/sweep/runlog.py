@@ -38,7 +38,7 @@ from flagtrack.daemon.security.names import identifier_problem
 from flagtrack.daemon.sweep.plan import Point, SweepConfig, plan_points
 from flagtrack.daemon.sweep.quantities import POINT_ALIASES
 from flagtrack.daemon.typed_yaml import from_mapping, to_mapping
-from flagtrack.drivers.formats.recording.reserve import DiskReserve
+from flagtrack.drivers.reserve import DiskReserve
 
 log = logging.getLogger(__name__)
 

@@ -28,7 +28,7 @@ from flagtrack.daemon.tracking.setup import TrackingSetup, load_tracking_config_
 from flagtrack.daemon.typed_yaml import from_mapping
 from flagtrack.daemon.validation.collect import raw_triggers
 from flagtrack.daemon.validation.figures import plot_point
-from flagtrack.daemon.validation.point import FlagFrame, PointValidation, validate_point
+from flagtrack.daemon.validation.point import FlagFrame, PointValidation, SensorFields, validate_point
 from flagtrack.drivers.sensor.record import read_sensor_record
 from flagtrack.drivers.sensor.setup import SensorConfig
 
@@ -122,7 +122,7 @@ def validate_run(
                                             window_s, str(record.start.get("run_id", "?")))  # fmt: skip
         except (FormatError, OSError) as exc:  # this point's files: the others go on
             log.warning("validate: point %s not validated: %s", point.point_id, exc)
-            updated, figure = dataclasses.replace(point, sensor_status=f"{DAMAGED}{exc}"), None
+            updated, figure = _not_validated(point, f"{DAMAGED}{exc}"), None
         points.append(updated)
         if figure is not None:
             figures[point.point_id] = figure
@@ -131,6 +131,13 @@ def validate_run(
     title += run_caption(record, points)
     figure = plot_sweep(points, out / "validation.png", title)
     return RunValidation(points, csv, figure, figures)
+
+
+def _not_validated(point: PointResult, status: str) -> PointResult:
+    """``point`` with ``status`` and none of the live run's comparison figures (they were not recomputed)."""
+    names = {*SensorFields.__annotations__, "cloud_distance_mean_over_l", "cloud_distance_std_over_l"}
+    defaults: dict[str, Any] = {f.name: f.default for f in dataclasses.fields(PointResult) if f.name in names}
+    return dataclasses.replace(point, **{**defaults, "sensor_status": status})
 
 
 def _validate_one(

@@ -18,7 +18,7 @@ import pytest
 from flagtrack.daemon.sweep.runlog import read_run
 from flagtrack.drivers.formats import read_events, write_events
 from flagtrack.drivers.formats.centreline import read_centrelines
-from flagtrack.drivers.formats.recording.reserve import RESERVE_BYTES
+from flagtrack.drivers.reserve import RESERVE_BYTES
 from flagtrack.drivers.sim.quickline import QuickLineParams, WavyFlag, line_events
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel

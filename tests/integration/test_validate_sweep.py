@@ -141,6 +141,8 @@ def test_a_damaged_point_is_said_and_the_others_are_validated(
     rows = {r["point_id"]: r for r in json.loads(captured.out)["points"]}
     assert rows[flapping.point_id]["sensor_status"].startswith(f"damaged: {lines}")
     assert rows[still.point_id]["sensor_status"].startswith(f"damaged: {copy / still.sensor_file}")
+    assert rows[flapping.point_id]["sensor_error_rms_over_l"] is None  # not the live run's number
+    assert rows[flapping.point_id]["cloud_distance_mean_over_l"] is None
     said = [r.getMessage() for r in caplog.records if "not validated" in r.getMessage()]
     assert [p in m for p, m in zip((still.point_id, flapping.point_id), said, strict=True)] == [True, True]
     assert f"{flapping.point_id} (the lines above" in captured.err.splitlines()[-1], captured.err

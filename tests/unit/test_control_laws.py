@@ -141,3 +141,15 @@ def test_controller_none_runs_on_requests_only_and_needs_them(tmp_path: Path) ->
     with pytest.raises(ConfigError, match="nothing would move the speed") as refused:
         control_rig(quiet, "none")
     assert refused.value.key == "--controller"
+
+
+def test_the_law_timeout_must_leave_the_tunnels_keep_alive_time() -> None:
+    from flagtrack.daemon.rig.config import RigConfig
+    from flagtrack.daemon.typed_yaml import from_mapping
+
+    tunnel = {"driver": "simulated", "safety": {"loop_timeout_s": 3.0}}
+    ok = from_mapping(RigConfig, {"tunnel": tunnel, "supervisor": {"control": {"law_timeout_s": 1.5}}})
+    assert ok.supervisor.control.law_timeout_s == 1.5
+    with pytest.raises(ConfigError, match="at most half of tunnel.safety.loop_timeout_s") as refused:
+        from_mapping(RigConfig, {"tunnel": tunnel, "supervisor": {"control": {"law_timeout_s": 2.0}}})
+    assert refused.value.key == "supervisor.control.law_timeout_s"

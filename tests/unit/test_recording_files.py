@@ -22,7 +22,7 @@ from flagtrack.drivers.formats.centreline import read_centrelines
 from flagtrack.drivers.formats.packets import Packetizer, PacketParams
 from flagtrack.drivers.formats.recording import FreeSpaceGuard, PartChain, RecordingPart, drop_summary
 from flagtrack.drivers.formats.recording.chain import failed_write
-from flagtrack.drivers.formats.recording.reserve import RESERVE_BYTES, DiskReserve
+from flagtrack.drivers.reserve import RESERVE_BYTES, DiskReserve
 from flagtrack.drivers.sim.quickline import WavyFlag, line_events
 from tests.integration.test_centreline_file_service import message
 
@@ -285,4 +285,22 @@ def test_a_part_holds_its_room_while_it_records_and_gives_it_back_when_it_closes
     part.write_packet(packets[0])
     assert (tmp_path / ".rec.reserve").stat().st_size == RESERVE_BYTES
     part.close()
+    assert not (tmp_path / ".rec.reserve").exists()
+
+
+def test_a_file_system_that_cannot_allocate_records_without_the_room_and_says_so(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    def unsupported(fd: int, offset: int, size: int) -> None:
+        raise OSError(errno.EOPNOTSUPP, "Operation not supported")
+
+    monkeypatch.setattr("os.posix_fallocate", unsupported, raising=False)
+    events, packets = camera()
+    part = RecordingPart(base=tmp_path / "rec", config={}, want_centrelines=True)
+    for packet in packets:
+        part.write_packet(packet)
+    part.close()
+    np.testing.assert_array_equal(read_events(tmp_path / "rec.raw", strict=True).events, events)
+    said = [r.getMessage() for r in caplog.records if "no room kept for closing its files" in r.getMessage()]
+    assert len(said) == 1 and "Operation not supported" in said[0]
     assert not (tmp_path / ".rec.reserve").exists()

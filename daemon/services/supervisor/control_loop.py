@@ -265,6 +265,8 @@ class ControlLoop:
 
     def _request(self, session: Session, asked: Asked) -> None:
         speed, problem = checked_output(asked.request.speed_mps)
+        if self.safe_reason:  # (the safe speed holds to the end, as after the law's faults)
+            speed, problem = None, "the run holds its safe speed after the law's faults"
         if speed is None:
             self.desk.answer(asked, False, -1.0, problem or "no speed")  # type: ignore[union-attr]
             record: dict[str, Any] = {"requester": asked.who, "request_id": asked.request.request_id, "asked_mps": None}

@@ -140,8 +140,8 @@ def failed_write(exc: BaseException, default: Path) -> tuple[Path, str]:
     lines) says of the file and the system's error."""
     filename = exc.filename if isinstance(exc, OSError) else None
     text = (exc.strerror if isinstance(exc, OSError) else None) or str(exc)
-    named = re.search(r"filename = '([^']+)'", text)
-    system = re.search(r"error message = '([^']+)'", text)
+    named = re.search(r"filename = '(.+?)', file descriptor", text) or re.search(r"filename = '([^']+)'", text)
+    system = re.search(r"error message = '(.+?)', buf", text) or re.search(r"error message = '([^']+)'", text)
     path = Path(filename) if filename else Path(named.group(1)) if named else default
     first_line = text.splitlines()[0] if text else type(exc).__name__
     return path, system.group(1) if system else first_line

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import time
@@ -18,7 +19,7 @@ from flagtrack.drivers.formats.centreline import CentrelineShapeError, Centrelin
 from flagtrack.drivers.formats.recording.inputs import CameraPacket, CentrelineUpdates, SyncIntervals
 from flagtrack.drivers.formats.recording.paths import part_base, recording_file
 from flagtrack.drivers.formats.recording.raw_part import RawPartFile
-from flagtrack.drivers.formats.recording.reserve import RESERVE_BYTES, RESERVE_BYTES_RAW_ONLY, DiskReserve
+from flagtrack.drivers.reserve import RESERVE_BYTES, RESERVE_BYTES_RAW_ONLY, DiskReserve
 
 log = logging.getLogger(__name__)
 
@@ -161,10 +162,14 @@ class RecordingPart:
         self.ended = packet.end_of_stream
 
     def _take_reserve(self) -> None:
-        """Keep the room the files need to close on a full disk (:mod:`.reserve`)."""
+        """Keep the room the files need to close on a full disk (:mod:`flagtrack.drivers.reserve`); a
+        full disk stops the part before it starts, a file system that cannot allocate is said once."""
         try:
             self.reserve.take()
         except OSError as exc:
+            if exc.errno not in (errno.ENOSPC, errno.EDQUOT):
+                log.warning("%s: recording with no room kept for closing its files: %s", self.raw_path, exc)
+                return
             kept = f"keeping {self.reserve.size // 1024} KiB to close the files"
             raise OSError(exc.errno, f"{exc.strerror} ({kept})", str(self.raw_path)) from exc
 

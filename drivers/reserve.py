@@ -1,9 +1,11 @@
-"""Room kept on the recording's disk for closing its files after a write failed on a full disk.
+"""Room kept on a disk for the last writes after it filled up (standard library only).
 
 The HDF5 library flushes what it holds when its file closes: with no room left that close fails
-(h5py then prints a traceback per object as they are freed, and the process may crash). A part
-therefore holds a hidden file of :data:`RESERVE_BYTES` next to its recording, given back just before
-its files are closed after a failure, so the centreline file and the sidecar close whole.
+(h5py then prints a traceback per object as they are freed, and the process may crash). A recording
+part therefore holds a hidden file of :data:`RESERVE_BYTES` next to its recording, given back just
+before its files close, so the centreline file and the sidecar close whole; a sweep's run log keeps
+one for its last records. A process killed outright leaves its reserve behind (hidden, and replaced
+by the next one made at the same path).
 """
 
 from __future__ import annotations
