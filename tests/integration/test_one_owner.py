@@ -58,13 +58,19 @@ sys.stdin.read()
 """
 
 
-def test_a_run_folder_in_use_is_refused_naming_the_holder_and_freed_by_its_death(tmp_path: Path) -> None:
-    run_dir = tmp_path / "runs" / "run"
+def hold(run_dir: Path) -> subprocess.Popen:
+    """Another process holding ``run_dir``'s lock (until it is killed)."""
     holder = subprocess.Popen(
         [sys.executable, "-c", HOLD, str(run_dir)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
     )
+    assert holder.stdout is not None and holder.stdout.readline() == "locked\n"
+    return holder
+
+
+def test_a_run_folder_in_use_is_refused_naming_the_holder_and_freed_by_its_death(tmp_path: Path) -> None:
+    run_dir = tmp_path / "runs" / "run"
+    holder = hold(run_dir)
     try:
-        assert holder.stdout is not None and holder.stdout.readline() == "locked\n"
         with pytest.raises(ConfigError) as refused:
             RunLock.acquire(run_dir, "flagtrack sweep --resume runs/run")
         text = str(refused.value)
@@ -96,11 +102,8 @@ def test_a_finished_run_leaves_no_lock_file_and_a_removed_one_is_not_locked(tmp_
 
 def test_resuming_a_run_in_use_is_refused_before_the_rig_starts(tmp_path: Path) -> None:
     run_dir = tmp_path / "runs" / "run"
-    holder = subprocess.Popen(
-        [sys.executable, "-c", HOLD, str(run_dir)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
-    )
+    holder = hold(run_dir)
     try:
-        assert holder.stdout is not None and holder.stdout.readline() == "locked\n"
         assert held_by(run_dir) is not None and held_by(tmp_path) is None
         resume = subprocess.run(
             [*FLAGTRACK, "sweep", "--resume", str(run_dir)], capture_output=True, text=True, timeout=60
