@@ -62,3 +62,17 @@ def test_a_law_that_does_not_return_in_time_is_a_fault_and_is_not_called_again_u
     assert calling.call("next").value == 1.0
     assert calls == ["stuck", "next"]
     calling.close()
+
+
+def test_what_the_law_returns_is_checked_in_its_thread_too() -> None:
+    class Hangs:
+        def __float__(self) -> float:
+            threading.Event().wait()  # never returns
+            return 0.0
+
+    def check(value: object) -> tuple[object, str]:
+        return float(value), ""  # type: ignore[arg-type]
+
+    calling = LawCall(lambda state: Hangs(), timeout_s=0.05, check=check)
+    assert calling.call(None).fault == "did not return within 0.05 s"  # the caller is not held
+    calling.close()

@@ -106,7 +106,7 @@ class ControlLoop:
         if self.desk is not None:
             self.desk.taking = True
         if self.law is not None:
-            self.calling = LawCall(self.law.function, self.cfg.law_timeout_s)
+            self.calling = LawCall(self.law.function, self.cfg.law_timeout_s, check=checked_output)
         while self.cfg.duration_s == 0 or session.clock.monotonic() - self._t0_s < self.cfg.duration_s:
             session.idle(0)  # the rig watched: a stop request
             problem = session.outside.problem()
@@ -166,7 +166,8 @@ class ControlLoop:
         self._last_step_s = session.clock.monotonic()
         answer = self.calling.call(state)
         self._out_faults = int(self.calling.busy)
-        asked, fault = checked_output(answer.value) if not answer.fault else (None, answer.fault)
+        asked = answer.value if isinstance(answer.value, float) else None  # (checked_output's: a float or None)
+        fault = answer.fault
         if not fault:
             self._say_if_slow(answer.took_s)
         record: dict[str, Any] = {"asked_mps": asked, "applied_mps": self.target_mps, "setpoint": self.law.setpoint()}

@@ -29,10 +29,18 @@ class Answer:
 
 
 class LawCall:
-    """Calls ``function`` with a state in a daemon thread and waits at most ``timeout_s`` for it."""
+    """Calls ``function`` with a state in a daemon thread and waits at most ``timeout_s`` for it;
+    ``check`` (in that thread too: a returned object's own methods may hang or raise) turns what it
+    returned into (value, fault), "" for no fault."""
 
-    def __init__(self, function: Callable[[Any], object], timeout_s: float, name: str = "law") -> None:
-        self._function = function
+    def __init__(
+        self,
+        function: Callable[[Any], object],
+        timeout_s: float,
+        name: str = "law",
+        check: Callable[[object], tuple[object, str]] = lambda value: (value, ""),
+    ) -> None:
+        self._function, self._check = function, check
         self.timeout_s = timeout_s
         self._calls: queue.SimpleQueue[object] = queue.SimpleQueue()
         self._answers: queue.SimpleQueue[Answer] = queue.SimpleQueue()
@@ -83,7 +91,7 @@ class LawCall:
         while (state := self._calls.get()) is not _CLOSE:
             start_s = time.monotonic()
             try:
-                value, fault = self._function(state), ""
+                value, fault = self._check(self._function(state))
             except BaseException as exc:  # noqa: BLE001 - a user's law: whatever it raises is a fault
                 value, fault = None, f"raised {type(exc).__name__}" + (f": {exc}" if str(exc) else "")
             self._answers.put(Answer(value, fault, time.monotonic() - start_s))
