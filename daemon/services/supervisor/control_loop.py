@@ -8,7 +8,8 @@ with the latency from the camera packet behind the state to that write (the seri
 to the port when it says when, else the end of the exchange). The law runs in a thread of its own
 (:class:`~flagtrack.daemon.services.supervisor.law_call.LawCall`): a law that raises, returns what is
 not a speed, or does not return within ``law_timeout_s`` holds the speed (said once, in one line);
-``max_faults`` in a row stop the run safe, and a law slower than ``period_s`` is said once. Requests from the bus go through the same bounds and are answered. The session ends the run
+``max_faults`` in a row stop the run safe, and a law slower than ``period_s`` is said once.
+Requests from the bus go through the same bounds and are answered. The session ends the run
 with the tunnel ramped to zero, whatever ends it (the duration, a signal, a service gone, an error).
 """
 
@@ -269,7 +270,8 @@ class ControlLoop:
         if self.safe_reason:  # (the safe speed holds to the end, as after the law's faults)
             speed, problem = None, "the run holds its safe speed after the law's faults"
         if speed is None:
-            self.desk.answer(asked, False, -1.0, problem or "no speed")  # type: ignore[union-attr]
+            problem = problem or "no speed"
+            self.desk.answer(asked, False, -1.0, problem)  # type: ignore[union-attr]
             record: dict[str, Any] = {"requester": asked.who, "request_id": asked.request.request_id, "asked_mps": None}
             self._write(
                 session, self.state, {**record, "applied_mps": self.target_mps, "reason": f"refused: {problem}"}
