@@ -176,7 +176,7 @@ def validate_task(
         A row with the seconds, the worker and ``validation.csv`` (events and updates are the points'),
         or ``failed`` with the reason.
     """
-    from flagtrack.daemon.validation.run import DAMAGED, validate_run
+    from flagtrack.daemon.validation.run import validate_run
 
     _tune()
     started, worker = time.perf_counter(), worker_name()
@@ -186,8 +186,7 @@ def validate_task(
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("default")
             result = validate_run(run_dir, sensor=sensor, centrelines_dir=centrelines_dir, window_s=window_s)
-        damaged = [f"{run_dir}: point {p.point_id} {p.sensor_status}" for p in result.points
-                   if (p.sensor_status or "").startswith(DAMAGED)]  # fmt: skip
+        damaged = [f"{run_dir}: point {p.point_id} {p.sensor_status}" for p in result.damaged]
         if not damaged:  # (a run with a damaged point is validated again next time)
             atomic_write(stamp_path, json.dumps(dict(stamp), sort_keys=True) + "\n")
         seconds = time.perf_counter() - started

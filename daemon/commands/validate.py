@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
 
     from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.sweep.runlog import RUN_LOG, read_run
-    from flagtrack.daemon.validation.run import DAMAGED, run_sensor_config, validate_run
+    from flagtrack.daemon.validation.run import run_sensor_config, validate_run
 
     if not (args.run_dir / RUN_LOG).exists():
         raise ConfigError(f"no run log in {args.run_dir}", key="RUN_DIR")
@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         _print_table(rows)
         print(f"flagtrack validate: {len(rows)} points -> {result.csv} and {result.figure}", file=sys.stderr)
-    damaged = [str(r["point_id"]) for r in rows if str(r["sensor_status"]).startswith(DAMAGED)]
+    damaged = [p.point_id for p in result.damaged]
     if damaged:
         print(f"flagtrack validate: {len(damaged)} point(s) not validated, their files damaged: "
               f"{', '.join(damaged)} (the lines above say which file)", file=sys.stderr)  # fmt: skip

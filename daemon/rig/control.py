@@ -36,6 +36,7 @@ def control_rig(
     control = rig.supervisor.control
     law = controller if controller is not None else control.controller
     key = "--controller" if controller is not None else "supervisor.control.controller"
+    where = rig.path if key != "--controller" else None  # (an option is named alone, a key with its file)
     if law is None:
         raise ConfigError(
             f"no control law: give --controller FILE.py:FUNCTION, {', '.join(BUILT_IN)}, or {NO_LAW} (speed "
@@ -48,10 +49,10 @@ def control_rig(
             raise ConfigError(
                 f"{NO_LAW}: no law and supervisor.control.requests false: nothing would move the speed",
                 key=key,
-                path=rig.path if key != "--controller" else None,
+                path=where,
             )
     elif law not in BUILT_IN:
-        law_file(law, key=key, path=rig.path if key != "--controller" else None)
+        law_file(law, key=key, path=where)
     supervisor = rig.supervisor
     runs_dir, run_name = supervisor.runs_dir, supervisor.run_name
     if out is not None:

@@ -49,6 +49,11 @@ class RunValidation:
     figure: Path
     point_figures: dict[str, Path]
 
+    @property
+    def damaged(self) -> list[PointResult]:
+        """The points not validated because their files could not be read (status ``damaged: ...``)."""
+        return [p for p in self.points if (p.sensor_status or "").startswith(DAMAGED)]
+
 
 def run_sensor_config(record: Any, path: str) -> SensorConfig:
     """The ``sensor:`` section stored in a run's start record.
