@@ -137,7 +137,10 @@ def _atomic_open(
     path: Path, mode: str, encoding: str, newline: str | None, permissions: int | None
 ) -> Iterator[IO[Any]]:
     pending = PendingFile(path)
-    fd = os.open(pending.tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666 if permissions is None else permissions)
+    try:
+        fd = os.open(pending.tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666 if permissions is None else permissions)
+    except OSError as exc:  # named by the file meant, not its hidden temporary name
+        raise OSError(exc.errno, exc.strerror, str(path)) from exc
     try:
         if permissions is not None:
             os.fchmod(fd, permissions)  # whatever the umask

@@ -80,11 +80,7 @@ def run(args: argparse.Namespace) -> int:
     if supervisor_service is not None and supervisor_service.run_dir is not None:
         run_dir = supervisor_service.run_dir
         print(f"flagtrack sweep: {supervisor_service.stop_reason}; run folder {run_dir}", file=sys.stderr)
-        print(
-            f"  log {run_dir / 'run.jsonl'}\n  summary {run_dir / 'summary.csv'}\n  figure {run_dir / 'amplitude.png'}\n"
-            f"  about {run_dir / 'README.txt'} (what each file is; run.json for programs)",
-            file=sys.stderr,
-        )
+        print(_run_files(run_dir), file=sys.stderr)
         if supervisor_service.stop_reason != "finished":
             print(f"  resume with: flagtrack sweep --resume {run_dir}", file=sys.stderr)
             return result.code or 1
@@ -92,3 +88,18 @@ def run(args: argparse.Namespace) -> int:
     # no run folder: the sweep never began (services that did not appear, a run in use): said, not 0
     print("flagtrack sweep: no run was started (the lines above say why)", file=sys.stderr)
     return result.code or 1
+
+
+def _run_files(run_dir: Path) -> str:
+    """Where the run's files are: those written, then those that are not (the lines above say why)."""
+    files = [
+        ("log", "run.jsonl", ""),
+        ("summary", "summary.csv", ""),
+        ("figure", "amplitude.png", ""),
+        ("about", "README.txt", " (what each file is; run.json for programs)"),
+    ]
+    lines = [f"  {label} {run_dir / name}{note}" for label, name, note in files if (run_dir / name).exists()]
+    missing = [name for _, name, _ in files if not (run_dir / name).exists()]
+    if missing:
+        lines.append(f"  not written: {', '.join(missing)} (the lines above say why)")
+    return "\n".join(lines)

@@ -21,7 +21,6 @@ from __future__ import annotations
 import fnmatch
 import json
 import math
-import os
 import shlex
 import sys
 import textwrap
@@ -34,6 +33,7 @@ from flagtrack.daemon import __file__ as _daemon_init
 from flagtrack.daemon import __version__
 from flagtrack.daemon.sweep.quantities import QUANTITIES
 from flagtrack.daemon.sweep.runlog import RUN_LOG, PointResult, RunRecord, point_record
+from flagtrack.drivers.atomic import atomic_write
 
 RUN_JSON = "run.json"
 README = "README.txt"
@@ -152,8 +152,8 @@ def write_run_files(
     """Write ``run.json`` and ``README.txt`` in the run's folder (each atomically); return their paths."""
     run_dir = record.run_dir
     description = describe_run(record, points, onset_mps, decay_mps)
-    json_path = _write_atomic(run_dir / RUN_JSON, json.dumps(description, indent=1, allow_nan=False) + "\n")
-    readme_path = _write_atomic(run_dir / README, readme_text(description))
+    json_path = atomic_write(run_dir / RUN_JSON, json.dumps(description, indent=1, allow_nan=False) + "\n")
+    readme_path = atomic_write(run_dir / README, readme_text(description))
     return json_path, readme_path
 
 
@@ -271,13 +271,3 @@ def _iso(t_unix: Any) -> str | None:
     if not isinstance(t_unix, int | float) or not math.isfinite(t_unix):
         return None
     return time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(t_unix))
-
-
-def _write_atomic(path: Path, text: str) -> Path:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as handle:
-        handle.write(text)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
-    return path

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import fcntl
 import json
+import logging
 import os
 import socket
 import time
@@ -22,6 +23,8 @@ from types import TracebackType
 from typing import IO
 
 from flagtrack.daemon.errors import ConfigError
+
+log = logging.getLogger(__name__)
 
 LOCK_FILE = ".lock"
 _ATTEMPTS, _RETRY_S = 5, 0.02  # an exclusive lock is tried this often, this far apart, before refusing
@@ -60,9 +63,13 @@ class RunLock:
         """Remove the lock file and unlock (idempotent): the run is free, its folder holds no lock."""
         if not self._handle.closed:
             path = self.run_dir / LOCK_FILE
-            if _names(path, self._handle):
-                path.unlink(missing_ok=True)  # still locked: whoever opens it now finds it removed
-            self._handle.close()
+            try:
+                if _names(path, self._handle):
+                    path.unlink(missing_ok=True)  # still locked: whoever opens it now finds it removed
+            except OSError as exc:  # a folder gone read-only: closing still frees the run
+                log.warning("%s: left in place (%s); the run is free all the same", path, exc.strerror or exc)
+            finally:
+                self._handle.close()
 
     def __enter__(self) -> RunLock:
         return self

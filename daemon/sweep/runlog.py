@@ -382,7 +382,10 @@ class RunLog:
         """Append the stop record (``finished``, ``SIGTERM``, ``error``, ...); the reserve is given back
         (a resume makes a new one)."""
         self._append({"type": "stop", "t_unix": _now(t_unix), "reason": reason, "error": error})
-        (self.run_dir / RESERVE).unlink(missing_ok=True)
+        try:
+            (self.run_dir / RESERVE).unlink(missing_ok=True)
+        except OSError as exc:  # the record is written; only the reserve stays (a resume reuses it)
+            log.warning("%s: could not give back the run's reserve: %s", self.run_dir / RESERVE, exc.strerror or exc)
 
     def close(self) -> None:
         """Close the file (idempotent)."""

@@ -13,7 +13,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
-import os
 import textwrap
 import time
 from collections.abc import Sequence
@@ -23,6 +22,7 @@ from flagtrack.daemon.sweep.figures import plot_amplitude, plot_sweep
 from flagtrack.daemon.sweep.quantities import POINT_ALIASES
 from flagtrack.daemon.sweep.runfiles import write_run_files
 from flagtrack.daemon.sweep.runlog import PointResult, RunRecord, read_run
+from flagtrack.drivers.atomic import atomic_open
 
 SUMMARY_CSV = "summary.csv"
 AMPLITUDE_FIGURE = "amplitude.png"
@@ -47,17 +47,13 @@ def summary_points(record: RunRecord) -> list[PointResult]:
 def write_summary_csv(points: Sequence[PointResult], path: str | Path) -> Path:
     """Write ``points`` as CSV (``NaN`` for missing numbers), atomically (temp file + rename)."""
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="", encoding="utf-8") as handle:
+    with atomic_open(path, "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(SUMMARY_COLUMNS)
         for point in points:
             row = dataclasses.asdict(point)
             row.update({old: row[new] for old, new in POINT_ALIASES.items()})
             writer.writerow([_cell(row[name]) for name in SUMMARY_COLUMNS])
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
     return path
 
 

@@ -136,3 +136,10 @@ def test_temporary_names_are_hidden_fresh_and_end_in_tmp(tmp_path: Path) -> None
 def test_only_write_modes_are_taken(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="'a'"):
         atomic_open(tmp_path / "x", "a")  # type: ignore[call-overload]
+
+
+def test_a_file_that_cannot_be_created_is_named_in_the_error_not_its_temporary(tmp_path: Path) -> None:
+    target = tmp_path / "missing" / "summary.csv"
+    with pytest.raises(FileNotFoundError) as caught:
+        atomic_write(target, "x")
+    assert caught.value.filename == str(target) and str(target) in str(caught.value)

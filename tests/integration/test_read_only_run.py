@@ -1,0 +1,76 @@
+"""A run folder that turns read-only between two points (a disk remounted read-only after an error):
+`flagtrack sweep` in a private mount namespace (`unshare -m`, skipped with a reason where it cannot
+be made), the folder bound read-only over itself once the first point is logged. The sweep stops
+safe with the tunnel at zero; the lines say which file could not be written, not a temporary name or
+"supervisor failed"; the end message does not list files that were not written; the log keeps both
+records and the run resumes once the folder is writable again."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from flagtrack.daemon.sweep.runlog import read_run
+from flagtrack.drivers.formats import read_events
+from flagtrack.drivers.tunnel.sim_model import SimParams
+from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
+from tests.fakes.tunnel import SWEEP_SIM
+from tests.integration.test_full_disk import _namespaces_work
+from tests.integration.test_restart_resumes import FLAGTRACK, rig_file
+
+
+@pytest.fixture
+def sim_params() -> SimParams:
+    return SWEEP_SIM
+
+
+@pytest.mark.slow
+def test_a_run_folder_turning_read_only_stops_the_sweep_safe_and_says_what_was_not_written(
+    sim: SimulatedTunnel, tmp_path: Path
+) -> None:
+    why = _namespaces_work()
+    if why:
+        pytest.skip(why)
+    sweep = {"speeds": [5.5, 6.0], "branches": ["up"], "settle_s": 0.5, "record_s": 1.0}
+    rig = rig_file(tmp_path, sim.port, sweep, {}, expected_rate_mev_s=0.0, free_space_margin_mb=0.0)
+    runs, out, night = tmp_path / "runs", tmp_path / "copy", tmp_path / "runs" / "night"
+    runs.mkdir()
+    out.mkdir()
+    flagtrack = " ".join(FLAGTRACK)
+    first_point_logged = (  # polled with a bound of 90 s
+        f'i=0; until grep -q \'"type": "point"\' {night}/run.jsonl 2>/dev/null || [ $i -gt 900 ]; '
+        "do sleep 0.1; i=$((i+1)); done"
+    )
+    script = (
+        f"mount -t tmpfs -o size=256m tmpfs {runs} || exit 99; "
+        f"{flagtrack} sweep -c {rig} & pid=$!; {first_point_logged}; "
+        f"mount --bind {night} {night} && mount -o remount,bind,ro {night} || exit 98; "
+        f"wait $pid; rc=$?; cp -a {runs}/. {out}/; "
+        f"echo RESUME >&2; mount -o remount,bind,rw {night} && {flagtrack} sweep --resume {night} >&2; "
+        f"cp {night}/run.jsonl {out}/resumed.jsonl; exit $rc"
+    )
+    done = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True, timeout=180)
+    first, resumed = done.stderr.split("RESUME\n", 1)
+    assert done.returncode == 1, done.stderr[-4000:]
+    assert "Traceback" not in done.stderr
+    # the second point's start failed on its own file (not a hidden temporary name); the run stopped there
+    record = read_run(out / "night")
+    done_point, failed = record.points
+    assert done_point.status == "done" and failed.status == "failed", record.points
+    assert "Read-only file system" in failed.reason and "points/001-up-6.00.json'" in failed.reason, failed.reason
+    assert record.stop is not None and "001-up-6.00" in record.stop["reason"]
+    assert len(read_events(out / "night" / done_point.raw_file).events) > 0
+    # what could not be written is said once each, as what it is; the end does not claim it
+    assert "could not write the stop record" not in first and "supervisor failed" not in first, first[-3000:]
+    assert "summary failed" in first
+    assert "not written: summary.csv, amplitude.png, README.txt (the lines above say why)" in first, first[-3000:]
+    assert "  summary " not in first and "  log " in first
+    assert sim.setpoint_mps == 0.0 and sim.watchdog_trips == 0
+    # writable again: the same run resumes (the lock left behind does not hold it) and finishes
+    lines = [json.loads(line) for line in (out / "resumed.jsonl").read_text().splitlines()]
+    assert [r["type"] for r in lines][-4:] == ["stop", "resume", "point", "stop"], resumed[-3000:]
+    assert lines[-2]["point_id"] == "001-up-6.00" and lines[-2]["status"] == "done"
+    assert lines[-1]["reason"] == "finished", resumed[-3000:]
