@@ -431,7 +431,9 @@ def _make_reserve(path: Path) -> None:
     if path.exists():
         return
     try:
-        DiskReserve(path, RESERVE_BYTES).take()
+        reserve = DiskReserve(path, RESERVE_BYTES)
+        reserve.take()
+        reserve.leave()  # (kept across resumes; removed by the stop record or spent on a full disk)
     except OSError as exc:
         log.warning("%s: no reserve for the run log's last records: %s", path, exc.strerror or exc)
 

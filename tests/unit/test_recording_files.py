@@ -288,6 +288,46 @@ def test_a_part_holds_its_room_while_it_records_and_gives_it_back_when_it_closes
     assert not (tmp_path / ".rec.reserve").exists()
 
 
+HOLD_RESERVE = """
+import os, signal, sys
+from pathlib import Path
+from flagtrack.drivers.reserve import DiskReserve
+DiskReserve(Path(sys.argv[1]), 64 * 1024).take()
+print("held", flush=True)
+if sys.argv[2] == "killed":
+    os.kill(os.getpid(), signal.SIGKILL)
+sys.stdin.read()  # held until the test closes stdin
+"""
+
+
+def test_a_reserve_left_by_a_killed_process_goes_when_a_part_starts_there_one_held_stays(tmp_path: Path) -> None:
+    killed, live = tmp_path / ".killed.reserve", tmp_path / ".live.reserve"
+    subprocess.run([sys.executable, "-c", HOLD_RESERVE, str(killed), "killed"], capture_output=True, timeout=60)
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLD_RESERVE, str(live), "live"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "held\n"
+        assert killed.exists() and live.exists()
+        _, packets = camera()
+        part = RecordingPart(base=tmp_path / "rec", config={}, want_centrelines=False)
+        part.write_packet(packets[0])
+        assert not killed.exists() and live.exists() and (tmp_path / ".rec.reserve").exists()
+        part.close()
+        assert live.exists()
+    finally:
+        holder.communicate("", timeout=60)
+    assert sorted(p.name for p in tmp_path.glob(".*.reserve")) == [".live.reserve"]  # its holder exited cleanly:
+    # (no release ran, so the file stays; unlocked now, the next part started here removes it)
+    second = RecordingPart(base=tmp_path / "rec2", config={}, want_centrelines=False)
+    second.write_packet(packets[0])
+    second.close()
+    assert not live.exists()
+
+
 def test_a_file_system_that_cannot_allocate_records_without_the_room_and_says_so(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:

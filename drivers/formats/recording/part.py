@@ -19,7 +19,7 @@ from flagtrack.drivers.formats.centreline import CentrelineShapeError, Centrelin
 from flagtrack.drivers.formats.recording.inputs import CameraPacket, CentrelineUpdates, SyncIntervals
 from flagtrack.drivers.formats.recording.paths import part_base, recording_file
 from flagtrack.drivers.formats.recording.raw_part import RawPartFile
-from flagtrack.drivers.reserve import RESERVE_BYTES, RESERVE_BYTES_RAW_ONLY, DiskReserve
+from flagtrack.drivers.reserve import RESERVE_BYTES, RESERVE_BYTES_RAW_ONLY, DiskReserve, remove_stale_reserves
 
 log = logging.getLogger(__name__)
 
@@ -164,6 +164,9 @@ class RecordingPart:
     def _take_reserve(self) -> None:
         """Keep the room the files need to close on a full disk (:mod:`flagtrack.drivers.reserve`); a
         full disk stops the part before it starts, a file system that cannot allocate is said once."""
+        stale = remove_stale_reserves(self.reserve.path.parent)
+        if stale:
+            log.info("removed the room kept by a recording that was killed: %s", ", ".join(p.name for p in stale))
         try:
             self.reserve.take()
         except OSError as exc:
