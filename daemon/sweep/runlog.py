@@ -46,7 +46,7 @@ RUN_LOG = "run.jsonl"
 LOG_VERSION = 1
 POINTS_DIR = "points"
 RESERVE = ".reserve"
-RESERVE_BYTES = 1 << 20
+RUN_LOG_RESERVE_BYTES = 1 << 20
 """Disk held in each run folder so the point and stop records still fit when the disk fills up."""
 _BLANK = b" \t\r\n\x00"
 
@@ -427,11 +427,11 @@ def _write_all(handle: Any, data: bytes) -> None:
 
 
 def _make_reserve(path: Path) -> None:
-    """Hold :data:`RESERVE_BYTES` of disk for the run's last records (given up when the disk is full)."""
+    """Hold :data:`RUN_LOG_RESERVE_BYTES` of disk for the run's last records (given up when the disk is full)."""
     if path.exists():
         return
     try:
-        reserve = DiskReserve(path, RESERVE_BYTES)
+        reserve = DiskReserve(path, RUN_LOG_RESERVE_BYTES)
         reserve.take()
         reserve.leave()  # (kept across resumes; removed by the stop record or spent on a full disk)
     except OSError as exc:
