@@ -262,7 +262,7 @@ class ControlLoop:
         """Apply and answer the speed requests that came (the newest of each identity)."""
         if self.desk is None:
             return
-        for asked in self.desk.take():
+        for asked in self.desk.take(on_refused=lambda asked, why: self._refused(session, asked, why)):
             self._request(session, asked)
 
     def _request(self, session: Session, asked: Asked) -> None:
@@ -272,10 +272,7 @@ class ControlLoop:
         if speed is None:
             problem = problem or "no speed"
             self.desk.answer(asked, False, -1.0, problem)  # type: ignore[union-attr]
-            record: dict[str, Any] = {"requester": asked.who, "request_id": asked.request.request_id, "asked_mps": None}
-            self._write(
-                session, self.state, {**record, "applied_mps": self.target_mps, "reason": f"refused: {problem}"}
-            )
+            self._refused(session, asked, problem)
             return
         applied, reason = bound_speed(speed, self.bounds.min_speed_mps, self.bounds.max_speed_mps)
         written = self._command(session, applied)
@@ -283,6 +280,16 @@ class ControlLoop:
         self.desk.answer(asked, True, applied, reason, written, readback)  # type: ignore[union-attr]
         record = {"requester": asked.who, "request_id": asked.request.request_id, "asked_mps": speed}
         self._write(session, self.state, {**record, "applied_mps": applied, "setpoint_mps": written, "reason": reason})
+
+    def _refused(self, session: Session, asked: Asked, why: str) -> None:
+        """Record a refused request (its speed when it was a number); the speed stays as it was."""
+        asked_mps = checked_output(asked.request.speed_mps)[0]
+        record: dict[str, Any] = {
+            "requester": asked.who,
+            "request_id": asked.request.request_id,
+            "asked_mps": asked_mps,
+        }
+        self._write(session, self.state, {**record, "applied_mps": self.target_mps, "reason": f"refused: {why}"})
 
     # -- the record ----------------------------------------------------------------------------
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from flagtrack.daemon.schema import SpeedReply, SpeedRequest
@@ -70,9 +71,10 @@ class SpeedDesk:
             self.bus.subscribe(key, SpeedRequest, capacity=256, max_bytes=1 << 20, origins=True) for key in wanted
         ]
 
-    def take(self) -> list[Asked]:
+    def take(self, on_refused: Callable[[Asked, str], None] | None = None) -> list[Asked]:
         """The requests that came, the newest of each identity (the older ones are answered as
-        superseded); every one is logged with who asked."""
+        superseded); every one is logged with who asked. ``on_refused`` hears of each request
+        refused here (superseded, not an operator's), after its answer."""
         newest: dict[str, Asked] = {}
         for subscription in self._subscriptions:
             while (request := subscription.recv(timeout_s=0)) is not None:
@@ -84,14 +86,19 @@ class SpeedDesk:
                 if repeated is not None:  # sent again (its answer was not heard): answered again, not applied
                     self._put(repeated)
                     continue
+                refusal = ""
                 if self.secured and identity not in self.operators:  # (a key no operator holds: not listened to)
-                    self.answer(asked, False, -1.0, f"{identity} is not an operator (bus.security.operators)")
-                    continue
-                if identity in newest and newest[identity].request.request_id == request.request_id:
+                    refusal = f"{identity} is not an operator (bus.security.operators)"
+                elif identity in newest and newest[identity].request.request_id == request.request_id:
                     continue  # the same request sent again before its answer: once
-                if identity in newest:
-                    self.answer(newest[identity], False, -1.0, "superseded by a newer request")
-                newest[identity] = asked
+                elif identity in newest:
+                    asked, newest[identity], refusal = newest[identity], asked, "superseded by a newer request"
+                else:
+                    newest[identity] = asked
+                if refusal:
+                    self.answer(asked, False, -1.0, refusal)
+                    if on_refused is not None:
+                        on_refused(asked, refusal)
         return list(newest.values())
 
     def answer(
