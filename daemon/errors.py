@@ -15,7 +15,8 @@ class ConfigError(FlagtrackError):
 
     Args:
         message: what is wrong.
-        key: dotted key of the offending value (``tracker.alpha``), if known.
+        key: dotted key of the offending value (``tracker.alpha``), or the option that gave it
+            (``--root``), if known.
         path: configuration file, if the value came from one.
     """
 
@@ -23,7 +24,8 @@ class ConfigError(FlagtrackError):
         self.message = message
         self.key = key
         self.path = path
-        where = ", ".join(part for part in (path and f"file {path}", key and f"key '{key}'") if part)
+        named = key and (key if key.startswith("-") else f"key '{key}'")  # (an option: ``--root``)
+        where = ", ".join(part for part in (path and f"file {path}", named) if part)
         super().__init__(f"{where}: {message}" if where else message)
 
 

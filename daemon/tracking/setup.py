@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -97,6 +98,8 @@ def refuse_root_off_sensor(config: TrackingConfig, width: int, height: int, *, s
 
     if config.root is None or (config.calibration is not None and not Path(config.calibration).is_file()):
         return
+    if not all(math.isfinite(v) for v in config.root):
+        return  # (not a place: the range checks name it)
     mapping: PointMapping | None = None
     if config.calibration is not None:
         from flagtrack.calibration.calfile import load_mapping

@@ -210,7 +210,7 @@ def test_ctrl_c_ends_a_live_run_with_its_figures(tmp_path: Path) -> None:
         (["--replay", "{rec}", "--window-ms", "0"], "--window-ms must be more than 0"),
         (["--replay", "{rec}", "--hot-factor", "0.5"], "--hot-factor/--hot-min-rate: factor must be more than 1"),
         (["--replay", "{rec}", "--length", "-3", "--root", "1", "2"], "key 'tracker': length must be positive"),
-        (["--replay", "{rec}", "--snapshot", "{tmp}"], "key '--snapshot'"),
+        (["--replay", "{rec}", "--snapshot", "{tmp}"], "--snapshot"),
         ([], "give a rig config (-c RIG.yaml) or a recording (--replay REC)"),
         (["--replay", "{tmp}/notes.txt"], "unknown event file type '.txt'"),
     ],

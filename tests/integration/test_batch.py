@@ -189,8 +189,8 @@ def test_bad_inputs_and_options_are_one_line_and_exit_2(campaign: Path, tmp_path
     cases = [
         ([str(tmp_path / "missing.raw")], f"{tmp_path / 'missing.raw'}: no such file or folder"),
         ([str(tmp_path / "a"), str(tmp_path / "b")], "would both write rec0_centrelines.h5"),
-        ([str(tmp_path / "a"), "--jobs", "0"], "key '--jobs': must be at least 1"),
-        ([str(tmp_path / "a"), "--scheduler", "head:8786"], "key '--scheduler': expected local"),
+        ([str(tmp_path / "a"), "--jobs", "0"], "--jobs: must be at least 1"),
+        ([str(tmp_path / "a"), "--scheduler", "head:8786"], "--scheduler: expected local"),
         ([str(tmp_path / "a"), "--alpha", "-1"], "alpha"),
     ]
     for args, words in cases:

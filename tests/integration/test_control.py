@@ -225,7 +225,7 @@ def test_a_missing_law_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.Cap
     rig = rig_file(tmp_path, free_port())
     assert main(["control", "-c", str(rig), "--controller", "nowhere.py:law"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["flagtrack control: error: key '--controller': no such file: nowhere.py"]
+    assert err == ["flagtrack control: error: --controller: no such file: nowhere.py"]
     assert main(["control", "-c", str(rig), "--controller", "law.txt"]) == 2
     assert "give the law as FILE.py:FUNCTION" in capsys.readouterr().err
     assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())

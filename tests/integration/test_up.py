@@ -328,7 +328,7 @@ def test_up_checks_its_centrelines_output_before_anything_opens(recording: Path,
         *TRACKER_ARGS,
     )
     lines = result.stderr.strip().splitlines()
-    assert result.returncode == 2 and len(lines) == 1 and "key '--centrelines'" in lines[0], result.stderr
+    assert result.returncode == 2 and len(lines) == 1 and "--centrelines" in lines[0], result.stderr
     assert not (tmp_path / "v.rrd").exists()
 
 

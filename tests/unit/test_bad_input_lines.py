@@ -67,10 +67,10 @@ def test_a_header_size_no_sensor_has_is_refused(tmp_path: Path, capsys: pytest.C
 @pytest.mark.parametrize(
     ("extra", "words"),
     [
-        (["--centrelines", "nowhere"], "key '--centrelines': nowhere: no such folder"),
-        (["--x-over-l", "nan"], "key '--x-over-l': must be a positive number, got nan"),
-        (["--max-lag-ms", "-5"], "key '--max-lag-ms'"),
-        (["--window", "0"], "key '--window'"),
+        (["--centrelines", "nowhere"], "--centrelines: nowhere: no such folder"),
+        (["--x-over-l", "nan"], "--x-over-l: must be a positive number, got nan"),
+        (["--max-lag-ms", "-5"], "--max-lag-ms"),
+        (["--window", "0"], "--window"),
     ],
 )
 def test_validate_refuses_a_missing_centrelines_folder_and_bad_numbers_first(
@@ -100,10 +100,10 @@ def test_control_out_onto_a_file_is_refused_before_the_rig_starts(
     (tmp_path / "afile").write_text("kept")
     rig = Path(__file__).resolve().parents[2] / "deploy" / "rig-control-sim.yaml"
     assert main(["control", "-c", str(rig), "--out", str(tmp_path / "afile")]) == 2
-    assert "key '--out'" in _one_line(capsys) and (tmp_path / "afile").read_text() == "kept"
+    assert "--out" in _one_line(capsys) and (tmp_path / "afile").read_text() == "kept"
     assert main(["control", "-c", str(rig), "--out", str(tmp_path / "afile" / "run1")]) == 2  # under a file
     line = _one_line(capsys)
-    assert "key '--out'" in line and f"{tmp_path / 'afile'} is a file" in line, line
+    assert "--out" in line and f"{tmp_path / 'afile'} is a file" in line, line
 
 
 def test_no_updates_at_all_is_not_blamed_on_the_geometry(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -132,7 +132,9 @@ def test_no_updates_at_all_is_not_blamed_on_the_geometry(tmp_path: Path, capsys:
         (["events", "info", "."], "is a directory, not an event file"),
         (["calibrate", "map"], "map needs a calibration file and pixel positions"),
         (["calibrate", "map", "REC", "nan", "inf"], "map: pixel positions must be finite"),
-        (["up", "--replay", ".", "--exit-at-eof"], "key '--replay': .: is a directory, not a recording"),
+        (["up", "--replay", ".", "--exit-at-eof"], "--replay: .: is a directory, not a recording"),
+        (["up", "--replay", "REC", "--root", "nan", "2", "--length", "100", "--exit-at-eof"],
+         "--root: must be two finite numbers"),
     ],
 )  # fmt: skip
 def test_numbers_and_folders_a_command_cannot_use_are_one_line(

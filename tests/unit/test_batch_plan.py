@@ -129,7 +129,7 @@ def test_executor_options() -> None:
 
 def test_a_scheduler_without_dask_is_one_line_saying_how_to_install_it(monkeypatch) -> None:
     monkeypatch.setitem(__import__("sys").modules, "distributed", None)  # as if not installed
-    with pytest.raises(ConfigError, match=r"key '--scheduler': needs Dask distributed.*\.\[cluster\]") as info:
+    with pytest.raises(ConfigError, match=r"--scheduler: needs Dask distributed.*\.\[cluster\]") as info:
         import_dask()
     assert "\n" not in str(info.value)
 

@@ -216,7 +216,7 @@ def test_services_and_no_files(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert report.services == ("camera",) and report.notes == ()  # the camera needs no calibration
     assert check_rig_file(path, files=False).notes == ()  # nothing of this host looked at
     assert main(["config", "check", str(path), "--services", "camera,teleporter"]) == 2
-    assert "key '--services': unknown service 'teleporter'" in capsys.readouterr().err
+    assert "--services: unknown service 'teleporter'" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("path", sorted(DEPLOY.glob("*.yaml")), ids=lambda p: p.name)

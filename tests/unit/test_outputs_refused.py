@@ -36,7 +36,7 @@ CASES = [
     (["up", "--replay", "rec.raw", "--centrelines", "rec.raw", "--exit-at-eof", "-q"], "--centrelines rec.raw: is the input"),
     (["up", "-c", "rig.yaml", "--rrd", "rig.yaml", "-q"], "--rrd rig.yaml: is the input"),
     (["reconstruct", "rec.raw", "-o", "rig.yaml", "-c", "rig.yaml"], "-o rig.yaml: is the config file itself"),
-    (["up", "-c", "rig.yaml", "--root", "900", "100", "-q"], "key '--root': (900, 100) is off the 640 x 480 sensor"),
+    (["up", "-c", "rig.yaml", "--root", "900", "100", "-q"], "--root: (900, 100) is off the 640 x 480 sensor"),
 ]  # fmt: skip
 
 
@@ -71,7 +71,7 @@ def test_up_record_refuses_a_name_recorded_before(
     (folder / "recordings" / "test1.raw").write_bytes(b"the first recording")
     assert main(["up", "-c", "rig.yaml", "--record", "test1", "-q"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "key '--record': recordings/test1.raw exists" in err[0], err
+    assert len(err) == 1 and "--record: recordings/test1.raw exists" in err[0], err
     assert (folder / "recordings" / "test1.raw").read_bytes() == b"the first recording"
 
 
