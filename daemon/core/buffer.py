@@ -101,9 +101,13 @@ class EventBuffer:
             self.cum_region[0] = self.cum_ring[0] = 0
         self.start, self.n = 0, live
 
-    def drop_before(self, t_us: float) -> None:
-        """Drop the events before ``t_us`` (they stay in the arrays until a compaction)."""
+    def drop_before(self, t_us: float, *, keep: tuple[float, int] | None = None) -> None:
+        """Drop the events before ``t_us`` (they stay in the arrays until a compaction); with ``keep``
+        = (``at_us``, ``n``), also those more than ``n`` events before the first at or after ``at_us``."""
         cut = int(np.searchsorted(self.times, np.int64(math.ceil(t_us)), side="left"))
+        if keep is not None:
+            at_us, n = keep
+            cut = max(cut, int(np.searchsorted(self.times, np.int64(math.ceil(at_us)), side="left")) - n)
         if cut:
             self.last_dropped_t = int(self.t[self.start + cut - 1])
             self.start += cut

@@ -20,6 +20,12 @@ from flagtrack.daemon.core.jit import njit
 
 _F = np.float32
 
+LOOK_BACK_EVENTS = 1 << 16
+"""At most this many events before a window's first are searched for its evidence, and kept for it:
+a region with too little evidence among the sensor's last 65 536 events is stale even where
+``stale_after_s`` reaches further back. Only a stream above 0.65 Mev/s (with the default 0.1 s) is
+cut so; it bounds the memory the look-back holds and moves at any event rate."""
+
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def classify(

@@ -279,6 +279,7 @@ def run_updates(
     t: np.ndarray,
     first: int,
     look_back_us: int,
+    look_back_events: int,
     end_us: np.ndarray,
     cum_region: np.ndarray,
     cum_ring: np.ndarray,
@@ -308,7 +309,8 @@ def run_updates(
         out_lost: (K,) uint8 written: 1 where the flag was not found.
         t: (n,) int64 event times, µs; first: the buffer's first live index; look_back_us: how far
             before a window's end its look-back starts (``stale_after_s``, :mod:`.evidence`; searched
-            only for the windows that need it); end_us: (K,) each window's end, µs.
+            only for the windows that need it), and at most ``look_back_events`` events before the
+            window's first (:data:`.evidence.LOOK_BACK_EVENTS`); end_us: (K,) each window's end, µs.
         cum_region, cum_ring, cls: the buffer's prefix counts and their valid range (:func:`.evidence.classify`).
         out_stale: (K,) uint8 written: 1 where the region held less than min_events of evidence over
             the whole look-back (the shape was not measured); such an update is not lost.
@@ -343,7 +345,7 @@ def run_updates(
         bucket_sort(x, y, lo, hi, root_x, root_y, inv_width, xs, ys, bucket, offsets)
         stale, start = 0, lo
         if stale_on and offsets[region_end] - (offsets[n_buckets - 1] - offsets[region_end]) * ring_ratio < target:
-            back = first + np.searchsorted(t[first:lo], end_us[w] - look_back_us)
+            back = max(first + np.searchsorted(t[first:lo], end_us[w] - look_back_us), lo - look_back_events)
             stale, start = look_back(
                 x, y, back, lo, hi, root_x, root_y, inv_width, region_end, n_buckets - 1, cum_region, cum_ring,
                 cls, ring_ratio, need, target, gathers,

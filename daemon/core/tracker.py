@@ -20,6 +20,7 @@ from flagtrack.daemon.core.buffer import EventBuffer
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.chain import AreaGeometry, ChainParams, ChainState
 from flagtrack.daemon.core.denoise import BackgroundActivityFilter, DenoiseParams
+from flagtrack.daemon.core.evidence import LOOK_BACK_EVENTS
 from flagtrack.daemon.core.kernels import run_updates
 from flagtrack.daemon.core.lost import NEVER, SUPPORTED
 from flagtrack.daemon.core.lost_params import LostParams
@@ -55,7 +56,8 @@ class TrackerParams:
         stale_after_s: an update whose flag's region held less than ``lost.min_events`` (the
             defaults' without ``lost``) of evidence over the last this many seconds is ``stale``
             (its shape was not measured); the robust method also gathers a quiet window's events
-            from that far back (:mod:`.evidence`); ``None``: no stale verdict, every ``stale`` 0.
+            from that far back (:mod:`.evidence`; at most :data:`.evidence.LOOK_BACK_EVENTS` events
+            before the window); ``None``: no stale verdict, every ``stale`` 0.
     """
 
     chain: ChainParams
@@ -170,8 +172,8 @@ class Tracker:
         window, and the buffer's spare room (growing it during the first windows of a fast stream
         costs them tens of milliseconds of fresh memory)."""
         longest_us = max(seg.tau_s for seg in self.params.schedule.segments) * 1e6
-        span_s = (self._look_back_us + longest_us) * 1e-6 + _PREALLOCATE_SLACK_S
-        self._buffer.preallocate(math.ceil(events_per_s * span_s))
+        look_back = min(events_per_s * self._look_back_us * 1e-6, LOOK_BACK_EVENTS if self._look_back_us else 0)
+        self._buffer.preallocate(math.ceil(look_back + events_per_s * (longest_us * 1e-6 + _PREALLOCATE_SLACK_S)))
 
     def take_buffer_of(self, old: Tracker) -> None:
         """Track in the event buffer of ``old``, a tracker of an ended stream that is not used again
@@ -341,7 +343,9 @@ class Tracker:
             batch = self._updates(t_us, lo_us, hi_us)
             if len(batch):
                 batches.append(batch)
-        self._buffer.drop_before(clock.next_window_start_us() - self._look_back_us)
+        next_us = clock.next_window_start_us()
+        kept = LOOK_BACK_EVENTS if self._look_back_us else 0
+        self._buffer.drop_before(next_us - self._look_back_us, keep=(next_us, kept))
         if not batches:
             return self._empty()
         return batches[0] if len(batches) == 1 else CentrelineBatch.concatenate(batches)
@@ -398,6 +402,7 @@ class Tracker:
             buf.t,
             buf.start,
             self._look_back_us,
+            LOOK_BACK_EVENTS,
             hi_us,
             buf.cum_region,
             buf.cum_ring,

@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
+from flagtrack.daemon.core.events import EVENT_DTYPE
+from flagtrack.daemon.core.evidence import LOOK_BACK_EVENTS
 from flagtrack.daemon.core.pointsensor import beam_lateral
 from flagtrack.daemon.core.tracker import Tracker
 from flagtrack.daemon.tracking.section import Method, TrackingConfig
@@ -125,3 +127,48 @@ def test_gathering_and_stale_do_not_depend_on_the_chunking() -> None:
     np.testing.assert_array_equal(got.stale, ref.stale)
     np.testing.assert_array_equal(got.lost, ref.lost)
     np.testing.assert_array_equal(got.x, ref.x)
+
+
+def _busy_elsewhere() -> np.ndarray:
+    """The flag along its rest line for 60 ms, then silent while a patch 1.8 L from the root (beyond
+    its region and the noise ring) fires 2 Mev/s for 90 ms."""
+    rng = np.random.default_rng(3)
+    n_flag, n_busy = 20_000, 180_000
+    flag = np.zeros(n_flag, EVENT_DTYPE)
+    flag["t"] = np.sort(rng.integers(0, 60_000, n_flag))
+    flag["x"] = rng.integers(int(ROOT[0]), int(ROOT[0] + LENGTH), n_flag)
+    flag["y"] = int(ROOT[1]) + rng.integers(-1, 2, n_flag)
+    busy = np.zeros(n_busy, EVENT_DTYPE)
+    busy["t"] = np.sort(rng.integers(60_000, 150_000, n_busy))
+    busy["x"], busy["y"] = rng.integers(620, 636, n_busy), rng.integers(4, 20, n_busy)
+    return np.concatenate([flag, busy])
+
+
+def test_the_look_back_holds_a_bounded_number_of_events_and_says_stale_beyond_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    events = _busy_elsewhere()
+    params = CONFIG.tracker_params()
+    params = dataclasses.replace(params, denoise=None)
+    cap_s = LOOK_BACK_EVENTS / 2e6  # the look-back's events at 2 Mev/s: 33 ms
+
+    def track(chunk_us: int) -> tuple[CentrelineBatch, int]:
+        tracker, parts, most = Tracker(params, sensor_size=(640, 480)), [], 0
+        for t0 in range(0, 150_000, chunk_us):
+            parts.append(tracker.feed(events[(events["t"] >= t0) & (events["t"] < t0 + chunk_us)]))
+            most = max(most, tracker._buffer.n - tracker._buffer.start)
+        parts.append(tracker.finish())
+        return CentrelineBatch.concatenate([p for p in parts if len(p)]), most
+
+    capped, most = track(10_000)
+    quiet = capped.t_s > 0.062
+    late = capped.t_s > 0.060 + cap_s + 0.003
+    assert capped.stale[late].all() and not capped.stale[capped.t_s < 0.058].any()
+    assert most <= LOOK_BACK_EVENTS + 25_000  # the look-back, a window and a chunk
+    chunked, _ = track(3_000)
+    np.testing.assert_array_equal(chunked.stale, capped.stale)
+    np.testing.assert_array_equal(chunked.x, capped.x)
+    # without the bound, 0.1 s of events is kept, and the quiet windows gather the flag's old events
+    monkeypatch.setattr("flagtrack.daemon.core.tracker.LOOK_BACK_EVENTS", 1 << 40)
+    unbounded, most = track(10_000)
+    assert most > 150_000 and not unbounded.stale[quiet & (unbounded.t_s < 0.155)].any()
