@@ -80,8 +80,8 @@ class TrackerServiceConfig:
             packet at once.
         gather_events: a call with this many events waits for no more.
         reserve_mev_s: the event rate (Mev/s) whose buffers each core tracker allocates before its
-            stream (about 10.6 MB per Mev/s: the verdicts' look-back and twice as much free room, so
-            that compactions move an event half a time on average): growing them in the first
+            stream (its windows and look-back, at most 65 536 events, with twice as much free room:
+            29 MB at 20 Mev/s): growing them in the first
             windows of a fast stream costs those windows tens of milliseconds; 0: grow as events come.
     """
 
