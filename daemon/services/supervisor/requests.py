@@ -91,8 +91,9 @@ class SpeedDesk:
                     refusal = f"{identity} is not an operator (bus.security.operators)"
                 elif identity in newest and newest[identity].request.request_id == request.request_id:
                     continue  # the same request sent again before its answer: once
-                elif identity in newest:
-                    asked, newest[identity], refusal = newest[identity], asked, "superseded by a newer request"
+                elif identity in newest:  # the older one is refused
+                    older, newest[identity] = newest[identity], asked
+                    asked, refusal = older, "superseded by a newer request"
                 else:
                     newest[identity] = asked
                 if refusal:
