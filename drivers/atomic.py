@@ -13,6 +13,7 @@ On any failure the temporary file is removed and the target is left as it was.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import uuid
 from collections.abc import Iterator
@@ -73,8 +74,10 @@ class PendingFile:
         return self.path
 
     def discard(self) -> None:
-        """Remove the temporary file (if any); :attr:`path` is untouched."""
-        self.tmp.unlink(missing_ok=True)
+        """Remove the temporary file (if any; never raises: a read-only folder refuses even that, and
+        the error being handled is the one to tell); :attr:`path` is untouched."""
+        with contextlib.suppress(OSError):
+            self.tmp.unlink(missing_ok=True)
 
 
 @contextmanager
@@ -84,6 +87,11 @@ def atomic_path(path: str | Path, *, keep_suffix: bool = False) -> Iterator[Path
     pending = PendingFile(path, keep_suffix=keep_suffix)
     try:
         yield pending.tmp
+    except OSError as exc:
+        pending.discard()
+        if exc.filename is not None and str(exc.filename) == str(pending.tmp):  # named by the file meant
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
+        raise
     except BaseException:
         pending.discard()
         raise

@@ -61,15 +61,25 @@ def run(args: argparse.Namespace) -> int:
     if run_dir is None or not (run_dir / "run.json").exists():
         print(f"flagtrack control: {getattr(supervisor, 'stop_reason', '') or 'not run'}", file=sys.stderr)
         return result.code or 1
-    print(summary_text(run_dir), file=sys.stderr)
+    print(summary_text(run_dir, supervisor.stop_reason), file=sys.stderr)
     return result.code or (0 if supervisor.stop_reason == "finished" else 1)
 
 
-def summary_text(run_dir: Path) -> str:
-    """How the run ended and where its files are, from its ``run.json``."""
+def summary_text(run_dir: Path, stop_reason: str) -> str:
+    """How the run ended and where its files are, from its ``run.json`` (or, where that could not be
+    written at the end, from ``stop_reason`` and the files there)."""
     import json
 
     run = json.loads((run_dir / "run.json").read_text())
+    if run["status"] == "running":  # the one written at the start: the end could not be written
+        stale = ["run.json", "README.txt"] + ([] if (run_dir / "control.png").exists() else ["control.png"])
+        return "\n".join(
+            [
+                f"flagtrack control: {stop_reason or 'stopped'}; run folder {run_dir}",
+                f"  log     {run_dir / 'control.jsonl'} (one record per step)",
+                f"  not written at the end: {', '.join(stale)} (the lines above say why)",
+            ]
+        )
     latency = run["loop_latency_ms"]
     p50, p99 = (f"{latency[p]:.1f} ms" if latency[p] is not None else "-" for p in ("p50", "p99"))
     counts = run["counts"]

@@ -1,9 +1,9 @@
-"""A run folder that turns read-only between two points (a disk remounted read-only after an error):
-`flagtrack sweep` in a private mount namespace (`unshare -m`, skipped with a reason where it cannot
-be made), the folder bound read-only over itself once the first point is logged. The sweep stops
-safe with the tunnel at zero; the lines say which file could not be written, not a temporary name or
-"supervisor failed"; the end message does not list files that were not written; the log keeps both
-records and the run resumes once the folder is writable again."""
+"""A run folder that turns read-only mid-run (a disk remounted read-only after an error), in a private
+mount namespace (`unshare -m`, skipped with a reason where it cannot be made), the folder bound
+read-only over itself: `flagtrack sweep` after its first point, `flagtrack control` after a few
+steps. Each stops safe with the tunnel at zero; the lines say which file could not be written (not a
+temporary name, not "supervisor failed"); the end message does not list files that were not
+written; what was recorded is kept, and the sweep resumes once the folder is writable again."""
 
 from __future__ import annotations
 
@@ -13,13 +13,18 @@ from pathlib import Path
 
 import pytest
 
+from flagtrack.daemon.schema import TunnelState
 from flagtrack.daemon.sweep.runlog import read_run
 from flagtrack.drivers.formats import read_events
 from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
+from tests.fakes.helpers import wait_until
 from tests.fakes.tunnel import SWEEP_SIM
+from tests.integration.test_control import law_file, watch_tunnel
+from tests.integration.test_control import rig_file as control_rig
 from tests.integration.test_full_disk import _namespaces_work
 from tests.integration.test_restart_resumes import FLAGTRACK, rig_file
+from tests.integration.test_transport import free_port
 
 
 @pytest.fixture
@@ -74,3 +79,64 @@ def test_a_run_folder_turning_read_only_stops_the_sweep_safe_and_says_what_was_n
     assert [r["type"] for r in lines][-4:] == ["stop", "resume", "point", "stop"], resumed[-3000:]
     assert lines[-2]["point_id"] == "001-up-6.00" and lines[-2]["status"] == "done"
     assert lines[-1]["reason"] == "finished", resumed[-3000:]
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(240)
+def test_a_control_run_whose_folder_turns_read_only_stops_safe_and_says_so(tmp_path: Path) -> None:
+    why = _namespaces_work()
+    if why:
+        pytest.skip(why)
+    runs, port = tmp_path / "runs", free_port()
+    runs.mkdir()
+    law = law_file(tmp_path, "def law(state):\n    return 5.0\n")
+    rig, out = control_rig(tmp_path, port, duration_s=30), runs / "exp"
+    states: list[TunnelState] = []
+    done = watch_tunnel(port, f"flagtrack/ctl{port}", states)
+    steps_logged = (  # polled with a bound of 90 s
+        f"i=0; until [ $(cat {out}/control.jsonl 2>/dev/null | wc -l) -gt 3 ] || [ $i -gt 900 ]; "
+        "do sleep 0.1; i=$((i+1)); done"
+    )
+    script = (
+        f"mount -t tmpfs -o size=256m tmpfs {runs} || exit 99; "
+        f"{' '.join(FLAGTRACK)} control -c {rig} --controller {law}:law --out {out} & pid=$!; {steps_logged}; "
+        f"mount --bind {out} {out} && mount -o remount,bind,ro {out} || exit 98; "
+        f"wait $pid; rc=$?; cp -a {runs}/. {tmp_path / 'copy'}/; exit $rc"
+    )
+    try:
+        ran = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True, timeout=200)
+        wait_until(lambda: states and states[-1].setpoint_mps == 0.0, 10, "the tunnel's last state (at zero)")
+    finally:
+        done.set()
+    err = ran.stderr
+    assert ran.returncode == 1, err[-4000:]  # stopped, not "finished" with half a recording
+    assert "Traceback" not in err
+    assert "flagtrack control: recorder: recording stopped: writing" in err, err[-4000:]
+    assert "not written at the end: run.json, README.txt, control.png (the lines above say why)" in err
+    assert f"Read-only file system: '{out / 'control.png'}'" in err  # the file meant, not its temporary name
+    copy = tmp_path / "copy" / "exp"
+    assert len((copy / "control.jsonl").read_text().splitlines()) > 3
+    assert (copy / "recording.raw").stat().st_size > 0
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(240)
+def test_a_control_run_whose_recording_fails_at_once_does_not_run_without_it(tmp_path: Path) -> None:
+    why = _namespaces_work()
+    if why:
+        pytest.skip(why)
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    law = law_file(tmp_path, "def law(state):\n    return 5.0\n")
+    rig, out = control_rig(tmp_path, free_port(), duration_s=30), runs / "exp"
+    script = (  # a disk with room for the log, not for the recording's first write
+        f"mount -t tmpfs -o size=1m tmpfs {runs} || exit 99; "
+        f"{' '.join(FLAGTRACK)} control -c {rig} --controller {law}:law --out {out}; rc=$?; "
+        f"cp -a {runs}/. {tmp_path / 'copy'}/; exit $rc"
+    )
+    ran = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True, timeout=200)
+    assert ran.returncode == 1, ran.stderr[-4000:]
+    assert "flagtrack control: recorder: recording stopped: writing" in ran.stderr, ran.stderr[-4000:]
+    assert "No space left on device" in ran.stderr
+    run = json.loads((tmp_path / "copy" / "exp" / "run.json").read_text())
+    assert run["status"] == "stopped" and run["counts"]["steps"] == 0, run

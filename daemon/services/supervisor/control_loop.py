@@ -93,7 +93,11 @@ class ControlLoop:
         self.record.open(session.clock.time())
         if self.cfg.record:
             base = str(self.record.recording_base.resolve())
-            session.ask_recorder(RecorderCommand("start", path=base, centrelines=True, request_id=uuid.uuid4().hex))
+            started = session.ask_recorder(
+                RecorderCommand("start", path=base, centrelines=True, request_id=uuid.uuid4().hex)
+            )
+            if started.state == "error":  # (a read-only folder, a full disk): no experiment without its record
+                raise RunStopped(f"recorder: {started.message or 'the recording did not start'}")
         session.mode = "control"
         if self.cfg.start_speed_mps > 0:
             self.target_mps = bound_speed(
@@ -113,6 +117,8 @@ class ControlLoop:
             problem = session.outside.problem()
             if problem:  # a service gone, the camera silent
                 raise RunStopped(problem)
+            if self.cfg.record and (failed := session.outside.recorder_error()):  # the recording stopped
+                raise RunStopped(f"recorder: {failed}")
             self._take_requests(session)
             self._law_turn(session)
             if session.clock.monotonic() - self._last_write_s >= self.cfg.period_s:
