@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -51,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     _refuse_outputs_over_inputs(args, rig)
     try:
         with SweepProgressView(quiet=args.quiet or "supervisor" not in names) as progress:
-            return run_rig(
+            result = run_rig(
                 rig,
                 names,
                 exit_at_end_of_stream=args.exit_at_eof,
@@ -59,12 +60,17 @@ def run(args: argparse.Namespace) -> int:
                 shutdown_timeout_s=args.shutdown_timeout,
                 quiet=args.quiet,
                 on_supervisor_state=progress,
-            ).code
+            )
     except ConfigError as exc:  # a value the command line gave is named as such, not as the file's key
         option = option_that_set(exc, args)
         if option is not None:
             raise ConfigError(exc.message, key=option) from None
         raise
+    recorder = result.service("recorder")
+    if "supervisor" not in names and recorder is not None and recorder.failure:  # (a sweep says it itself)
+        print(f"flagtrack up: {recorder.failure}", file=sys.stderr)
+        return result.code or 1
+    return result.code
 
 
 def _refuse_outputs_over_inputs(args: argparse.Namespace, rig: RigConfig) -> None:

@@ -133,6 +133,7 @@ class RecorderService:
         self._final_seen = False
         self._dropped_before = 0  # the queue's drop count when the current part began
         self.refused_commands = 0
+        self.failure = ""  # why the last recording stopped on its own (a full disk), "" if none did
         self._free_space = FreeSpaceGuard(cfg.min_free_mb, setting="recorder.min_free_mb")
         self._sequence = PacketSequence()  # the camera stream the current part follows
 
@@ -279,6 +280,7 @@ class RecorderService:
     def _write_failed(self, part: RecordingPart, message: str) -> None:
         """Writing ``part`` failed (a full disk; it is cut back and closed): one error line, an ``error`` status."""
         log.error("recorder: %s", message)
+        self.failure = message
         self._status("error", recording=part, message=message)
 
     def _write_queued_packets(self) -> None:

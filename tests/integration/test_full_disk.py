@@ -176,6 +176,7 @@ def test_a_full_disk_under_the_centrelines_file_is_one_error_line_and_both_files
     errors = [line for line in done.stderr.splitlines() if line.startswith("ERROR flagtrack.daemon.services.recorder")]
     assert len(errors) == 1 and "No space left on device" in errors[0], done.stderr[-3000:]
     assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr, done.stderr[-3000:]
+    assert done.returncode == 1 and "\nflagtrack up: recording stopped: writing " in done.stderr, done.stderr[-3000:]
     failed = errors[0].split("writing ", 1)[1].split(" failed", 1)[0]
     assert failed in (f"{disk}/rec.raw", f"{disk}/rec_centrelines.h5"), errors[0]
     got = read_events(tmp_path / "out" / "rec.raw", strict=True).events  # whole up to its last flush
