@@ -21,9 +21,10 @@ def test_a_superseded_request_is_answered_and_heard_by_the_caller() -> None:
         asking = bus.publisher(key)
         for speed, request_id in ((4.0, "first"), (5.0, "second"), (5.0, "second")):
             asking.put(SpeedRequest(speed, request_id, "alice"))
+        (queue,) = (subscription.channel for subscription in desk._subscriptions)
+        wait_until(lambda: len(queue) == 3, 10, "the three requests at the desk")  # (one take sees them all)
         refused: list[tuple[Asked, str]] = []
-        taken: list[Asked] = []
-        wait_until(lambda: taken.extend(desk.take(lambda a, why: refused.append((a, why)))) or refused, 10, "a take")
+        taken = desk.take(lambda a, why: refused.append((a, why)))
         assert [a.request.request_id for a in taken] == ["second"]
         assert [(a.request.request_id, a.request.speed_mps, why) for a, why in refused] == [
             ("first", 4.0, "superseded by a newer request")
@@ -31,6 +32,9 @@ def test_a_superseded_request_is_answered_and_heard_by_the_caller() -> None:
         reply = wait_until(lambda: replies.recv(timeout_s=0.1), 10, "the refusal's answer")
         assert reply.request_id == "first" and not reply.accepted and reply.requester == "alice"
         desk.answer(taken[0], True, 5.0)
+        answered = wait_until(lambda: replies.recv(timeout_s=0.1), 10, "the answer")
         asking.put(SpeedRequest(5.0, "second", "alice"))  # sent again: answered again, not taken
-        again = wait_until(lambda: (r := replies.recv(timeout_s=0.1)) and r.request_id == "second" and r, 10, "answer")
-        assert again.accepted and desk.take(lambda a, why: refused.append((a, why))) == [] and len(refused) == 1
+        wait_until(lambda: len(queue) == 1, 10, "the request sent again at the desk")
+        assert desk.take(lambda a, why: refused.append((a, why))) == [] and len(refused) == 1
+        again = wait_until(lambda: replies.recv(timeout_s=0.1), 10, "the answer again")
+        assert answered.request_id == again.request_id == "second" and answered.accepted and again.accepted
