@@ -32,10 +32,6 @@ class DiskReserve:
         self.size = size
         self._fd: int | None = None
 
-    @property
-    def held(self) -> bool:
-        return self._fd is not None
-
     def take(self) -> None:
         """Allocate the room (a leftover file of a crashed run, or a link, at ``path`` is replaced).
 

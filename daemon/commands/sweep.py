@@ -98,8 +98,9 @@ def _run_files(run_dir: Path) -> str:
         ("figure", "amplitude.png", ""),
         ("about", "README.txt", " (what each file is; run.json for programs)"),
     ]
-    lines = [f"  {label} {run_dir / name}{note}" for label, name, note in files if (run_dir / name).exists()]
-    missing = [name for _, name, _ in files if not (run_dir / name).exists()]
+    written = {name: (run_dir / name).exists() for _, name, _ in files}
+    lines = [f"  {label} {run_dir / name}{note}" for label, name, note in files if written[name]]
+    missing = [name for name, there in written.items() if not there]
     if missing:
         lines.append(f"  not written: {', '.join(missing)} (the lines above say why)")
     return "\n".join(lines)

@@ -160,6 +160,7 @@ class Tracker:
         self._max_step_back_us = 0  # largest step back in time seen in the stream (sensor jitter)
         # (whole µs: the buffer's int64 times are searched with it, and a float would copy them as float64)
         self._look_back_us = 0 if params.stale_after_s is None else round(params.stale_after_s * 1e6)
+        self._look_back_events = LOOK_BACK_EVENTS if self._look_back_us else 0  # (and at most this many events)
         # a window ending within this of the last event starts at or before it (see feed)
         self._shortest_window_us = math.floor(min(seg.tau_s for seg in params.schedule.segments) * 1e6)
         self._finished = False
@@ -172,7 +173,7 @@ class Tracker:
         window, and the buffer's spare room (growing it during the first windows of a fast stream
         costs them tens of milliseconds of fresh memory)."""
         longest_us = max(seg.tau_s for seg in self.params.schedule.segments) * 1e6
-        look_back = min(events_per_s * self._look_back_us * 1e-6, LOOK_BACK_EVENTS if self._look_back_us else 0)
+        look_back = min(events_per_s * self._look_back_us * 1e-6, self._look_back_events)
         self._buffer.preallocate(math.ceil(look_back + events_per_s * (longest_us * 1e-6 + _PREALLOCATE_SLACK_S)))
 
     def take_buffer_of(self, old: Tracker) -> None:
@@ -344,8 +345,7 @@ class Tracker:
             if len(batch):
                 batches.append(batch)
         next_us = clock.next_window_start_us()
-        kept = LOOK_BACK_EVENTS if self._look_back_us else 0
-        self._buffer.drop_before(next_us - self._look_back_us, keep=(next_us, kept))
+        self._buffer.drop_before(next_us - self._look_back_us, keep=(next_us, self._look_back_events))
         if not batches:
             return self._empty()
         return batches[0] if len(batches) == 1 else CentrelineBatch.concatenate(batches)
@@ -402,7 +402,7 @@ class Tracker:
             buf.t,
             buf.start,
             self._look_back_us,
-            LOOK_BACK_EVENTS,
+            self._look_back_events,
             hi_us,
             buf.cum_region,
             buf.cum_ring,

@@ -41,12 +41,9 @@ def record_point(
     point = watch.point
     t_start_unix = session.clock.time()
     base = run_dir / POINTS_DIR / point.point_id
-    started = session.ask_recorder(
-        RecorderCommand("start", path=str(base.resolve()), centrelines=True, request_id=uuid.uuid4().hex)
-    )
-    if started.state == "error":  # nothing is recorded (a read-only folder, a full disk): the sweep stops safe
-        reason = f"recorder: {started.message or 'the recording did not start'}"
-        raise BadPoint(PointResult.planned(point, status="failed", reason=reason), stop=True)
+    started, refused = session.start_recording(str(base.resolve()))
+    if refused:  # nothing is recorded (a read-only folder, a full disk): the sweep stops safe
+        raise BadPoint(PointResult.planned(point, status="failed", reason=refused), stop=True)
     try:
         readbacks = _gather(session, measure, watch, step.duration_s)
         stopped = session.ask_recorder(RecorderCommand("stop", request_id=uuid.uuid4().hex))

@@ -181,6 +181,13 @@ class Session:
             self.idle(0.02)
         return reply
 
+    def start_recording(self, base: str) -> tuple[RecorderStatus, str]:
+        """Ask the recorder to record the camera and the centrelines to ``base``; its answer, and why
+        nothing is recorded ("" when it started)."""
+        started = self.ask_recorder(RecorderCommand("start", path=base, centrelines=True, request_id=uuid.uuid4().hex))
+        refused = f"recorder: {started.message or 'the recording did not start'}" if started.state == "error" else ""
+        return started, refused
+
     def publish(self, force: bool = False) -> None:
         """Publish the run's and the tunnel's state (at most every ``publish_interval_s`` unless ``force``)."""
         now_s = self.clock.monotonic()

@@ -19,11 +19,10 @@ import dataclasses
 import logging
 import math
 import time
-import uuid
 from collections.abc import Callable
 from typing import Any, Protocol
 
-from flagtrack.daemon.schema import FlagState, RecorderCommand
+from flagtrack.daemon.schema import FlagState
 from flagtrack.daemon.services.supervisor.control_record import ControlRecord
 from flagtrack.daemon.services.supervisor.law_call import LawCall
 from flagtrack.daemon.services.supervisor.laws import Law, bound_speed, checked_output
@@ -92,12 +91,9 @@ class ControlLoop:
     def run(self, session: Session) -> None:
         self.record.open(session.clock.time())
         if self.cfg.record:
-            base = str(self.record.recording_base.resolve())
-            started = session.ask_recorder(
-                RecorderCommand("start", path=base, centrelines=True, request_id=uuid.uuid4().hex)
-            )
-            if started.state == "error":  # (a read-only folder, a full disk): no experiment without its record
-                raise RunStopped(f"recorder: {started.message or 'the recording did not start'}")
+            refused = session.start_recording(str(self.record.recording_base.resolve()))[1]
+            if refused:  # (a read-only folder, a full disk): no experiment without its record
+                raise RunStopped(refused)
         session.mode = "control"
         if self.cfg.start_speed_mps > 0:
             self.target_mps = bound_speed(
@@ -289,13 +285,14 @@ class ControlLoop:
 
     def _refused(self, session: Session, asked: Asked, why: str) -> None:
         """Record a refused request (its speed when it was a number); the speed stays as it was."""
-        asked_mps = checked_output(asked.request.speed_mps)[0]
-        record: dict[str, Any] = {
+        fields = {
             "requester": asked.who,
             "request_id": asked.request.request_id,
-            "asked_mps": asked_mps,
+            "asked_mps": checked_output(asked.request.speed_mps)[0],
+            "applied_mps": self.target_mps,
+            "reason": f"refused: {why}",
         }
-        self._write(session, self.state, {**record, "applied_mps": self.target_mps, "reason": f"refused: {why}"})
+        self._write(session, self.state, fields)
 
     # -- the record ----------------------------------------------------------------------------
 
