@@ -37,17 +37,23 @@ def _namespaces_work() -> str | None:
 
 
 @pytest.fixture
+def mount_namespace() -> None:
+    """Skip the test where a private mount namespace with a tmpfs cannot be made."""
+    why = _namespaces_work()
+    if why:
+        pytest.skip(why)
+
+
+@pytest.fixture
 def sim_params() -> SimParams:
     return SWEEP_SIM
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("mount_namespace")
 def test_a_disk_filling_up_mid_point_ends_the_sweep_safe_with_the_file_readable(
     sim: SimulatedTunnel, tmp_path: Path
 ) -> None:
-    why = _namespaces_work()
-    if why:
-        pytest.skip(why)
     sweep = {"speeds": [5.5, 6.0], "branches": ["up"], "settle_s": 0.5, "record_s": 8.0}
     recorder = {"min_free_mb": 0.0}
     rig = rig_file(tmp_path, sim.port, sweep, recorder, expected_rate_mev_s=0.0, free_space_margin_mb=0.0)
@@ -128,10 +134,8 @@ with Bus(BusConfig(namespace="flagtrack/disk", listen=(f"tcp/127.0.0.1:{free_por
 """
 
 
+@pytest.mark.usefixtures("mount_namespace")
 def test_the_recorder_on_a_full_disk_stops_cleanly_and_keeps_its_file_to_the_last_flush(tmp_path: Path) -> None:
-    why = _namespaces_work()
-    if why:
-        pytest.skip(why)
     disk = tmp_path / "disk"
     disk.mkdir()
     script = f"mount -t tmpfs -o size=200k tmpfs {disk} && exec {sys.executable} -c '{FILL}' {disk}"
@@ -151,10 +155,8 @@ def test_the_recorder_on_a_full_disk_stops_cleanly_and_keeps_its_file_to_the_las
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("mount_namespace")
 def test_a_full_disk_under_the_centrelines_file_is_one_error_line_and_both_files_read_back(tmp_path: Path) -> None:
-    why = _namespaces_work()
-    if why:
-        pytest.skip(why)
     flag = WavyFlag(length=200.0, root=(100.0, 240.0))
     events = np.concatenate(list(line_events(flag, 0, 1_500_000, 640, 480, QuickLineParams(noise_rate_hz=1e5))))
     recording = tmp_path / "flag.raw"

@@ -22,7 +22,7 @@ from tests.fakes.helpers import wait_until
 from tests.fakes.tunnel import SWEEP_SIM
 from tests.integration.test_control import law_file, watch_tunnel
 from tests.integration.test_control import rig_file as control_rig
-from tests.integration.test_full_disk import _namespaces_work
+from tests.integration.test_full_disk import mount_namespace  # noqa: F401 - the fixture
 from tests.integration.test_restart_resumes import FLAGTRACK, rig_file
 from tests.integration.test_transport import free_port
 
@@ -33,12 +33,10 @@ def sim_params() -> SimParams:
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("mount_namespace")
 def test_a_run_folder_turning_read_only_stops_the_sweep_safe_and_says_what_was_not_written(
     sim: SimulatedTunnel, tmp_path: Path
 ) -> None:
-    why = _namespaces_work()
-    if why:
-        pytest.skip(why)
     sweep = {"speeds": [5.5, 6.0], "branches": ["up"], "settle_s": 0.5, "record_s": 1.0}
     rig = rig_file(tmp_path, sim.port, sweep, {}, expected_rate_mev_s=0.0, free_space_margin_mb=0.0)
     runs, out, night = tmp_path / "runs", tmp_path / "copy", tmp_path / "runs" / "night"
@@ -83,14 +81,10 @@ def test_a_run_folder_turning_read_only_stops_the_sweep_safe_and_says_what_was_n
 
 @pytest.mark.slow
 @pytest.mark.timeout(240)
+@pytest.mark.usefixtures("mount_namespace")
 def test_a_control_run_whose_folder_turns_read_only_stops_safe_and_says_so(tmp_path: Path) -> None:
-    why = _namespaces_work()
-    if why:
-        pytest.skip(why)
-    runs, port = tmp_path / "runs", free_port()
-    runs.mkdir()
-    law = law_file(tmp_path, "def law(state):\n    return 5.0\n")
-    rig, out = control_rig(tmp_path, port, duration_s=30), runs / "exp"
+    port = free_port()
+    runs, out, control = _control_run(tmp_path, port)
     states: list[TunnelState] = []
     done = watch_tunnel(port, f"flagtrack/ctl{port}", states)
     steps_logged = (  # polled with a bound of 90 s
@@ -99,7 +93,7 @@ def test_a_control_run_whose_folder_turns_read_only_stops_safe_and_says_so(tmp_p
     )
     script = (
         f"mount -t tmpfs -o size=256m tmpfs {runs} || exit 99; "
-        f"{' '.join(FLAGTRACK)} control -c {rig} --controller {law}:law --out {out} & pid=$!; {steps_logged}; "
+        f"{control} & pid=$!; {steps_logged}; "
         f"mount --bind {out} {out} && mount -o remount,bind,ro {out} || exit 98; "
         f"wait $pid; rc=$?; cp -a {runs}/. {tmp_path / 'copy'}/; exit $rc"
     )
@@ -121,17 +115,12 @@ def test_a_control_run_whose_folder_turns_read_only_stops_safe_and_says_so(tmp_p
 
 @pytest.mark.slow
 @pytest.mark.timeout(240)
+@pytest.mark.usefixtures("mount_namespace")
 def test_a_control_run_whose_recording_fails_at_once_does_not_run_without_it(tmp_path: Path) -> None:
-    why = _namespaces_work()
-    if why:
-        pytest.skip(why)
-    runs = tmp_path / "runs"
-    runs.mkdir()
-    law = law_file(tmp_path, "def law(state):\n    return 5.0\n")
-    rig, out = control_rig(tmp_path, free_port(), duration_s=30), runs / "exp"
+    runs, _, control = _control_run(tmp_path, free_port())
     script = (  # a disk with room for the log, not for the recording's first write
         f"mount -t tmpfs -o size=1m tmpfs {runs} || exit 99; "
-        f"{' '.join(FLAGTRACK)} control -c {rig} --controller {law}:law --out {out}; rc=$?; "
+        f"{control}; rc=$?; "
         f"cp -a {runs}/. {tmp_path / 'copy'}/; exit $rc"
     )
     ran = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True, timeout=200)
@@ -140,3 +129,14 @@ def test_a_control_run_whose_recording_fails_at_once_does_not_run_without_it(tmp
     assert "No space left on device" in ran.stderr
     run = json.loads((tmp_path / "copy" / "exp" / "run.json").read_text())
     assert run["status"] == "stopped" and run["counts"]["steps"] == 0, run
+
+
+def _control_run(tmp_path: Path, port: int) -> tuple[Path, Path, str]:
+    """The runs folder (made), the run's folder in it, and the command line of a 30 s control run
+    on the light simulated rig, its law asking 5 m/s."""
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    law = law_file(tmp_path, "def law(state):\n    return 5.0\n")
+    out = runs / "exp"
+    rig = control_rig(tmp_path, port, duration_s=30)
+    return runs, out, f"{' '.join(FLAGTRACK)} control -c {rig} --controller {law}:law --out {out}"
