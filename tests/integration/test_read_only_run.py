@@ -16,20 +16,13 @@ import pytest
 from flagtrack.daemon.schema import TunnelState
 from flagtrack.daemon.sweep.runlog import read_run
 from flagtrack.drivers.formats import read_events
-from flagtrack.drivers.tunnel.sim_model import SimParams
 from flagtrack.drivers.tunnel.simulated import SimulatedTunnel
 from tests.fakes.helpers import wait_until
-from tests.fakes.tunnel import SWEEP_SIM
 from tests.integration.test_control import law_file, watch_tunnel
 from tests.integration.test_control import rig_file as control_rig
-from tests.integration.test_full_disk import mount_namespace  # noqa: F401 - the fixture
+from tests.integration.test_full_disk import mount_namespace, sim_params  # noqa: F401 - fixtures (the sweep's tunnel)
 from tests.integration.test_restart_resumes import FLAGTRACK, rig_file
 from tests.integration.test_transport import free_port
-
-
-@pytest.fixture
-def sim_params() -> SimParams:
-    return SWEEP_SIM
 
 
 @pytest.mark.slow
