@@ -14,6 +14,7 @@ probe made unimportable, then SciPy imports normally again.
 
 from __future__ import annotations
 
+import gc
 import sys
 import threading
 from collections.abc import Callable, Sequence
@@ -177,11 +178,18 @@ def _use_numba() -> None:
     with _lock:
         if _numba_njit is not None:
             return
-        _import_arraymath_without_blas_probe()
-        from numba import njit as numba_njit
+        collecting = gc.isenabled()
+        gc.disable()  # numba's import makes ~100 k objects, none of them garbage: no collection meanwhile
+        try:
+            _import_arraymath_without_blas_probe()
+            from numba import njit as numba_njit
 
-        for kernel in _kernels:
-            kernel._dispatcher = numba_njit(**kernel.options)(kernel.py_func)
+            for kernel in _kernels:
+                kernel._dispatcher = numba_njit(**kernel.options)(kernel.py_func)
+        finally:
+            if collecting:
+                gc.enable()
+        gc.freeze()  # and later full collections need not go through them again
         for module in list(sys.modules.values()):
             namespace = getattr(module, "__dict__", None)
             if not isinstance(namespace, dict):

@@ -1,4 +1,5 @@
-"""flagtrack.daemon.core.jit: numba's first call without SciPy's linalg, and SciPy intact afterwards."""
+"""flagtrack.daemon.core.jit: numba's first call without SciPy's linalg (and without the garbage
+collector), and SciPy intact afterwards."""
 
 from __future__ import annotations
 
@@ -30,6 +31,8 @@ def dot(a, b):
     return np.dot(a, b)
 
 print("compiled_dot", dot(np.ones(3), np.arange(3.0)))
+import gc
+print("gc_after_numba", gc.isenabled(), gc.get_freeze_count() > 10_000)
 """
 
 
@@ -39,3 +42,6 @@ def test_tracking_loads_no_scipy_linalg_and_scipy_works_after() -> None:
     assert lines["linalg_loaded_by_tracking"] == "False"  # numba's BLAS probe did not import it (~0.15 s)
     assert lines["scipy_linalg_works"] == "True True"
     assert float(lines["compiled_dot"]) == 3.0  # numba's own np.dot still finds BLAS when it is compiled
+    # numba's import ran without the collector, which is back on; its objects are frozen out of
+    # later full collections (~0.1 s of every command)
+    assert lines["gc_after_numba"] == "True True"
