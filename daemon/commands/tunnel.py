@@ -7,7 +7,10 @@ import signal
 import sys
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from flagtrack.drivers.tunnel.safe import SafeTunnel
 
 COMMAND = "tunnel"
 HELP = "wind tunnel: run a simulated one on a pty, or set/get/stop the one of a config"
@@ -146,11 +149,26 @@ def _set(args: argparse.Namespace) -> int:
         print(f"{tunnel.device}: at {tunnel.read_speed_mps():.2f} m/s; holding (keep-alive every "
               f"{tunnel.params.keepalive_s:g} s), Ctrl-C or SIGTERM ramps to zero", flush=True)  # fmt: skip
         while not stopper.event.wait(1.0):
+            _check_answering(tunnel)
             if args.verbose:
                 print(f"speed {tunnel.read_speed_mps():.2f} m/s", file=sys.stderr, flush=True)
         started = time.monotonic()
     print(f"{tunnel.device}: ramped to zero in {time.monotonic() - started:.1f} s", flush=True)
     return 0
+
+
+def _check_answering(tunnel: SafeTunnel) -> None:
+    """Raise DriverError once the controller has not answered the keep-alive for longer than its
+    watchdog (unplugged, powered off): it has stopped the fan, or nothing can now."""
+    from flagtrack.daemon.errors import DriverError
+
+    silent_s, why = tunnel.unanswered()
+    if silent_s > tunnel.params.watchdog_s:
+        raise DriverError(
+            f"the controller has not answered for {silent_s:.0f} s ({why}); not holding any more: "
+            f"its watchdog ({tunnel.params.watchdog_s:g} s) stops the fan",
+            device=tunnel.device,
+        )
 
 
 def _stop(args: argparse.Namespace) -> int:

@@ -19,6 +19,13 @@ from flagtrack.drivers.serial.holder import port_holders
 
 log = logging.getLogger(__name__)
 
+try:  # pyserial's POSIX port flushes and configures through termios, whose errors are not OSErrors
+    import termios
+
+    _LINK_ERRORS: tuple[type[BaseException], ...] = (serial.SerialException, OSError, termios.error)
+except ImportError:  # pragma: no cover - not POSIX
+    _LINK_ERRORS = (serial.SerialException, OSError)
+
 
 class SerialAdapter:
     """A serial port read and written in lines.
@@ -71,14 +78,14 @@ class SerialAdapter:
             self.serial.write(data)
             self.serial.flush()
             self.last_sent_ns = time.time_ns()  # (the latency of a control loop ends here)
-        except (serial.SerialException, OSError) as exc:
+        except _LINK_ERRORS as exc:  # a pty whose other end closed: EIO from tcflush
             raise DriverError(f"write failed: {exc}", device=self.device) from exc
 
     def _recv(self) -> bytes:
         """Read one line (terminator removed); DriverError when none arrives within the timeout."""
         try:
             data = self.serial.read_until(self.eol)
-        except (serial.SerialException, OSError) as exc:
+        except _LINK_ERRORS as exc:
             raise DriverError(f"read failed: {exc}", device=self.device) from exc
         log.debug("%s -> %r", self.device, data)
         if not data.endswith(self.eol):
@@ -102,5 +109,5 @@ class SerialAdapter:
         """Close the port (idempotent)."""
         try:
             self.serial.close()
-        except (serial.SerialException, OSError) as exc:  # pragma: no cover - closing a dead port
+        except _LINK_ERRORS as exc:  # pragma: no cover - closing a dead port
             log.debug("%s: close failed: %s", self.device, exc)

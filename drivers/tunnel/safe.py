@@ -128,6 +128,8 @@ class SafeTunnel:
         self._setpoint_mps: float | None = None
         self._last_exchange_s = time.monotonic()
         self._link_ok = True
+        self._answered_s = time.monotonic()  # the last exchange that succeeded
+        self._link_error = ""  # the last exchange's error while the link is down
         self._keepalive_failures = 0
         self._heartbeat_s: float | None = None  # the owner's loop, once it reports (None: not watched)
         self._withheld = False
@@ -270,6 +272,13 @@ class SafeTunnel:
         is sent only while such calls keep coming (within ``loop_timeout_s``)."""
         self._heartbeat_s = time.monotonic()
 
+    def unanswered(self) -> tuple[float, str]:
+        """How long the controller has not answered (0 while the last exchange succeeded), s, and
+        the last exchange's error ("" then)."""
+        if self._link_ok:
+            return 0.0, ""
+        return time.monotonic() - self._answered_s, self._link_error
+
     @property
     def owner_silent(self) -> bool:
         """The owner reported a heartbeat once and then none for ``loop_timeout_s``."""
@@ -322,14 +331,14 @@ class SafeTunnel:
         with self._lock:
             try:
                 result = call()
-            except DriverError:
-                self._link_ok = False
+            except DriverError as exc:
+                self._link_ok, self._link_error = False, _text(exc)
                 raise
             except (OSError, ValueError) as exc:
-                self._link_ok = False
+                self._link_ok, self._link_error = False, f"link error: {exc}"
                 raise DriverError(f"link error: {exc}", device=self.device) from exc
             self._link_ok = True
-            self._last_exchange_s = time.monotonic()
+            self._last_exchange_s = self._answered_s = time.monotonic()
             return result
 
     def _ramp_to(self, target_mps: float, *, abortable: bool) -> None:

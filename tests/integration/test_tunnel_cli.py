@@ -69,6 +69,41 @@ def test_sigkill_leaves_it_to_the_tunnel_watchdog(sim: SimulatedTunnel, tmp_path
     assert wait_until(lambda: sim.speed_mps < 0.05)
 
 
+def test_set_ends_with_one_line_when_the_controller_goes(sim: SimulatedTunnel, tmp_path: Path) -> None:
+    """The controller's end of the link closes (a USB adapter pulled): the keep-alive thread died of
+    termios' EIO with a traceback and the command went on saying it held the speed until Ctrl-C."""
+    proc = start_set(rig_config(tmp_path, sim.port), "3")
+    try:
+        sim.close()
+        out, err = proc.communicate(timeout=30)  # the watchdog (1 s) and the next check (1 s) later
+    finally:
+        proc.kill()
+    assert proc.returncode == 2, err  # a device's error, as everywhere
+    assert "Traceback" not in err and "ramped to zero" not in out
+    last = err.strip().splitlines()[-1]
+    assert last.startswith(f"flagtrack tunnel: error: {sim.port}: the controller has not answered for "), err
+    assert "its watchdog (1 s) stops the fan" in err
+
+
+def test_a_closed_pty_is_a_driver_error_naming_the_port() -> None:
+    import os
+    import pty
+
+    from flagtrack.daemon.errors import DriverError
+    from flagtrack.drivers.serial.adapter import SerialAdapter
+
+    master, slave = pty.openpty()
+    port = os.ttyname(slave)
+    adapter = SerialAdapter(port, timeout_s=0.2)
+    os.close(master)
+    os.close(slave)
+    try:
+        with pytest.raises(DriverError, match=f"^{port}: write failed: "):  # not termios.error
+            adapter.write_line("V?")
+    finally:
+        adapter.close()
+
+
 def test_set_beyond_bounds_is_one_line_error(sim: SimulatedTunnel, tmp_path: Path) -> None:
     result = subprocess.run([*FLAGTRACK, "tunnel", "set", "9", "-c", str(rig_config(tmp_path, sim.port))],
                             capture_output=True, text=True, timeout=20)  # fmt: skip
