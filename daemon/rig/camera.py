@@ -112,13 +112,16 @@ def open_hardware_camera(rig: RigSections, *, check_root: bool = True) -> Opened
 
 
 class BusSpeedSource:
-    """The wind speed as the supervisor publishes it (for a simulated camera in another process); it
-    subscribes to the tunnel state at its first call, in the camera's loop."""
+    """The wind speed as the supervisor publishes it (for a simulated camera in another process), and
+    ``own_mps`` (the camera's own setting) until a tunnel state arrives: a rig without a running
+    supervisor (``flagtrack up`` beside ``flagtrack tunnel set``) shows the flag at that speed, as
+    ``flagtrack config check`` says. It subscribes to the tunnel state at its first call, in the
+    camera's loop."""
 
-    def __init__(self, bus: Bus) -> None:
+    def __init__(self, bus: Bus, own_mps: float = 0.0) -> None:
         self._bus = bus
         self._sub: Subscription | None = None
-        self._speed_mps = 0.0
+        self._speed_mps = own_mps
 
     def __call__(self) -> float:
         if self._sub is None:

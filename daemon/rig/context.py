@@ -65,14 +65,15 @@ class Build:
 
     def _speed_source(self) -> Callable[[], float] | None:
         """Where a simulated camera reads the wind speed: the simulated tunnel of the supervisor of
-        this process (once it has started), else the tunnel state on the bus, else its own setting."""
+        this process (once it has started), else the tunnel state on the bus (its own setting until
+        one arrives)."""
         rig = self.rig
         if rig.camera.adapter != "simulated" or rig.tunnel is None:
             return None
+        own = rig.camera.simulated.speed_mps
         supervisor = self.built.get("supervisor")
         if supervisor is None:
-            return BusSpeedSource(self.bus)
-        own = rig.camera.simulated.speed_mps
+            return BusSpeedSource(self.bus, own)
 
         def tunnel_speed() -> float:
             simulator = getattr(getattr(supervisor, "tunnel", None), "simulator", None)

@@ -46,7 +46,8 @@ class SimulatedCameraConfig:
         length_px, root_px, direction_deg: the flag on the sensor.
         wavelength_over_l, w_travel: shape of the flapping wave.
         flutter: flutter curve (onset/decay speeds, amplitude, frequency).
-        speed_mps: wind speed when no speed source is connected.
+        speed_mps: wind speed when no speed source is connected, and in a rig with a tunnel until
+            the tunnel's speed is known (no supervisor has published it yet).
         still_amp_over_l: residual motion of a still flag (a few events from it).
         events_per_px2: events per pixel area swept by the line (sets the event rate).
         line_width_px: spread of events across the line.

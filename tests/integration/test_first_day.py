@@ -56,8 +56,8 @@ def simulated_board(folder: Path) -> None:
 
 
 def simulated_flag(folder: Path) -> None:
-    """The twin's flag flaps only when a supervisor runs the tunnel: the flag's recording for
-    ``geometry`` is a simulated recording of a flapping flag of the same sensor size."""
+    """The flag's recording for ``geometry`` is a simulated recording of a flapping flag of the same
+    sensor size (the twin, at its own ``speed_mps`` in ``up``, would cost the test seconds of real time)."""
     run(folder, ["simulate", "simflag", "--duration", "0.5"])
     (folder / "recordings").mkdir(exist_ok=True)
     shutil.move(folder / "simflag" / "sim_00000.raw", folder / "recordings" / "flag.raw")
