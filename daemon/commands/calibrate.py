@@ -55,7 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--degree", type=int, help="total degree of the polynomial (default 3)")
     parser.add_argument("--period-ms", type=float, help="blink period if known, ms (default: detected)")
-    parser.add_argument("--min-period-ms", type=float, default=10.0, help="shortest period searched, ms (10)")
+    parser.add_argument("--min-period-ms", type=float, default=40.0, help="shortest period searched, ms (40)")
     parser.add_argument("--max-period-ms", type=float, default=5000.0, help="longest period searched, ms (5000)")
     parser.add_argument(
         "--max-seconds", type=float, default=10.0, help="use the first S seconds of the recording (default 10)"

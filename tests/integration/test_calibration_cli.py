@@ -111,3 +111,14 @@ def test_end_to_end_tip_error_in_metres(calibration: Path, tmp_path: Path, capsy
 
     _, attrs = read_centrelines(out)
     assert attrs["units"] == "m" and str(attrs["calibration"]) == str(calibration)
+
+
+def test_the_command_searches_the_periods_the_docs_give() -> None:
+    """`--min-period-ms` defaulted to 10 (a 100 Hz room light's flicker then passes for a blink) where
+    docs/calibration.md and the library say 40."""
+    from flagtrack.calibration.pseudo_image import BlinkSearch
+    from flagtrack.daemon.cli import build_parser
+
+    args = build_parser("calibrate").parse_args(["calibrate", "board.raw", "--board", "9x6", "--square-mm", "20"])
+    search = BlinkSearch()
+    assert (args.min_period_ms * 1e3, args.max_period_ms * 1e3) == (search.min_period_us, search.max_period_us)
