@@ -56,9 +56,16 @@ def run(args: argparse.Namespace) -> int:
 def _config(args: argparse.Namespace) -> Any:
     import dataclasses
 
-    from flagtrack.drivers.tunnel.setup import TunnelConfig, load_tunnel_config
+    from flagtrack.daemon.errors import ConfigError
+    from flagtrack.daemon.rig.config import load_rig
+    from flagtrack.drivers.tunnel.setup import TunnelConfig
 
-    cfg = load_tunnel_config(args.config) if args.config else TunnelConfig()
+    cfg = TunnelConfig()
+    if args.config:  # the whole file is checked (a typo anywhere is named), nothing opened
+        rig_cfg = load_rig(args.config, services=())
+        if rig_cfg.tunnel is None:
+            raise ConfigError("section is missing", key="tunnel", path=str(args.config))
+        cfg = rig_cfg.tunnel
     if getattr(args, "port", None):
         driver = cfg.driver if cfg.driver != "simulated" else cfg.sim.protocol
         cfg = dataclasses.replace(cfg, driver=driver, port=args.port)

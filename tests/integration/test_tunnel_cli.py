@@ -169,3 +169,14 @@ def test_sim_command_prints_a_pty_the_driver_can_use() -> None:
         proc.kill()
         proc.communicate(timeout=5)  # close its pipes
     assert proc.returncode == 0
+
+
+def test_a_typo_anywhere_in_the_rig_file_is_named_before_the_port_opens(tmp_path: Path) -> None:
+    """`tunnel get -c rig.yaml` read only the tunnel section: a misspelt key elsewhere passed unseen,
+    where every other command refuses the file."""
+    config = rig_config(tmp_path, "/dev/flagtrack-no-such-port")
+    config.write_text(config.read_text() + "tracker: {root: [100, 240], lenght: 200}\n")
+    got = subprocess.run([*FLAGTRACK, "tunnel", "get", "-c", str(config)], capture_output=True, text=True, timeout=30)
+    assert got.returncode == 2 and got.stdout == "", got
+    lines = got.stderr.strip().splitlines()
+    assert len(lines) == 1 and "tracker.lenght" in lines[0] and "unknown key" in lines[0], lines
