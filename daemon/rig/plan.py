@@ -14,7 +14,7 @@ from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.rig.findings import Findings
 from flagtrack.daemon.rig.host import free_bytes, size_text
 from flagtrack.daemon.rig.sections import RigSections
-from flagtrack.daemon.sweep.plan import Action, Record, SetSpeed, SweepConfig, Wait, plan_points, sweep_plan
+from flagtrack.daemon.sweep.plan import SweepConfig, plan_duration_s, plan_points
 from flagtrack.daemon.sweep.validity import expected_point_bytes, free_space_problem
 from flagtrack.drivers.tunnel.setup import TunnelConfig
 
@@ -48,15 +48,7 @@ def estimate_plan(rig: RigSections) -> PlanEstimate | None:
     if sweep is None:
         return None
     ramp_mps2 = rig.tunnel.safety.max_ramp_mps2 if rig.tunnel is not None else None
-    duration_s, speed_mps = 0.0, 0.0
-    for step in sweep_plan(sweep):
-        if isinstance(step, SetSpeed):
-            duration_s += abs(step.speed_mps - speed_mps) / ramp_mps2 if ramp_mps2 else 0.0
-            speed_mps = step.speed_mps
-        elif isinstance(step, Wait | Record):
-            duration_s += step.duration_s
-        elif isinstance(step, Action) and step.name == "pause":
-            duration_s += float(step.params.get("seconds", 0.0))
+    duration_s = plan_duration_s(sweep, ramp_mps2)
     speeds = sweep.speed_values()
     supervisor = rig.supervisor
     point_bytes = expected_point_bytes(sweep.record_s, supervisor.expected_rate_mev_s, supervisor.bytes_per_event)

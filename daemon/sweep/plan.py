@@ -226,6 +226,21 @@ def sweep_plan(cfg: SweepConfig, done: Collection[str] = ()) -> Iterator[Step]:
     yield SetSpeed(0.0, reason="end of sweep")
 
 
+def plan_duration_s(cfg: SweepConfig, ramp_mps2: float | None) -> float:
+    """The plan's expected duration, s: its waits, records and pauses, and its ramps at ``ramp_mps2``
+    (None: not counted)."""
+    duration_s, speed_mps = 0.0, 0.0
+    for step in sweep_plan(cfg):
+        if isinstance(step, SetSpeed):
+            duration_s += abs(step.speed_mps - speed_mps) / ramp_mps2 if ramp_mps2 else 0.0
+            speed_mps = step.speed_mps
+        elif isinstance(step, Wait | Record):
+            duration_s += step.duration_s
+        elif isinstance(step, Action) and step.name == "pause":
+            duration_s += float(step.params.get("seconds", 0.0))
+    return duration_s
+
+
 def load_sweep_config(path: str | Path, section: str = "sweep") -> SweepConfig:
     """Read the ``section`` of a YAML file as a :class:`SweepConfig` (errors name key and file)."""
     data = load_yaml(path)

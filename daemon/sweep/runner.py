@@ -30,6 +30,7 @@ from flagtrack.daemon.sweep.plan import (
     Step,
     SweepConfig,
     Wait,
+    plan_duration_s,
     plan_points,
     sweep_plan,
 )
@@ -60,6 +61,8 @@ class SweepSettings:
         readback_grace_s: how long it may stay out (or the link silent) before the point fails, s.
         suspect_lost_fraction: a point whose updates are lost more often is ``suspect``.
         expected_rate_mev_s, bytes_per_event, free_space_margin_mb: the free-space check.
+        ramp_mps2: the tunnel's ramp rate, m/s^2 (the ETA before the first point ends; None: ramps
+            not counted).
     """
 
     runs_dir: Path = Path("runs")
@@ -72,6 +75,7 @@ class SweepSettings:
     expected_rate_mev_s: float = 5.0
     bytes_per_event: float = 2.0
     free_space_margin_mb: float = 50.0
+    ramp_mps2: float | None = None
 
 
 class SweepRunner:
@@ -128,7 +132,8 @@ class SweepRunner:
     def run(self, session: Session) -> None:
         self._runlog = self._resume() if self.resume_dir is not None else self._create(session.clock.time())
         assert self._sweep is not None
-        planned_point_s = self._sweep.settle_s + self._sweep.record_s
+        points = len(plan_points(self._sweep))
+        planned_point_s = plan_duration_s(self._sweep, self.settings.ramp_mps2) / max(points, 1)
         session.progress = SweepProgress(
             plan_points(self._sweep), self._done, planned_point_s, session.clock.monotonic()
         )

@@ -394,3 +394,11 @@ def test_watching_alone_publishes_until_stopped_and_ends_safe() -> None:
     session.run(Monitoring(), stop)
     assert session.stop_reason == "SIGINT" and tunnel.speeds == [] and tunnel.calls == ["start", "safe_stop", "close"]
     assert {r.mode for r in outside.reports} == {"monitor", "safe"} and len(outside.reports) >= 5
+
+
+def test_the_eta_before_the_first_point_counts_the_ramps(tmp_path: Path) -> None:
+    """The first ETA counted each point's settle and record only: `sweep` said 0:20 for a plan whose
+    `config check` estimate (ramps counted) was 44 s."""
+    _, session, _, _ = sweep(tmp_path, ramp_mps2=1.0)
+    # ramps 0 -> 4 -> 5.5 -> 4 -> 0 m/s at 1 m/s^2 (11 s), and 3 x (0.5 + 1.0) s, over 3 points
+    assert session.progress is not None and session.progress.planned_point_s == pytest.approx(15.5 / 3)

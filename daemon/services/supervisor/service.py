@@ -149,6 +149,7 @@ class SupervisorService:
             expected_rate_mev_s=cfg.expected_rate_mev_s,
             bytes_per_event=cfg.bytes_per_event,
             free_space_margin_mb=cfg.free_space_margin_mb,
+            ramp_mps2=params.max_ramp_mps2 if params is not None else None,
         )
         measure = BusMeasure(self.monitor, self.flag, self.sensor)
         return SweepRunner(settings, measure, self.rig_snapshot, self.resume_dir)
