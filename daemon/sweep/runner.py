@@ -132,11 +132,9 @@ class SweepRunner:
     def run(self, session: Session) -> None:
         self._runlog = self._resume() if self.resume_dir is not None else self._create(session.clock.time())
         assert self._sweep is not None
-        points = len(plan_points(self._sweep))
-        planned_point_s = plan_duration_s(self._sweep, self.settings.ramp_mps2) / max(points, 1)
-        session.progress = SweepProgress(
-            plan_points(self._sweep), self._done, planned_point_s, session.clock.monotonic()
-        )
+        points = plan_points(self._sweep)
+        planned_point_s = plan_duration_s(self._sweep, self.settings.ramp_mps2) / max(len(points), 1)
+        session.progress = SweepProgress(points, self._done, planned_point_s, session.clock.monotonic())
         steps: list[Step] = []  # the steps of the point under way, from its Point to its EndPoint
         for step in sweep_plan(self._sweep, self._done):
             if isinstance(step, Point) or steps:
