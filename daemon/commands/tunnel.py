@@ -53,15 +53,19 @@ def run(args: argparse.Namespace) -> int:
     return {"sim": _sim, "get": _get, "set": _set, "stop": _stop}[args.action](args)
 
 
-def _config(args: argparse.Namespace) -> Any:
+def _config(args: argparse.Namespace, *, whole_file: bool = True) -> Any:
+    """The tunnel section of ``-c``: the whole file checked (a typo anywhere is named, nothing opened),
+    except for ``stop`` (``whole_file`` false), which a key outside the section never holds up."""
     import dataclasses
 
     from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.rig.config import load_rig
-    from flagtrack.drivers.tunnel.setup import TunnelConfig
+    from flagtrack.drivers.tunnel.setup import TunnelConfig, load_tunnel_config
 
     cfg = TunnelConfig()
-    if args.config:  # the whole file is checked (a typo anywhere is named), nothing opened
+    if args.config and not whole_file:
+        cfg = load_tunnel_config(args.config)
+    elif args.config:
         rig_cfg = load_rig(args.config, services=())
         if rig_cfg.tunnel is None:
             raise ConfigError("section is missing", key="tunnel", path=str(args.config))
@@ -183,7 +187,7 @@ def _stop(args: argparse.Namespace) -> int:
     from flagtrack.drivers.tunnel.setup import open_tunnel
 
     try:
-        tunnel = open_tunnel(_config(args))
+        tunnel = open_tunnel(_config(args, whole_file=False))
     except PortInUseError as exc:  # the owner keeps the port: the way to stop the tunnel now is to stop it
         raise DriverError(f"{exc}; to stop the tunnel, stop its owner (SIGTERM ramps the tunnel to zero)") from exc
     try:

@@ -180,3 +180,17 @@ def test_a_typo_anywhere_in_the_rig_file_is_named_before_the_port_opens(tmp_path
     assert got.returncode == 2 and got.stdout == "", got
     lines = got.stderr.strip().splitlines()
     assert len(lines) == 1 and "tracker.lenght" in lines[0] and "unknown key" in lines[0], lines
+
+
+@pytest.mark.parametrize("sim_params", [replace(RIG_SIM, watchdog_s=30.0)], ids=["watchdog 30 s"])
+def test_stop_is_never_held_up_by_a_key_outside_the_tunnel_section(sim: SimulatedTunnel, tmp_path: Path) -> None:
+    link = AsciiTunnel.open(sim.port, timeout_s=0.3)
+    link.write_setpoint_mps(2.0)
+    link.close()
+    config = rig_config(tmp_path, sim.port)
+    config.write_text(config.read_text() + "tracker: {root: [100, 240], lenght: 200}\n")
+    stopped = subprocess.run(
+        [*FLAGTRACK, "tunnel", "stop", "-c", str(config)], capture_output=True, text=True, timeout=20
+    )
+    assert stopped.returncode == 0, stopped.stderr
+    assert sim.setpoint_mps == 0.0
