@@ -331,10 +331,9 @@ def run_updates(
     region_end = min(int(lost_cfg[4] * inv_width), n_buckets - 2) + 1  # buckets of the flag's region
     # the ring of whole buckets beyond it, up to the overflow bucket: region area / ring area
     ring_ratio = region_end**2 / max((n_buckets - 1) ** 2 - region_end**2, 1)
-    trial = angles.copy()
     hist = np.zeros(N_BINS, dtype=np.int64)
-    t_jx, t_jy = np.empty(n_links + 1), np.empty(n_links + 1)
-    t_sx, t_sy = np.empty(out_sx.shape[1]), np.empty(out_sx.shape[1])
+    n_s = out_sx.shape[1]
+    spare = (angles.copy(), np.empty(n_links + 1), np.empty(n_links + 1), np.empty(n_s), np.empty(n_s), np.empty(2))
     stale_on = lost_cfg[9] != 0.0
     need = lost_cfg[1]
     gathers = lost_on and lost_cfg[5] != 0.0  # a chain that may be moved by the detector gathers quiet windows
@@ -365,9 +364,8 @@ def run_updates(
             lost_prev[3], lost_prev[4] = end_us[w], SUPPORTED  # a quiet region: the tip's support is looked for afresh
         elif lost_on:
             lost, total, used = _judge(
-                xs, ys, offsets, bucket_width, root_x, root_y, angles, trial, geometry, area, jx, jy, sx, sy, t_jx,
-                t_jy, t_sx, t_sy, counts, work, seg, inside, best, hist, region_end, ring_ratio, lost_cfg, lost_prev,
-                end_us[w], total, used,
+                xs, ys, offsets, bucket_width, root_x, root_y, angles, geometry, area, jx, jy, sx, sy, spare, counts,
+                work, seg, inside, best, hist, region_end, ring_ratio, lost_cfg, lost_prev, end_us[w], total, used,
             )  # fmt: skip
         out_lost[w] = lost
         out_n[w] = used
@@ -386,7 +384,9 @@ def _scratch(size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
     )
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+# inlined (and so at most 30 arguments, or Python passes them as *args): a call between compiled
+# functions with this many arrays costs ~0.5 us, 4 % of a window
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _judge(
     xs: np.ndarray,
     ys: np.ndarray,
@@ -395,17 +395,13 @@ def _judge(
     root_x: float,
     root_y: float,
     angles: np.ndarray,
-    trial: np.ndarray,
     geometry: tuple,
     area: np.ndarray,
     jx: np.ndarray,
     jy: np.ndarray,
     sx: np.ndarray,
     sy: np.ndarray,
-    t_jx: np.ndarray,
-    t_jy: np.ndarray,
-    t_sx: np.ndarray,
-    t_sy: np.ndarray,
+    spare: tuple,
     counts: np.ndarray,
     work: np.ndarray,
     seg: np.ndarray,
@@ -421,8 +417,9 @@ def _judge(
     used: int,
 ) -> tuple[int, float, int]:
     """The verdict of one measured update (see :func:`run_updates`), after a wide search of a poorly
-    fitting window (whose chain replaces the update's when it fits better); (lost, total, used)."""
-    lengths, reach, r2_min, r2_max, cl2, cr2, half_angle, min_events, length, rel_tol, group = geometry
+    fitting window (whose chain, made in ``spare``, replaces the update's when it fits better);
+    (lost, total, used)."""
+    min_events = geometry[7]
     n_buckets = len(offsets) - 1
     tip_n, busiest = counts[-2:].sum(), counts.max()
     n_region = offsets[region_end]
@@ -432,21 +429,15 @@ def _judge(
     lost = verdict(n_region, noise, n_near, int(lost_cfg[1]), lost_cfg[2], fold, lost_prev[0])
     poor = verdict(n_region, noise, n_near, int(lost_cfg[1]), max(lost_cfg[2], lost_cfg[12]), fold, lost)
     if poor and lost_cfg[5] != 0.0 and n_region - noise >= lost_cfg[1]:
-        trial[:] = angles
-        wide_search(
-            xs, ys, offsets, 1.0 / bucket_width, root_x, root_y, trial, lengths, r2_min, r2_max, lost_cfg[6],
-            lost_cfg[7], min_events, hist,
+        searched = _search_again(
+            xs, ys, offsets, bucket_width, root_x, root_y, angles, geometry, area, spare, counts, work, seg, inside,
+            best, hist, lost_cfg, n_region, noise, n_near, fold,
         )  # fmt: skip
-        t_total, t_used = _update_measure(
-            xs, ys, offsets, bucket_width, root_x, root_y, trial, geometry, area, t_jx, t_jy, counts, work, t_sx,
-            t_sy, seg, inside, best,
-        )  # fmt: skip
-        t_near = count_near(best, n_region, lost_cfg[3])
-        if (t_near > n_near or fold) and not folded(trial, lost_cfg[6]):
+        if searched >= 0:  # the search's chain fits better: it replaces the update's
+            trial, t_jx, t_jy, t_sx, t_sy, t_sums = spare
             angles[:] = trial
             jx[:], jy[:], sx[:], sy[:] = t_jx, t_jy, t_sx, t_sy
-            total, used = t_total, t_used
-            lost = verdict(n_region, noise, t_near, int(lost_cfg[1]), lost_cfg[2], False, 1)
+            lost, total, used = searched, t_sums[0], int(t_sums[1])
             tip_n, busiest = counts[-2:].sum(), counts.max()
     lost_prev[0] = lost
     starved = tip_n < min_events and STARVED * tip_n < busiest  # far fewer than the busiest link
@@ -456,6 +447,50 @@ def _judge(
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _search_again(
+    xs: np.ndarray,
+    ys: np.ndarray,
+    offsets: np.ndarray,
+    bucket_width: float,
+    root_x: float,
+    root_y: float,
+    angles: np.ndarray,
+    geometry: tuple,
+    area: np.ndarray,
+    spare: tuple,
+    counts: np.ndarray,
+    work: np.ndarray,
+    seg: np.ndarray,
+    inside: np.ndarray,
+    best: np.ndarray,
+    hist: np.ndarray,
+    lost_cfg: np.ndarray,
+    n_region: int,
+    noise: float,
+    n_near: int,
+    fold: bool,
+) -> int:
+    """A wide search of a poorly fitting window from ``angles``, its chain made in ``spare``: its
+    verdict if it fits better than the update's, else -1."""
+    lengths, reach, r2_min, r2_max, cl2, cr2, half_angle, min_events, length, rel_tol, group = geometry
+    trial, t_jx, t_jy, t_sx, t_sy, t_sums = spare
+    trial[:] = angles
+    wide_search(
+        xs, ys, offsets, 1.0 / bucket_width, root_x, root_y, trial, lengths, r2_min, r2_max, lost_cfg[6],
+        lost_cfg[7], min_events, hist,
+    )  # fmt: skip
+    t_total, t_used = _update_measure(
+        xs, ys, offsets, bucket_width, root_x, root_y, trial, geometry, area, t_jx, t_jy, counts, work, t_sx,
+        t_sy, seg, inside, best,
+    )  # fmt: skip
+    t_sums[0], t_sums[1] = t_total, t_used
+    t_near = count_near(best, n_region, lost_cfg[3])
+    if (t_near > n_near or fold) and not folded(trial, lost_cfg[6]):
+        return verdict(n_region, noise, t_near, int(lost_cfg[1]), lost_cfg[2], False, 1)
+    return -1
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")  # inlined: as _judge
 def _update_measure(
     xs: np.ndarray,
     ys: np.ndarray,
