@@ -228,6 +228,7 @@ class SimulatedCamera:
         return self.flutter.state
 
     def open(self) -> CameraInfo:
+        self._warm_up()
         self._wall0 = time.monotonic()
         flutter = self.flutter.params
         return CameraInfo(
@@ -243,6 +244,15 @@ class SimulatedCamera:
                 "time_scale": self.cfg.time_scale,
             },
         )
+
+    def _warm_up(self) -> None:
+        """Render one slice of the flag as it is and throw it away, so that loading the renderer's
+        compiled kernels (on a first run, compiling them: 1-2 s) happens before the camera's clock
+        starts, not as a lag skipped at the stream's start. Nothing of the twin's state changes."""
+        state, slice_s = self.flutter.state, self.cfg.slice_us * 1e-6
+        twin = _TwinSlice(self.kinematics, 0.0, slice_s, state, state, self.cfg.still_amp_over_l)
+        for _ in line_events(twin, 0, self.cfg.slice_us, self.cfg.width, self.cfg.height, self.line):
+            pass
 
     def read(self, timeout_s: float) -> CameraData | None:
         if self._wall0 is None:

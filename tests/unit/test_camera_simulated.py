@@ -78,3 +78,25 @@ def test_bench_twin_reports_the_demo_twins_rate_and_its_scaling() -> None:
     assert 0.8 < demo["camera_mev_s"] < 2.0  # the demo's twin: about 1 Mev/s of camera data
     assert dense["events"] / demo["events"] == pytest.approx(3.0, rel=0.1)  # events scale with the density
     assert demo["real_time_margin"] > 0 and demo["generated_mev_s"] > 0
+
+
+def test_opening_renders_once_before_the_clock_starts_and_changes_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    import flagtrack.drivers.camera.simulated as simulated
+
+    cfg = SimulatedCameraConfig(flutter=FLUTTER, speed_mps=7.0, seed=3)
+    with monkeypatch.context() as patch:
+        patch.setattr(SimulatedCamera, "_warm_up", lambda self: None)
+        unwarmed = np.concatenate(fast_forward(SimulatedCamera(cfg), 0.05))
+    clock_at_render: list[float | None] = []
+    render = simulated.line_events
+
+    def spy(*args: object, **kwargs: object) -> object:
+        clock_at_render.append(camera._wall0)
+        return render(*args, **kwargs)
+
+    monkeypatch.setattr(simulated, "line_events", spy)
+    camera = SimulatedCamera(cfg)
+    camera.open()
+    assert clock_at_render == [None]  # one slice rendered (the kernels loaded) before the clock started
+    events = np.concatenate(fast_forward(camera, 0.05))
+    np.testing.assert_array_equal(events, unwarmed)  # the stream is the one without the warm-up
