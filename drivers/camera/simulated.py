@@ -215,7 +215,8 @@ class SimulatedCamera:
             slice_us=100,
         )
         self._t_us = 0
-        self._wall0: float | None = None
+        self._open = False
+        self._wall0: float | None = None  # the wall clock at camera time 0, from the first read on
         self._slice = 0
         self.skipped_us = 0
         self._drops: list[DeviceDrop] = []  # skips not yet handed over with data
@@ -229,7 +230,7 @@ class SimulatedCamera:
 
     def open(self) -> CameraInfo:
         self._warm_up()
-        self._wall0 = time.monotonic()
+        self._open = True
         flutter = self.flutter.params
         return CameraInfo(
             "simulated",
@@ -248,15 +249,18 @@ class SimulatedCamera:
     def _warm_up(self) -> None:
         """Render one slice of the flag as it is and throw it away, so that loading the renderer's
         compiled kernels (on a first run, compiling them: 1-2 s) happens before the camera's clock
-        starts, not as a lag skipped at the stream's start. Nothing of the twin's state changes."""
+        starts (at the first read, so that a service's own set-up is no lag either), not as a lag
+        skipped at the stream's start. Nothing of the twin's state changes."""
         state, slice_s = self.flutter.state, self.cfg.slice_us * 1e-6
         twin = _TwinSlice(self.kinematics, 0.0, slice_s, state, state, self.cfg.still_amp_over_l)
         for _ in line_events(twin, 0, self.cfg.slice_us, self.cfg.width, self.cfg.height, self.line):
             pass
 
     def read(self, timeout_s: float) -> CameraData | None:
-        if self._wall0 is None:
+        if not self._open:
             raise DriverError("simulated camera is not open", device="simulated camera")
+        if self._wall0 is None:
+            self._wall0 = time.monotonic() - self._t_us * 1e-6 / self.cfg.time_scale
         t1_us = self._t_us + self.cfg.slice_us
         due = self._wall0 + t1_us * 1e-6 / self.cfg.time_scale
         wait = due - time.monotonic()
@@ -298,6 +302,7 @@ class SimulatedCamera:
         return CameraData(events, triggers, time.time_ns(), t_until_us=t1_us, drops=drops)
 
     def close(self) -> None:
+        self._open = False
         self._wall0 = None
 
     def _skip(self, skip_us: int) -> None:
@@ -323,7 +328,7 @@ class SimulatedCamera:
 
 def fast_forward(camera: SimulatedCamera, duration_s: float) -> list[np.ndarray]:
     """Generate ``duration_s`` of camera time as fast as possible (tests and benchmarks)."""
-    if camera._wall0 is None:
+    if not camera._open:
         camera.open()
     out = []
     stop_us = camera._t_us + int(duration_s * 1e6)

@@ -56,6 +56,8 @@ def test_a_camera_that_falls_behind_skips_ahead_and_stays_in_step_with_the_wall_
 
     camera = SimulatedCamera(SimulatedCameraConfig(flutter=FLUTTER, speed_mps=7.0, max_lag_s=0.1))
     camera.open()
+    first = camera.read(0.05)  # the camera's clock starts
+    assert first is not None and camera.skipped_us == 0
     time.sleep(0.5)  # an overloaded machine: no reads for half a second
     data = camera.read(0.05)
     assert data is not None and camera.skipped_us >= 300_000
@@ -100,3 +102,14 @@ def test_opening_renders_once_before_the_clock_starts_and_changes_nothing(monkey
     assert clock_at_render == [None]  # one slice rendered (the kernels loaded) before the clock started
     events = np.concatenate(fast_forward(camera, 0.05))
     np.testing.assert_array_equal(events, unwarmed)  # the stream is the one without the warm-up
+
+
+def test_the_clock_starts_at_the_first_read_so_a_services_set_up_is_no_lag() -> None:
+    import time
+
+    camera = SimulatedCamera(SimulatedCameraConfig(flutter=FLUTTER, speed_mps=7.0, max_lag_s=0.1))
+    camera.open()
+    time.sleep(0.3)  # the camera service loading its own kernels between the open and the first read
+    data = camera.read(0.05)
+    assert data is not None and camera.skipped_us == 0 and not data.drops
+    assert data.t_until_us == camera.cfg.slice_us  # the stream starts at its beginning
