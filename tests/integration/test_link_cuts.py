@@ -1,8 +1,8 @@
 """Link cuts between hosts: the camera host and the tracker host in their own network namespaces, joined
 through a third that runs the router (veth pairs). The camera's link is cut for 10 s, then the router is
 restarted: the tracker and the recorder go on by themselves, every gap is recorded (sidecar, centreline
-file), every hole in the recorded events is one of them, and nothing recorded before the cut is lost. Needs root and `ip netns`; skips with the reason
-elsewhere."""
+file), every hole in the recorded events is one of them, and nothing recorded before the cut is lost.
+Needs root and `ip netns`; skips with the reason elsewhere."""
 
 from __future__ import annotations
 
