@@ -72,12 +72,12 @@ def summary_text(run_dir: Path, stop_reason: str) -> str:
 
     run = json.loads((run_dir / "run.json").read_text())
     if run["status"] == "running":  # the one written at the start: the end could not be written
-        stale = ["run.json", "README.txt"] + ([] if (run_dir / "control.png").exists() else ["control.png"])
+        unwritten = ["run.json", "README.txt"] + ([] if (run_dir / "control.png").exists() else ["control.png"])
         return "\n".join(
             [
                 f"flagtrack control: {stop_reason or 'stopped'}; run folder {run_dir}",
                 f"  log     {run_dir / 'control.jsonl'} (one record per step)",
-                f"  not written at the end: {', '.join(stale)} (the lines above say why)",
+                f"  not written at the end: {', '.join(unwritten)} (the lines above say why)",
             ]
         )
     latency = run["loop_latency_ms"]
