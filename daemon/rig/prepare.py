@@ -4,8 +4,9 @@ Each service's step is in the service table (:attr:`~flagtrack.daemon.rig.table.
 
 - compile (first run after installing: about a minute) or load the compiled kernels of the twin
   camera, the packets and the tracker: services that share a process would otherwise compile
-  together, and the supervisor would not see the tracker come up within its start-up timeout
-  (hardware cameras are not opened here);
+  together, and the supervisor would not see the tracker come up within its start-up timeout;
+  a hardware camera is not opened here, but its packets' kernels are loaded: the rig opens it
+  next, and it streams into its host buffer from then on;
 - a supervisor imports matplotlib (about a second, holding the GIL): drawing the summary figure at
   the end of a sweep would otherwise stall the twin camera of the same process;
 - trigger events (a twin with a sync generator, a point sensor that reads the raw files' pulses)

@@ -356,9 +356,16 @@ def _check_recording(recording: Path, path: str | None) -> None:
 
 
 def _prepare_camera(p: Preparation) -> None:
+    from flagtrack.daemon.rig.sections import HARDWARE_ADAPTERS
+
     camera = p.rig.camera
+    if camera.adapter in HARDWARE_ADAPTERS:  # not opened here: its packets' kernels, before it streams
+        from flagtrack.daemon.services.camera import load_packet_kernels
+
+        load_packet_kernels()  # (0.3 s; 5 s on the first run after installing: no message)
+        return
     if camera.adapter != "simulated":
-        return  # hardware cameras are not opened here
+        return  # a replay: its clock starts at its first read
     from flagtrack.drivers.camera.simulated import fast_forward
 
     p.loading_kernels()

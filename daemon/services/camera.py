@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -92,6 +93,18 @@ class RateCounter:
         return closed
 
 
+def load_packet_kernels(encodings: Iterable[str] = NATIVE_ENCODINGS) -> None:
+    """Compile (the first run after installing: seconds) or load the kernels that encode events into
+    packets of ``encodings`` and cut a device's own words into them: before a hardware camera opens,
+    so that its first reads do not wait on them (its host buffer would fill meanwhile)."""
+    for encoding in encodings:
+        Packetizer(encoding, 1, 1).push(
+            make_events(np.array([0, 1]), np.array([0, 0]), np.array([0, 0]), np.array([1, 0])), t_until_us=5000
+        )
+        if encoding in NATIVE_ENCODINGS:
+            NativeCutter(encoding).push(bytes(8))
+
+
 class CameraService:
     """Publishes one camera's stream until stopped or until the stream ends.
 
@@ -162,11 +175,7 @@ class CameraService:
         packetizer = Packetizer(
             info.encoding, info.width, info.height, PacketParams(self.cfg.packet_us, self.cfg.max_packet_events)
         )
-        Packetizer(info.encoding, 1, 1).push(
-            make_events(np.array([0, 1]), np.array([0, 0]), np.array([0, 0]), np.array([1, 0])), t_until_us=5000
-        )  # load the encoder
-        if info.encoding in NATIVE_ENCODINGS:
-            NativeCutter(info.encoding).push(bytes(8))  # and the word scan
+        load_packet_kernels([info.encoding])  # (loaded already where the rig was prepared)
         rates = RateCounter(int(self.cfg.rate_interval_s * 1e6))
         joiner = PacketJoiner(self.cfg.min_packet_events, self.cfg.max_packet_us)
         cutter: NativeCutter | None = None  # made at the first native bytes the adapter did not cut
