@@ -48,6 +48,12 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.output, "-o", inputs, replaceable=only_yaml_sections("tracker"), holds="a tracker: section")
     mapping, units = _mapping(args.calibration)
     events, size = _read(args.file, args.seconds)
+    if mapping is not None:
+        from flagtrack.daemon.tracking.setup import calibration_misfit
+
+        misfit = calibration_misfit(mapping, *size, str(args.file))
+        if misfit is not None:
+            raise ConfigError(f"{args.calibration}: {misfit}", key="--calibration")
     try:
         found = find_geometry(events, size, mapping)
     except NoFlagError as exc:

@@ -125,11 +125,16 @@ def check_paths(events: Path, output: Path, config: Path | None) -> None:
 
 
 def _sensor_check(setup: TrackingSetup, args: argparse.Namespace) -> Callable[[int, int], None]:
-    """Refuse a root off the recording's sensor (by the option or key that set it)."""
+    """Refuse a calibration made on another sensor than the recording's, and a root off that sensor
+    (by the option or key that set it)."""
     from flagtrack.daemon.errors import ConfigError
-    from flagtrack.daemon.tracking.setup import root_on_sensor
+    from flagtrack.daemon.tracking.setup import calibration_misfit, root_on_sensor
 
     def check(width: int, height: int) -> None:
+        misfit = calibration_misfit(setup.mapping, width, height, str(args.file))
+        if misfit is not None:
+            name = "--calibration" if args.calibration else f"file {args.config}, key 'tracker.calibration'"
+            raise ConfigError(f"{name}: {setup.config.calibration}: {misfit}")
         if not root_on_sensor(setup, width, height):
             x, y = setup.params.chain.root
             name = "--root" if args.root else f"file {args.config}, key 'tracker.root'"

@@ -98,9 +98,11 @@ def open_hardware_camera(rig: RigSections, *, check_root: bool = True) -> Opened
         ) from exc
     try:  # the sensor's size is known now: a root off it tracks nothing (check_root False: aim, which sets it up)
         if check_root:
-            from flagtrack.daemon.tracking.setup import refuse_root_off_sensor
+            from flagtrack.daemon.tracking.setup import refuse_tracker_off_sensor
 
-            refuse_root_off_sensor(rig.tracker, info.width, info.height, sensor=f"camera {info.serial}", path=rig.path)
+            refuse_tracker_off_sensor(
+                rig.tracker, info.width, info.height, sensor=f"camera {info.serial}", path=rig.path
+            )
     except FlagtrackError:
         camera.close()
         raise

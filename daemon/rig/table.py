@@ -229,10 +229,10 @@ def _check_tracker(rig: RigSections, findings: Findings) -> None:
         rig.tracker.tracker_params(path=rig.path)
     sensor = _known_sensor(rig) if findings.files else None
     if sensor is not None:  # (a hardware camera's: when up opens it)
-        from flagtrack.daemon.tracking.setup import refuse_root_off_sensor
+        from flagtrack.daemon.tracking.setup import refuse_tracker_off_sensor
 
         width, height, whose = sensor
-        refuse_root_off_sensor(rig.tracker, width, height, sensor=whose, path=rig.path)
+        refuse_tracker_off_sensor(rig.tracker, width, height, sensor=whose, path=rig.path)
 
 
 def _known_sensor(rig: RigSections) -> tuple[int, int, str] | None:

@@ -84,27 +84,44 @@ def processing_attrs(config: TrackingConfig) -> dict[str, Any]:
     return attrs
 
 
-def refuse_root_off_sensor(config: TrackingConfig, width: int, height: int, *, sensor: str, path: str | None) -> None:
-    """Refuse a ``tracker.root`` off a ``width`` x ``height`` sensor (``sensor`` says whose), through
-    the calibration when there is one; nothing to say without a root or with a calibration not made
-    yet.
+def calibration_misfit(mapping: PointMapping | None, width: int, height: int, sensor: str) -> str | None:
+    """Why ``mapping`` cannot serve the ``width`` x ``height`` sensor of ``sensor`` (it was made on
+    another size), or None (it can, or a size is unknown)."""
+    made_on = getattr(mapping, "image_size", None)
+    if made_on is None or not width or not height or tuple(made_on) == (width, height):
+        return None
+    return (
+        f"made on a {made_on[0]} x {made_on[1]} sensor, not the {width} x {height} sensor of {sensor}: its "
+        "pixels would map to the wrong places (calibrate this camera: flagtrack calibrate)"
+    )
+
+
+def refuse_tracker_off_sensor(
+    config: TrackingConfig, width: int, height: int, *, sensor: str, path: str | None
+) -> None:
+    """Refuse a calibration made on a sensor of another size than ``width`` x ``height`` (``sensor``
+    says whose), and a ``tracker.root`` off that sensor, through the calibration when there is one;
+    nothing to say without a root or with a calibration not made yet.
 
     Raises:
-        ConfigError: naming ``tracker.root`` and ``path``.
+        ConfigError: naming ``tracker.calibration`` or ``tracker.root``, and ``path``.
         FormatError: the calibration file is not one.
     """
     from flagtrack.daemon.core.mapping import on_sensor
     from flagtrack.daemon.errors import ConfigError
 
-    if config.root is None or (config.calibration is not None and not Path(config.calibration).is_file()):
+    if config.calibration is not None and not Path(config.calibration).is_file():
         return
-    if not all(math.isfinite(v) for v in config.root):
-        return  # (not a place: the range checks name it)
     mapping: PointMapping | None = None
     if config.calibration is not None:
         from flagtrack.calibration.calfile import load_mapping
 
         mapping = load_mapping(config.calibration)
+        misfit = calibration_misfit(mapping, width, height, sensor)
+        if misfit is not None:
+            raise ConfigError(f"{config.calibration}: {misfit}", key="tracker.calibration", path=path)
+    if config.root is None or not all(math.isfinite(v) for v in config.root):
+        return  # (no root, or not a place: the range checks name it)
     x, y = config.root
     if not on_sensor(x, y, width, height, mapping):
         plane = " (its outline mapped through the calibration)" if mapping is not None else ""

@@ -156,3 +156,35 @@ def test_every_centreline_file_says_how_it_was_made(recording: Path, tmp_path: P
             for name, value in expected.items():
                 assert np.array_equal(np.asarray(got[name]), np.asarray(value)), (path, name)
             np.testing.assert_allclose(f["t"][()], t_offline, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("how", ["option", "config", "geometry", "config check"])
+def test_a_calibration_made_on_another_sensor_is_refused(recording: Path, tmp_path: Path, how: str) -> None:
+    """A 1280 x 720 calibration on the 640 x 480 recording: one line naming it and both sizes, exit 2
+    (before, its pixels were mapped as they came, and the tracker tracked in the wrong place)."""
+    hd = tmp_path / "hd.yaml"
+    hd.write_text(yaml.safe_dump({**CALIBRATION, "image_size": [1280, 720]}))
+    tracker = {"root": [0.05, 0.12], "length": 0.1, "direction_deg": 0.0, "calibration": str(hd)}
+    config = tmp_path / "rig.yaml"
+    config.write_text(yaml.safe_dump({"tracker": tracker}))
+    out = str(tmp_path / "out.h5")
+    argv = {
+        "option": ["reconstruct", str(recording), "-o", out, "--calibration", str(hd), "--root", "0.05", "0.12",
+                   "--length", "0.1", "--direction", "0"],
+        "config": ["reconstruct", str(recording), "-o", out, "-c", str(config)],
+        "geometry": ["geometry", str(recording), "--calibration", str(hd)],
+        "config check": ["config", "check", str(config)],
+    }[how]  # fmt: skip
+    if how == "config check":
+        rig = {"camera": {"adapter": "replay", "replay": {"path": str(recording)}}, "tracker": tracker}
+        config.write_text(yaml.safe_dump({**rig, "services": ["camera", "tracker"]}))
+    done = flagtrack(*argv)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1, done.stderr
+    assert "hd.yaml: made on a 1280 x 720 sensor, not the 640 x 480 sensor of" in lines[0]
+    assert ("--calibration" if how in ("option", "geometry") else "'tracker.calibration'") in lines[0]
+    assert not Path(out).exists()
+    hd.write_text(yaml.safe_dump(CALIBRATION))  # the same, made on this sensor: the refusal is the size alone
+    again = flagtrack(*argv)
+    assert "made on" not in again.stderr
+    assert again.returncode == 0 or (how == "geometry" and "no flag found" in again.stderr)  # (0.1 s: no period)
