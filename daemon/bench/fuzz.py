@@ -104,7 +104,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         import hypothesis  # noqa: F401 - checked before anything runs
     except ImportError:
-        raise FlagtrackError("flagtrack bench fuzz needs hypothesis: pip install 'flagtrack[dev]'") from None
+        raise FlagtrackError(
+            "flagtrack bench fuzz needs hypothesis: pip install -e '.[dev]' in flagtrack's folder"
+        ) from None
     result = fuzz(args.minutes, args.examples, args.deadline, args.seed)
     for name, figures in result["targets"].items():
         found = "; ".join(figures["failures"]) or "nothing found"

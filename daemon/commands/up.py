@@ -34,7 +34,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--exit-at-eof", action="store_true", help="stop when the replayed file ends")
     parser.add_argument("--centrelines", type=Path, metavar="OUT.h5", help="write the centrelines to this file")
     parser.add_argument("--rrd", type=Path, metavar="OUT.rrd", help="write the Rerun view to this file (headless)")
-    parser.add_argument("--record", type=Path, metavar="BASE", help="record the camera to BASE.raw (+ .json)")
+    parser.add_argument(
+        "--record",
+        type=Path,
+        metavar="BASE",
+        help="record the camera to BASE.raw (+ .json) in the recorder's folder (recordings/ by default)",
+    )
     parser.add_argument(
         "--shutdown-timeout", type=positive_seconds, default=10.0, help="seconds to wait for services to stop"
     )

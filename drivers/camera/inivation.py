@@ -1,4 +1,4 @@
-"""iniVation cameras (DVXplorer, DAVIS346, ...) through dv-processing (``pip install 'flagtrack[inivation]'``).
+"""iniVation cameras (DVXplorer, DAVIS346, ...) through dv-processing (``pip install -e '.[inivation]'``).
 
 dv-processing 2.x opens a camera with ``dv.io.camera.open(serial)`` and gives decoded event
 batches (``getNextEventBatch`` -> EventStore, Unix-time µs) and trigger batches, not EVT bytes:
@@ -36,7 +36,7 @@ from flagtrack.drivers.camera.hardware import (
 
 log = logging.getLogger(__name__)
 
-INSTALL_HINT = "pip install 'flagtrack[inivation]' (installs dv-processing from PyPI)"
+INSTALL_HINT = "pip install -e '.[inivation]' in flagtrack's folder (installs dv-processing from PyPI)"
 POLL_INTERVAL_S = 0.001
 TRIGGERS = {
     "EXTERNAL_SIGNAL_RISING_EDGE": (0, 1),

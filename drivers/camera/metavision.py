@@ -52,7 +52,7 @@ log = logging.getLogger(__name__)
 INSTALL_HINT = (
     "install OpenEB (or the Metavision SDK) with its Python bindings and make metavision_hal "
     "importable from this Python (see docs/cameras.md), or use adapter: prophesee "
-    "(pip install 'flagtrack[prophesee]')"
+    "(pip install -e '.[prophesee]' in flagtrack's folder)"
 )
 POLL_INTERVAL_S = 0.001
 

@@ -1,6 +1,6 @@
 """Prophesee-sensor cameras (EVK4, EVK3 HD, CenturyArks SilkyEvCam VGA, ...) through ``neuromorphic-drivers``.
 
-neuromorphic-drivers (PyPI, ``pip install 'flagtrack[prophesee]'``) talks USB directly (no
+neuromorphic-drivers (PyPI, ``pip install -e '.[prophesee]'``) talks USB directly (no
 OpenEB needed). The camera is opened in raw mode: it yields the sensor's EVT 3.0 bytes, which are
 handed to the camera service as they are (it cuts them into packets: docs/formats.md). Biases, ROI (row/column masks), the rate limiter and the external trigger
 input come from ``camera.hardware`` of the rig config and are applied with
@@ -42,7 +42,7 @@ from flagtrack.drivers.camera.hardware import (
 
 log = logging.getLogger(__name__)
 
-INSTALL_HINT = "pip install 'flagtrack[prophesee]' (installs neuromorphic-drivers from PyPI)"
+INSTALL_HINT = "pip install -e '.[prophesee]' in flagtrack's folder (installs neuromorphic-drivers from PyPI)"
 ITERATOR_TIMEOUT_S = 0.02
 """How long one step of the device iterator waits for data (reads loop over steps until their timeout)."""
 RING_FULL = "neuromorphic-drivers dropped USB packets: the host's ring was full (the host fell behind)"

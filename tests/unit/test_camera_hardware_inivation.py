@@ -113,7 +113,7 @@ def test_bad_hardware_keys_name_the_key(hardware: dict, key: str) -> None:
 
 
 def test_missing_sdk_gives_the_install_line(no_sdk) -> None:
-    with pytest.raises(DriverError, match=r"pip install 'flagtrack\[inivation\]'"):
+    with pytest.raises(DriverError, match=r"pip install -e '\.\[inivation\]' in flagtrack's folder"):
         inivation.open_from_config({}).open()
 
 

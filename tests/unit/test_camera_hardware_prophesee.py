@@ -131,7 +131,7 @@ def test_settings_the_model_lacks_name_the_key_and_release_the_device(fake_nd, h
 
 def test_missing_sdk_gives_the_install_line(no_sdk) -> None:
     camera = prophesee.open_from_config({"serial": "1"})  # checking the config imports nothing
-    with pytest.raises(DriverError, match=r"pip install 'flagtrack\[prophesee\]'"):
+    with pytest.raises(DriverError, match=r"pip install -e '\.\[prophesee\]' in flagtrack's folder"):
         camera.open()
     assert sys.modules.get("neuromorphic_drivers") is None
 
