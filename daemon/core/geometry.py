@@ -80,7 +80,7 @@ class FlagGeometry:
 
     Attributes:
         root: (x, y) of the root.
-        direction_deg: rest direction, degrees from +x towards +y (the tracker's convention).
+        direction_deg: rest direction, degrees from +x towards +y (the tracker's convention), in [-180, 180).
         length: flag length L.
         root_gap: distance from the root to where the flag first moves enough to fire events (the
             part of the root's position that is extrapolated, not seen).
@@ -355,7 +355,8 @@ class _Frame:
 
     @property
     def direction_deg(self) -> float:
-        return math.degrees(math.atan2(self.axis[1], self.axis[0])) % 360.0
+        """In [-180, 180): a flag pointing along +x is near 0, either side."""
+        return (math.degrees(math.atan2(self.axis[1], self.axis[0])) + 180.0) % 360.0 - 180.0
 
     def uv(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         dx, dy = x - self.origin[0], y - self.origin[1]

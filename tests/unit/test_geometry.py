@@ -39,6 +39,7 @@ def test_root_direction_and_length_within_the_targets(root, direction_deg) -> No
     found = find_geometry(flag_events(kin), SIZE)
     assert root_error(found, root, 200.0) < 0.02
     assert abs(turn_deg(found.direction_deg, direction_deg)) < 2.0
+    assert -180.0 <= found.direction_deg < 180.0  # (-90 as -90, not 270; 0 either side of 0, not 359.9)
     assert abs(found.length / 200.0 - 1.0) < 0.03
     assert found.frequency_hz == pytest.approx(20.0, rel=0.05)
     assert found.hot_pixels == ()
