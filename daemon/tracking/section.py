@@ -9,6 +9,7 @@ dt = tau) and, for the robust method, the measured ones of docs/tracking.md.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import enum
 from dataclasses import dataclass
 from pathlib import Path
@@ -212,6 +213,19 @@ def _build(cls: type, path: str | None, key: str, **values: Any) -> Any:
 
 
 def load_tracking_config(path: str | Path) -> TrackingConfig:
-    """Read the ``tracker:`` section of a YAML file (other sections are ignored)."""
+    """Read the ``tracker:`` section of a YAML file (other sections are ignored; none: the defaults).
+
+    Raises:
+        ConfigError: a bad key in the section; no section but a top-level key spelt nearly so, or
+            the file is a calibration.
+    """
     data = load_yaml(path)
+    if SECTION not in data:
+        from flagtrack.calibration.calfile import FORMAT as CALIBRATION_FORMAT
+
+        if data.get("format") == CALIBRATION_FORMAT:
+            raise ConfigError("a calibration file, not a config with a 'tracker:' section", path=str(path))
+        near = difflib.get_close_matches(SECTION, [str(k) for k in data], n=1, cutoff=0.8)
+        if near:
+            raise ConfigError(f"unknown key (did you mean '{SECTION}'?)", key=near[0], path=str(path))
     return from_mapping(TrackingConfig, data.get(SECTION), path=str(path), key=SECTION)

@@ -112,6 +112,20 @@ def test_missing_section_gives_defaults(tmp_path: Path) -> None:
     assert load_tracking_config(_write(tmp_path, "camera: {}\n")) == TrackingConfig()
 
 
+@pytest.mark.parametrize(
+    ("text", "words"),
+    [
+        ("traker: {root: [0, 0], length: 100}\n", "key 'traker': unknown key (did you mean 'tracker'?)"),
+        ("format: flagtrack-calibration\nversion: 1\n", "a calibration file, not a config with a 'tracker:' section"),
+    ],
+)
+def test_a_misspelt_section_or_a_calibration_is_named_not_taken_for_defaults(tmp_path: Path, text, words) -> None:
+    """`reconstruct -c` with `traker:` said "key 'tracker.root': required"; with a calibration, the same."""
+    with pytest.raises(ConfigError) as caught:
+        load_tracking_config(_write(tmp_path, text))
+    assert words in str(caught.value) and "rig.yaml" in str(caught.value)
+
+
 def test_the_denoise_section_is_the_core_filter_parameters_with_the_robust_default(tmp_path: Path) -> None:
     """One definition of each filter parameter: the section is the core's DenoiseParams; keys it does not
     give keep the robust method's adaptive default (max 3 neighbours), not the classic filter's 1."""
