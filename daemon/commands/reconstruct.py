@@ -85,6 +85,9 @@ def run(args: argparse.Namespace) -> int:
             f"warning: most updates found no flag: check the geometry first ({geometry}: where the flag is)",
             file=sys.stderr,
         )
+    elif summary.reach is not None and (misfit := summary.reach.misfit(setup.params.chain.length, setup.units)):
+        length = f"file {args.config}, key 'tracker.length'" if args.config and not args.length else "--length"
+        print(f"warning: {misfit}: check {length} (and the root)", file=sys.stderr)
     return 0
 
 

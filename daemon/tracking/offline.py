@@ -9,9 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
+from flagtrack.daemon.core.chain_reach import ChainReach
 from flagtrack.daemon.core.denoise import BeyondAnySensorError
 from flagtrack.daemon.errors import FormatError
 from flagtrack.daemon.tracking.pipeline import TrackerPipeline
+from flagtrack.daemon.tracking.reach import ReachSampler
 from flagtrack.daemon.tracking.setup import TrackingSetup
 from flagtrack.drivers.formats import open_events
 from flagtrack.drivers.formats.centreline import CentrelineSink
@@ -36,6 +38,7 @@ class ReconstructSummary:
     events_lost_at_most: int = 0
     lost_updates: int = 0
     stale_updates: int = 0
+    reach: ChainReach | None = None
 
     def as_dict(self) -> dict[str, int | None]:
         """The summary as plain values (``--json`` outputs, batch rows)."""
@@ -106,7 +109,8 @@ def reconstruct_file(
         with CentrelineSink(output, attrs, s=tracker.s, n_joints=setup.params.chain.n_joints, atomic=atomic) as sink:
             # this thread reads, decodes, denoises and maps; the pipeline's worker updates the chain
             # and writes the updates (the same results as tracker.feed on each chunk)
-            with TrackerPipeline(tracker, lambda batch, _tag: sink.add(batch)) as pipeline:
+            sampler = ReachSampler(setup.params)
+            with TrackerPipeline(tracker, lambda batch, _tag: sink.add(batch), observe=sampler.observe) as pipeline:
                 for chunk in reader:
                     try:
                         pipeline.feed(chunk.events)
@@ -117,7 +121,7 @@ def reconstruct_file(
                 if progress is not None:
                     progress(Path(path).stat().st_size)
                 pipeline.finish()
-            stats = tracker.stats
+            stats, reach = tracker.stats, sampler.reach()
             skipped = tuple((r.start, r.end) for r in reader.skipped)
             sink.set_attrs(
                 {
@@ -125,6 +129,7 @@ def reconstruct_file(
                     "events_kept": stats.events_kept,
                     "input_skipped_bytes": np.array(skipped, dtype=np.int64).reshape(-1, 2),
                     "input_events_lost_at_most": reader.events_lost_at_most,
+                    "chain_reach": reach.reach if reach is not None else np.nan,
                 }
             )
     if stats.events_out_of_order:
@@ -139,4 +144,5 @@ def reconstruct_file(
         reader.events_lost_at_most,
         stats.lost_updates,
         stats.stale_updates,
+        reach,
     )

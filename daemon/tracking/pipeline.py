@@ -32,11 +32,20 @@ class TrackerPipeline:
         tracker: the core tracker (only the worker calls its ``advance``; only the caller ``prepare``).
         emit: called on the worker with each chunk's updates and the tag given to :meth:`feed`.
         depth: prepared chunks waiting for the worker at most (bounds the memory).
+        observe: called on the worker with each prepared chunk and the updates it completed, before
+            ``emit`` (``flagtrack reconstruct`` samples the chain's reach there).
     """
 
-    def __init__(self, tracker: Tracker, emit: Callable[[CentrelineBatch, Any], None], depth: int = 4) -> None:
+    def __init__(
+        self,
+        tracker: Tracker,
+        emit: Callable[[CentrelineBatch, Any], None],
+        depth: int = 4,
+        observe: Callable[[PreparedChunk, CentrelineBatch], None] | None = None,
+    ) -> None:
         self.tracker = tracker
         self._emit = emit
+        self._observe = observe
         self._queue: queue.Queue[Any] = queue.Queue(maxsize=depth)
         self._error: BaseException | None = None
         self._worker = threading.Thread(target=self._work, name="tracker-chain", daemon=True)
@@ -116,6 +125,8 @@ class TrackerPipeline:
                 chunk, complete_through_us, tag = item
                 if isinstance(chunk, PreparedChunk):
                     batch = tracker.advance(chunk, complete_through_us)
+                    if self._observe is not None:
+                        self._observe(chunk, batch)
                 else:
                     batch = tracker.finish()
                 self._emit(batch, tag)

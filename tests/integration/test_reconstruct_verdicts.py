@@ -54,6 +54,39 @@ def test_a_recording_with_no_flag_where_the_geometry_says_is_said_out_loud(
     assert np.mean(batch.lost | batch.stale) > 0.5
 
 
+@pytest.mark.parametrize(
+    ("length", "words"),
+    [
+        (
+            "210",
+            "warning: the chain's last 14 % had no events: from this root the flag looks about 180 px long, not 210",
+        ),
+        (
+            "160",
+            "warning: the flag's events reach 12 % past the chain's tip: from this root the flag looks about 180 px",
+        ),
+    ],
+)
+def test_a_chain_longer_or_shorter_than_the_flag_is_said_though_all_is_found(
+    raw_file: Path, tmp_path: Path, capsys, length: str, words: str
+) -> None:
+    """Every update finds the flag (the chain's links near the tip lie on its events) while the chain
+    runs on past the tip, or stops short of it; the events' reach along the chain says so."""
+    out = tmp_path / "out.h5"
+    status, lines = _run(capsys, raw_file, "-o", out, "--root", "120", "250", "--length", length, *GEOMETRY[2:])
+    assert status == 0 and "100.0 % found" in lines[-2], lines
+    assert lines[-1].startswith(words) and lines[-1].endswith("check --length (and the root)"), lines
+    with h5py.File(out) as f:
+        assert f.attrs["chain_reach"] == pytest.approx(180 / float(length), abs=0.01)
+
+
+def test_the_chains_reach_goes_into_the_file(raw_file: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "out.h5"
+    status, _ = _run(capsys, raw_file, "-o", out, "--root", "120", "250", *GEOMETRY)
+    with h5py.File(out) as f:
+        assert status == 0 and f.attrs["chain_reach"] == pytest.approx(1.0, abs=0.01)
+
+
 def test_a_start_before_a_unix_time_clock_tracks_from_the_first_event(raw_file: Path, tmp_path: Path, capsys) -> None:
     """``--t-start 0`` on a recording whose clock is Unix time (aedat4's): the windows before its first
     event hold nothing and are not made (it hung, making 6e12 of them); a time in that clock is taken."""
