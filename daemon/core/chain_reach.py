@@ -92,7 +92,7 @@ class ReachProfile:
         end = int(np.searchsorted(cumulative, QUANTILE * total))  # the bin holding the quantile
         below = cumulative[end - 1] if end else 0
         inside = (QUANTILE * total - below) / max(int(self.counts[end]), 1)  # linear within the bin
-        return ChainReach(round((end + inside) * BIN, 4), total, self.updates)
+        return ChainReach(round(float((end + inside) * BIN), 4), total, self.updates)
 
 
 def _figure(value: float) -> str:

@@ -84,8 +84,9 @@ def _build_supervisor(b: Build) -> Service:
     root_x, root_y = tracker.root or (0.0, 0.0)
     flag = FlagGeometry(float(tracker.length or 1.0), (float(root_x), float(root_y)), float(tracker.direction_deg))
     opener = lambda: open_tunnel(tunnel)  # noqa: E731
+    tracking = b.tracking() if tracker.root is not None and tracker.length is not None else None
     return SupervisorService(
-        b.bus, rig.supervisor, opener, rig.camera.id, flag, rig.snapshot(), b.resume_dir, rig.sensor
+        b.bus, rig.supervisor, opener, rig.camera.id, flag, rig.snapshot(), b.resume_dir, rig.sensor, tracking
     )
 
 

@@ -12,6 +12,7 @@ import math
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
+from flagtrack.daemon.core.chain_reach import TOLERANCE as REACH_TOLERANCE
 from flagtrack.daemon.sweep.plan import Point
 from flagtrack.daemon.sweep.runlog import PointResult
 
@@ -30,11 +31,16 @@ def stale_fraction(result: PointResult) -> float:
     return math.nan if value is None else float(value)
 
 
-def is_suspect(lost_fraction: float, bound: float, stale_fraction: float = math.nan, state: str = "") -> bool:
+def is_suspect(
+    lost_fraction: float, bound: float, stale_fraction: float = math.nan, state: str = "", chain_reach: float = math.nan
+) -> bool:
     """Whether a point is suspect: its updates were lost more often than ``bound``, or, for a flapping
     point, stale more often (a still flag gives few events: a still point is not suspect for being
-    stale). NaN: not known, not suspect."""
+    stale), or the flag's events ended more than :data:`~.core.chain_reach.TOLERANCE` of L from the
+    chain's tip (``chain_reach``). NaN: not known, not suspect."""
     if math.isfinite(lost_fraction) and lost_fraction > bound:
+        return True
+    if math.isfinite(chain_reach) and abs(chain_reach - 1.0) > REACH_TOLERANCE:
         return True
     return state == "flapping" and math.isfinite(stale_fraction) and stale_fraction > bound
 

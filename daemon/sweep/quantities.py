@@ -74,6 +74,8 @@ QUANTITIES: dict[str, Quantity] = {
                  "updates whose shape rests on no recent events in the flag's region (remembered, not measured)"),
         Quantity("shed_fraction", "shed", "%", 100.0, 1,
                  "share of the point's camera time the live tracker skipped to keep within its latency budget"),
+        Quantity("chain_reach", "reach", "", 1.0, 3,
+                 "where the flag's events ended along the live chain, a fraction of L (1: at its tip)"),
         Quantity("sensor_error_rms_over_l", "e/L RMS", "%", 100.0, 2,
                  "RMS over the point of e/L, e = camera minus point sensor at the beam"),
         Quantity("sensor_error_max_over_l", "|e|/L max", "%", 100.0, 2, "maximum over the point of |e|/L"),

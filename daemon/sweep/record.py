@@ -63,7 +63,7 @@ def record_point(
         centreline_file=_relative(lines, run_dir),
         t_start_unix=t_start_unix,
         t_stop_unix=session.clock.time(),
-        suspect=is_suspect(found.lost_fraction, suspect_bound, found.stale_fraction, found.state),
+        suspect=is_suspect(found.lost_fraction, suspect_bound, found.stale_fraction, found.state, found.chain_reach),
     )
 
 

@@ -99,6 +99,10 @@ class PointResult:
         stale_fraction: fraction of the point's updates whose shape rests on no recent events
             (``/stale``: remembered, not measured). A still flag gives few events, so a still point
             is not suspect for it (its A/L of 0 stands).
+        chain_reach: where the flag's events ended along the live chain over the point's first
+            events, a fraction of L (1: at its tip; NaN when not judged: a still flag, no recording
+            here). Off 1 by more than 3 %, the chain's length is not the flag's and the point is
+            suspect (docs/tracking.md).
     """
 
     point_id: str
@@ -143,6 +147,7 @@ class PointResult:
     reason: str | None = None
     shed_fraction: float = math.nan
     stale_fraction: float = math.nan
+    chain_reach: float = math.nan
 
     @classmethod
     def planned(cls, point: Point, **values: Any) -> PointResult:

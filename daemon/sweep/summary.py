@@ -35,6 +35,7 @@ SUMMARY_COLUMNS = (
     "sensor_error_std_over_l", "sensor_sync", "sensor_offset_us", "sensor_offset_unc_us", "sensor_drift_ppm",
     "sensor_xcorr_offset_us", "sensor_xcorr_unc_us", "sensor_samples", "sensor_missing", "sensor_compared", "sensor_file",
     "sensor_figure", "actions", "lost_fraction", "suspect", "reason", "stale_fraction", "shed_fraction",
+    "chain_reach",
     *POINT_ALIASES,  # the old names of the cloud distance, last, with the same values (for programs that read them)
 )  # fmt: skip
 

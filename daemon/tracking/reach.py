@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.chain_reach import ChainReach, ReachProfile
 from flagtrack.daemon.core.tracker import PreparedChunk, TrackerParams
+from flagtrack.drivers.formats import open_events
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.tracking.setup import TrackingSetup
 
 UPDATES_PER_CHUNK = (32, 1)
 """Found updates sampled per chunk of the recording, evenly spread over it: the first while fewer
@@ -52,3 +59,28 @@ class ReachSampler:
     def reach(self) -> ChainReach | None:
         """Where the events ended along the chain (None: too few to say)."""
         return self._profile.reach()
+
+
+RECORDING_BYTES = 8 << 20
+""":func:`recording_reach` reads at most this much of a recording (about 2 M events of EVT 3.0)."""
+
+
+def recording_reach(path: Path, updates: CentrelineBatch, setup: TrackingSetup) -> ChainReach | None:
+    """The reach of ``updates`` (a live tracker's, on ``path``'s clock) over the first events of the
+    recording ``path`` (at most :data:`RECORDING_BYTES`, denoised and mapped as ``setup`` tracks them).
+
+    Raises:
+        FormatError: the recording cannot be read.
+    """
+    sampler = ReachSampler(setup.params)
+    window_ends_us = setup.params.schedule.window_ends_us(updates.t_s)
+    with open_events(path, chunk_bytes=1 << 20) as reader:
+        tracker = setup.new_tracker((reader.info.width or 0, reader.info.height or 0))
+        for chunk in reader:
+            prepared = tracker.prepare(chunk.events)
+            if len(prepared.t):
+                lo, hi = np.searchsorted(window_ends_us, (prepared.t[0], prepared.t[-1] + 1))
+                sampler.observe(prepared, updates.select(slice(lo, hi)))
+            if chunk.byte_offset >= RECORDING_BYTES:
+                break
+    return sampler.reach()

@@ -61,6 +61,8 @@ def test_a_sweep_records_every_point_and_ends_at_zero(tmp_path: Path) -> None:
     flapping = points[1]
     assert 0.15 < flapping.amplitude_over_l < 0.4 and 8 < flapping.frequency_hz < 20 and 0 <= flapping.twi <= 1
     assert flapping.event_rate_mev_s > 5 * points[0].event_rate_mev_s
+    assert flapping.chain_reach == pytest.approx(1.0, abs=0.02) and not flapping.suspect  # the chain is the flag's
+    assert all(np.isnan(p.chain_reach) for p in (points[0], points[2]))  # still: not judged
     assert record.stop["reason"] == "finished"
     for p in points:
         raw = tmp_path / "runs" / "run" / p.raw_file

@@ -1,4 +1,5 @@
-"""A sweep point whose tracker did not find the flag is marked suspect (issue 19), on the simulated rig."""
+"""A sweep point whose tracker did not find the flag (issue 19), or whose chain is longer than the flag,
+is marked suspect, on the simulated rig."""
 
 from __future__ import annotations
 
@@ -27,3 +28,21 @@ def test_a_point_tracked_off_the_flag_is_suspect(tmp_path: Path) -> None:
     with open(tmp_path / "runs" / "run" / "summary.csv") as handle:
         (row,) = csv.DictReader(handle)
     assert row["suspect"] == "True" and float(row["lost_fraction"]) == pytest.approx(point.lost_fraction)
+
+
+@pytest.mark.slow
+def test_a_point_tracked_with_a_chain_longer_than_the_flag_is_suspect(tmp_path: Path) -> None:
+    """A chain 15 % longer than the flag finds it at every update (no loss to see) while its tail has
+    no events: the point's chain reach says so, and the point is suspect."""
+    config = rig(tmp_path, sweep={"speeds": [5.5], "branches": ["up"], "settle_s": 0.5, "record_s": 1.0})
+    length = config.tracker.length
+    assert length is not None
+    tracker = config.tracker.with_overrides(length=1.15 * length)
+    supervisor, report, _ = run(dataclasses.replace(config, tracker=tracker))
+    assert supervisor.stop_reason == "finished" and not report.errors
+    (point,) = read_run(tmp_path / "runs" / "run").latest_points().values()
+    assert point.state == "flapping" and point.lost_fraction < 0.05 and point.suspect
+    assert point.chain_reach == pytest.approx(1 / 1.15, abs=0.02)
+    with open(tmp_path / "runs" / "run" / "summary.csv") as handle:
+        (row,) = csv.DictReader(handle)
+    assert row["suspect"] == "True" and float(row["chain_reach"]) == pytest.approx(point.chain_reach)

@@ -43,6 +43,13 @@ def test_a_point_is_suspect_above_the_bound(fraction: float, bound: float, suspe
     assert is_suspect(fraction, bound) is suspect
 
 
+@pytest.mark.parametrize(
+    ("reach", "suspect"), [(0.87, True), (1.04, True), (0.975, False), (1.02, False), (math.nan, False)]
+)
+def test_a_point_whose_chain_is_not_the_flags_length_is_suspect(reach: float, suspect: bool) -> None:
+    assert is_suspect(0.0, 0.05, 0.0, "flapping", reach) is suspect
+
+
 def test_the_bound_is_a_supervisor_key_with_a_default_of_5_percent() -> None:
     assert SupervisorConfig().suspect_lost_fraction == 0.05
     assert from_mapping(SupervisorConfig, {"suspect_lost_fraction": 0.1}).suspect_lost_fraction == 0.1

@@ -4,10 +4,11 @@ flag's state, the centrelines' metrics, the point-sensor comparison (a run's
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -15,6 +16,11 @@ from flagtrack.daemon.services.supervisor.analysis import PointMetrics, point_me
 from flagtrack.daemon.services.supervisor.monitor import BusMonitor, Collection, point_state
 from flagtrack.daemon.sweep.plan import Point
 from flagtrack.daemon.sweep.runlog import POINTS_DIR, PointResult, point_paths
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.tracking.setup import TrackingSetup
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -33,10 +39,14 @@ class BusMeasure:
         monitor: the supervisor's subscriptions.
         flag: the flag's geometry.
         sensor: a point sensor (``SensorConfig``) compared with each point's reconstruction, or None.
+        tracking: the rig's tracking set-up: with it, a flapping point's live centrelines are set
+            against the first events of its recording (``chain_reach``); None: not judged.
     """
 
-    def __init__(self, monitor: BusMonitor, flag: FlagGeometry, sensor: Any = None) -> None:
-        self.monitor, self.flag, self.sensor = monitor, flag, sensor
+    def __init__(
+        self, monitor: BusMonitor, flag: FlagGeometry, sensor: Any = None, tracking: TrackingSetup | None = None
+    ) -> None:
+        self.monitor, self.flag, self.sensor, self.tracking = monitor, flag, sensor, tracking
         self._gathered = Collection()
 
     def begin(self) -> None:
@@ -73,8 +83,32 @@ class BusMeasure:
             lost_fraction=metrics.lost_fraction,
             shed_fraction=metrics.shed_fraction,
             stale_fraction=metrics.stale_fraction,
+            chain_reach=self._chain_reach(point, run_dir, collection) if state == "flapping" else math.nan,
             **self._check_sensor(point, run_dir, collection, state),
         )
+
+    def _chain_reach(self, point: Point, run_dir: Path, collection: Collection) -> float:
+        """Where the flag's events ended along the live chain over the point's first events (NaN: not
+        judged); a chain off the flag's length is said in the log. Never raises."""
+        raw = run_dir / point_paths(point.point_id)[0]
+        if self.tracking is None or not collection.batches or not raw.exists():
+            return math.nan
+        from flagtrack.daemon.core.centreline import CentrelineBatch
+        from flagtrack.daemon.tracking.reach import recording_reach
+
+        try:
+            reach = recording_reach(raw, CentrelineBatch.concatenate(collection.batches), self.tracking)
+        except Exception as exc:  # noqa: BLE001 - a figure of the point, not a reason to stop the sweep
+            log.warning("point %s: the chain's reach was not judged: %s", point.point_id, exc)
+            return math.nan
+        if reach is None:
+            return math.nan
+        misfit = reach.misfit(self.tracking.params.chain.length, self.tracking.units)
+        if misfit:
+            log.warning(
+                "point %s: %s: check tracker.length (and the root); the point is suspect", point.point_id, misfit
+            )
+        return reach.reach
 
     def _check_sensor(self, point: Point, run_dir: Path, collection: Collection, state: str) -> dict[str, Any]:
         """The point-sensor fields of the point (empty without a sensor); never raises."""

@@ -49,6 +49,8 @@ class SupervisorService:
         rig_snapshot: the whole rig config, stored in the run's start record.
         resume_dir: resume this run instead of starting a new one.
         sensor: a point sensor (``SensorConfig``) compared with each point's reconstruction, or None.
+        tracking: the rig's tracking set-up (``TrackingSetup``), for each flapping point's chain
+            reach (:class:`.measure.BusMeasure`), or None.
     """
 
     name = "supervisor"
@@ -63,8 +65,10 @@ class SupervisorService:
         rig_snapshot: dict[str, Any],
         resume_dir: Path | None = None,
         sensor: Any = None,
+        tracking: Any = None,
     ) -> None:
         self.bus, self.cfg, self.flag = bus, cfg, flag
+        self.tracking = tracking  # the rig's TrackingSetup: a point's chain reach is judged with it
         self._open_tunnel, self.camera_id = open_tunnel, camera_id
         self.tunnel: Any = None  # opened by start()
         self.monitor: BusMonitor
@@ -151,7 +155,7 @@ class SupervisorService:
             free_space_margin_mb=cfg.free_space_margin_mb,
             ramp_mps2=params.max_ramp_mps2 if params is not None else None,
         )
-        measure = BusMeasure(self.monitor, self.flag, self.sensor)
+        measure = BusMeasure(self.monitor, self.flag, self.sensor, self.tracking)
         return SweepRunner(settings, measure, self.rig_snapshot, self.resume_dir)
 
     def _control_loop(self) -> ControlLoop:
