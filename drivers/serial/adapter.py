@@ -9,7 +9,9 @@ holder, so two programs never drive one tunnel.
 
 from __future__ import annotations
 
+import errno
 import logging
+import os
 import time
 
 import serial
@@ -68,7 +70,7 @@ class SerialAdapter:
             if "exclusively lock" in str(exc):
                 holders = "; ".join(port_holders(port)) or "a process this user cannot see"
                 raise PortInUseError(f"port in use, held by {holders}; not opened", device=port) from exc
-            raise DriverError(f"cannot open serial port: {exc}", device=port) from exc
+            raise DriverError(f"cannot open serial port: {_why_not_opened(exc)}", device=port) from exc
 
     def _send(self, data: bytes) -> None:
         """Write ``data`` as is (after dropping unread input, so replies stay aligned)."""
@@ -111,3 +113,17 @@ class SerialAdapter:
             self.serial.close()
         except _LINK_ERRORS as exc:  # pragma: no cover - closing a dead port
             log.debug("%s: close failed: %s", self.device, exc)
+
+
+def _why_not_opened(exc: BaseException) -> str:
+    """Why a port did not open, in a few words (pyserial's own text repeats the port and the errno)."""
+    code = getattr(exc, "errno", None)
+    if code == errno.ENOENT:
+        return "no such device (is it plugged in? docs/first-day.md: the udev rule names it)"
+    if code in (errno.EACCES, errno.EPERM):
+        return "permission denied (the user must be in the 'dialout' group: docs/first-day.md)"
+    if isinstance(code, int):
+        return os.strerror(code).lower()
+    if "Could not configure port" in str(exc):
+        return "not a serial port (it does not take a serial port's settings)"
+    return str(exc)

@@ -566,3 +566,20 @@ def test_modbus_sensor_failures_are_missing_samples_then_a_driver_error() -> Non
             sensor.read(0.001)
         sensor.close()
     assert np.isnan(values).all() and missing >= 2 and info.value.device == replay.url
+
+
+@pytest.mark.parametrize(
+    ("make", "words"),
+    [
+        (lambda tmp: tmp / "ttyUSB9", "no such device (is it plugged in?"),
+        (lambda tmp: (tmp / "notes.txt").write_text("x") and tmp / "notes.txt", "not a serial port"),
+        (lambda tmp: tmp, "is a directory"),
+    ],
+)
+def test_a_port_that_does_not_open_says_why_in_a_few_words(tmp_path, make, words: str) -> None:
+    """One line: the port, then why (pyserial's text named the port and the errno twice)."""
+    port = str(make(tmp_path))
+    with pytest.raises(DriverError) as caught:
+        SerialAdapter(port)
+    message = str(caught.value)
+    assert message.startswith(f"{port}: cannot open serial port: {words}") and message.count("Errno") == 0
