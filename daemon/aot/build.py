@@ -132,6 +132,7 @@ def build(progress: Any = None, workload: Any = run_workload) -> BuildResult:
     cache folder (replacing the build there)."""
     say = progress or (lambda _msg: None)
     jit.set_compiled_loader(None)  # the workload runs through numba (an older build may be loaded)
+    say("tracking and decoding small synthetic recordings, so that numba compiles every kernel (about 40 s) ...")
     started = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         workload(Path(tmp))
