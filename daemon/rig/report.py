@@ -77,7 +77,9 @@ def check_rig_file(
         check_port(rig.tunnel.port, key="tunnel.port", what="the tunnel's controller", findings=findings)
     pending = [note for note in findings.notes if note.pending]
     if strict and pending:
-        raise ConfigError(f"{pending[0].text} (--strict)", key=pending[0].key, path=str(path))
+        more = [note.key or "?" for note in pending[1:]]
+        rest = f"; {len(more)} more to do: {', '.join(more)}" if more else ""
+        raise ConfigError(f"{pending[0].text} (--strict{rest})", key=pending[0].key, path=str(path))
     lines = [("bus", bus_line(rig))] if kind == "rig" or "bus" in data else []
     lines += [(name, DESCRIPTIONS[name](rig)) for name in READING_ORDER if name in names]
     if rig.tunnel is not None:
