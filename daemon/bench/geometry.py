@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -26,12 +27,17 @@ HELP = "accuracy of `flagtrack geometry` (root, direction, length) on simulated 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Grid size, seed, duration, output."""
+    add_grid_arguments(parser)
+    parser.set_defaults(run=run)
+
+
+def add_grid_arguments(parser: argparse.ArgumentParser) -> None:
+    """The grid's size, seed and duration, the processes, --json (also ``bench reach``'s)."""
     parser.add_argument("--n", type=int, default=36, help="recordings in the grid (default 36)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the grid (default 0)")
     parser.add_argument("--duration", type=float, default=0.3, help="seconds per recording (default 0.3)")
     parser.add_argument("--jobs", type=int, default=1, help="processes (default 1)")
     parser.add_argument("--json", action="store_true", help="print one JSON object (cases and summary)")
-    parser.set_defaults(run=run)
 
 
 @dataclass(frozen=True)
@@ -232,16 +238,20 @@ def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def evaluate_grid(args: argparse.Namespace, evaluate: Callable[[Case], dict[str, Any]]) -> list[dict[str, Any]]:
+    """``evaluate`` on every case of the grid the arguments name, on ``--jobs`` processes."""
+    cases = plan(args.n, args.seed, args.duration)
+    if args.jobs <= 1:
+        return [evaluate(case) for case in cases]
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        return list(pool.map(evaluate, cases))
+
+
 def run(args: argparse.Namespace) -> int:
     """Simulate the grid, evaluate each recording, print the figures."""
-    cases = plan(args.n, args.seed, args.duration)
-    if args.jobs > 1:
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            rows = list(pool.map(evaluate, cases))
-    else:
-        rows = [evaluate(case) for case in cases]
+    rows = evaluate_grid(args, evaluate)
     figures = summary(rows)
     if args.json:
         print(json.dumps({"summary": figures, "cases": rows}))

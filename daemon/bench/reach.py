@@ -13,7 +13,7 @@ import json
 from dataclasses import asdict
 from typing import Any
 
-from flagtrack.daemon.bench.geometry import Case, plan
+from flagtrack.daemon.bench.geometry import Case, add_grid_arguments, evaluate_grid
 
 COMMAND = "reach"
 HELP = "accuracy of the chain's reach (reconstruct's length warning) on simulated recordings"
@@ -24,11 +24,7 @@ CHUNK_EVENTS = 250_000
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Grid size, seed, duration, output (the grid of ``flagtrack bench geometry``)."""
-    parser.add_argument("--n", type=int, default=36, help="recordings in the grid (default 36)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the grid (default 0)")
-    parser.add_argument("--duration", type=float, default=0.3, help="seconds per recording (default 0.3)")
-    parser.add_argument("--jobs", type=int, default=1, help="processes (default 1)")
-    parser.add_argument("--json", action="store_true", help="print one JSON object (cases and summary)")
+    add_grid_arguments(parser)
     parser.set_defaults(run=run)
 
 
@@ -75,14 +71,7 @@ def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     """Simulate the grid, track each recording at three lengths, print the figures."""
-    cases = plan(args.n, args.seed, args.duration)
-    if args.jobs > 1:
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            rows = list(pool.map(evaluate, cases))
-    else:
-        rows = [evaluate(case) for case in cases]
+    rows = evaluate_grid(args, evaluate)
     figures = summary(rows)
     if args.json:
         print(json.dumps({"summary": figures, "cases": rows}))
