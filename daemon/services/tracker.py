@@ -30,6 +30,7 @@ import numpy as np
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.core.events import empty_events
+from flagtrack.daemon.core.tracker import PreparedChunk
 from flagtrack.daemon.problems import ProblemLog
 from flagtrack.daemon.schema import EventPacket, TrackerStatus
 from flagtrack.daemon.services.lost_count import LostCount
@@ -45,6 +46,7 @@ from flagtrack.daemon.services.tracker_decode import (
 )
 from flagtrack.daemon.services.tracker_outbox import CentrelineOutbox, updates_source_ns
 from flagtrack.daemon.tracking.pipeline import TrackerPipeline
+from flagtrack.daemon.tracking.reach import LiveReach
 from flagtrack.daemon.transport import Bus, Publisher, Subscription
 from flagtrack.drivers.formats.packets import decode_packet
 
@@ -160,6 +162,7 @@ class TrackerService:
         self.budget = LatencyBudget(max_lag_ms) if max_lag_ms is not None else None
         self.shed = ShedSpans()  # packets skipped for the budget, and the camera time they held
         self._held: EventPacket | None = None  # received, left for the next call (no room in the budget)
+        self._reach = LiveReach(self.tracker.params, units)  # the chain's length against its events
 
     def start(self) -> None:
         """Subscribe to the camera's packets; declare the centreline and status publishers."""
@@ -363,7 +366,7 @@ class TrackerService:
         if self._pipeline is None or self._pipeline.tracker is not tracker:
             if self._pipeline is not None:
                 self._pipeline.abandon()
-            self._pipeline = TrackerPipeline(tracker, lambda batch, _tag: None)
+            self._pipeline = TrackerPipeline(tracker, lambda batch, _tag: None, observe=self._judge_reach)
         return self._pipeline
 
     def _track(self, chunks: list, run: list[EventPacket], end_of_stream: bool, advanced: bool = False) -> None:
@@ -378,7 +381,7 @@ class TrackerService:
                 chunks
                 if advanced
                 else [
-                    tracker.feed(events, run[-1].t_last_us if i == len(chunks) - 1 else None)
+                    self._feed(tracker, events, run[-1].t_last_us if i == len(chunks) - 1 else None)
                     for i, events in enumerate(chunks)
                 ]
             )
@@ -400,8 +403,25 @@ class TrackerService:
         if end_of_stream:
             self._publish_if_due(force=True, final=True)
             self.stream += 1
+            self._reach.restart()
             self.lost.end_stream()
             self.shed.end_stream()
+
+    def _feed(self, tracker: Any, events: np.ndarray, horizon_us: int | None) -> CentrelineBatch:
+        """``tracker.feed``; a chunk the chain's reach samples is prepared apart (the same result)."""
+        if len(events) == 0 or not self._reach.due(int(events["t"][-1])):
+            return tracker.feed(events, horizon_us)
+        prepared = tracker.prepare(events)
+        batch = tracker.advance(prepared, horizon_us)
+        self._judge_reach(prepared, batch)
+        return batch
+
+    def _judge_reach(self, chunk: PreparedChunk, batch: CentrelineBatch) -> None:
+        """Sample the chain's reach; say, once a span, a chain off the flag's length."""
+        misfit = self._reach.observe(chunk, batch)
+        if misfit:
+            span = f"{self._reach.span_s:g} s"
+            log.warning("tracker: over the last %s, %s: check tracker.length (and the root)", span, misfit)
 
     def _failed(self, run: list[EventPacket], exc: Exception) -> None:
         """Count the packets of a run that raised while decoded or tracked (:func:`.tracker_decode.say_failed`)."""

@@ -84,3 +84,54 @@ def recording_reach(path: Path, updates: CentrelineBatch, setup: TrackingSetup) 
             if chunk.byte_offset >= RECORDING_BYTES:
                 break
     return sampler.reach()
+
+
+class LiveReach:
+    """The chain's reach over spans of a live stream (the live tracker's check of its length).
+
+    :meth:`observe` samples a prepared chunk at most every ``every_us`` of camera time (a live
+    tracker gets many small chunks: this bounds the cost to about 1 ms a second) and, once a span of
+    ``span_us`` has passed, judges it and starts the next: it returns the sentence of a chain off
+    the flag's length (:meth:`.ChainReach.misfit`), else None.
+    """
+
+    def __init__(self, params: TrackerParams, units: str, every_us: int = 20_000, span_us: int = 10_000_000) -> None:
+        self._params, self._units = params, units
+        self._every_us, self._span_us = every_us, span_us
+        self._sampler = ReachSampler(params)
+        self._span_start_us: int | None = None
+        self._last_us: int | None = None
+
+    @property
+    def span_s(self) -> float:
+        """The span judged at a time, seconds of camera time."""
+        return self._span_us / 1e6
+
+    def due(self, now_us: int) -> bool:
+        """Whether a chunk ending at ``now_us`` (µs) is to be sampled (or ends a span): a caller that
+        tracks with ``Tracker.feed`` prepares only those chunks apart."""
+        last, start = self._last_us, self._span_start_us
+        if last is None or start is None or now_us < start:
+            return True
+        return now_us - last >= self._every_us or now_us - start >= self._span_us
+
+    def observe(self, chunk: PreparedChunk, batch: CentrelineBatch) -> str | None:
+        """Sample ``chunk`` when due; the misfit of a span that ended here, else None."""
+        if len(chunk.t) == 0:
+            return None
+        now_us = int(chunk.t[-1])
+        if self._span_start_us is None or now_us < self._span_start_us:  # (a new stream's clock)
+            self.restart(now_us)
+        if self._last_us is None or now_us - self._last_us >= self._every_us:
+            self._last_us = now_us
+            self._sampler.observe(chunk, batch)
+        if self._span_start_us is None or now_us - self._span_start_us < self._span_us:
+            return None
+        reach = self._sampler.reach()
+        self.restart(now_us)
+        return None if reach is None else reach.misfit(self._params.chain.length, self._units)
+
+    def restart(self, now_us: int | None = None) -> None:
+        """Forget the span so far (a new stream)."""
+        self._sampler = ReachSampler(self._params)
+        self._span_start_us, self._last_us = now_us, None

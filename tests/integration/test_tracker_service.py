@@ -556,3 +556,28 @@ def test_a_chunk_the_core_cannot_track_is_counted_and_a_fresh_tracker_goes_on(
         t_s = CentrelineBatch.concatenate(added).t_s
         assert t_s.max() > 0.05  # tracking went on after the failure (at 30 ms) to the end (60 ms)
         assert not np.any((t_s > 0.0305) & (t_s < 0.0315))  # the failed chunk's updates are dropped
+
+
+@pytest.mark.parametrize(("length", "warned"), [(200.0, False), (230.0, True)])
+def test_a_live_chain_longer_than_the_flag_is_said_in_the_log(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture, length: float, warned: bool
+) -> None:
+    """Every update finds the flag with a chain 15 % too long; the live tracker says, once a span
+    (here 0.1 s of camera time, 10 s by default), how long the flag looks from its events."""
+    import functools
+
+    import flagtrack.daemon.services.tracker as tracker_module
+    from flagtrack.daemon.tracking.reach import LiveReach
+
+    monkeypatch.setattr(tracker_module, "LiveReach", functools.partial(LiveReach, span_us=100_000))
+    events = np.concatenate(list(line_events(FLAG, 0, 400_000, 640, 480, QuickLineParams(noise_rate_hz=2e5))))
+    path = tmp_path / "flag.raw"
+    write_events(path, events, width=640, height=480, encoding="evt3")
+    with caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.tracker"):
+        got, _, _ = live(path, CONFIG.with_overrides(length=length))
+    assert np.mean(got.lost | got.stale) < 0.05  # found, whatever the length
+    said = [r.getMessage() for r in caplog.records if "check tracker.length" in r.getMessage()]
+    assert bool(said) is warned, said
+    if warned:
+        assert said[0].startswith("tracker: over the last 0.1 s, the chain's last 13 % had no events: from this root")
+        assert "looks about 200 px long, not 230" in said[0]
