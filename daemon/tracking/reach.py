@@ -90,12 +90,12 @@ class LiveReach:
     """The chain's reach over spans of a live stream (the live tracker's check of its length).
 
     :meth:`observe` samples a prepared chunk at most every ``every_us`` of camera time (a live
-    tracker gets many small chunks: this bounds the cost to about 1 ms a second) and, once a span of
+    tracker gets many small chunks: this bounds the cost; docs/tracking.md) and, once a span of
     ``span_us`` has passed, judges it and starts the next: it returns the sentence of a chain off
     the flag's length (:meth:`.ChainReach.misfit`), else None.
     """
 
-    def __init__(self, params: TrackerParams, units: str, every_us: int = 20_000, span_us: int = 10_000_000) -> None:
+    def __init__(self, params: TrackerParams, units: str, every_us: int = 100_000, span_us: int = 10_000_000) -> None:
         self._params, self._units = params, units
         self._every_us, self._span_us = every_us, span_us
         self._sampler = ReachSampler(params)

@@ -569,7 +569,7 @@ def test_a_live_chain_longer_than_the_flag_is_said_in_the_log(
     import flagtrack.daemon.services.tracker as tracker_module
     from flagtrack.daemon.tracking.reach import LiveReach
 
-    monkeypatch.setattr(tracker_module, "LiveReach", functools.partial(LiveReach, span_us=100_000))
+    monkeypatch.setattr(tracker_module, "LiveReach", functools.partial(LiveReach, every_us=10_000, span_us=100_000))
     events = np.concatenate(list(line_events(FLAG, 0, 400_000, 640, 480, QuickLineParams(noise_rate_hz=2e5))))
     path = tmp_path / "flag.raw"
     write_events(path, events, width=640, height=480, encoding="evt3")
