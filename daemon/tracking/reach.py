@@ -1,4 +1,5 @@
-"""The chain's length against its events, sampled while a recording is reconstructed (:mod:`.core.chain_reach`)."""
+"""The chain's length against its events, sampled while a recording is reconstructed, live, and over a
+sweep point's recording (:mod:`.core.chain_reach`)."""
 
 from __future__ import annotations
 
