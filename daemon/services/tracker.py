@@ -162,7 +162,7 @@ class TrackerService:
         self.budget = LatencyBudget(max_lag_ms) if max_lag_ms is not None else None
         self.shed = ShedSpans()  # packets skipped for the budget, and the camera time they held
         self._held: EventPacket | None = None  # received, left for the next call (no room in the budget)
-        self._reach = LiveReach(self.tracker.params, units)  # the chain's length against its events
+        self._reach: LiveReach | None = None  # the chain's length against its events (made on first use)
 
     def start(self) -> None:
         """Subscribe to the camera's packets; declare the centreline and status publishers."""
@@ -403,13 +403,13 @@ class TrackerService:
         if end_of_stream:
             self._publish_if_due(force=True, final=True)
             self.stream += 1
-            self._reach.restart()
+            self._live_reach().restart()
             self.lost.end_stream()
             self.shed.end_stream()
 
     def _feed(self, tracker: Any, events: np.ndarray, horizon_us: int | None) -> CentrelineBatch:
         """``tracker.feed``; a chunk the chain's reach samples is prepared apart (the same result)."""
-        if len(events) == 0 or not self._reach.due(int(events["t"][-1])):
+        if len(events) == 0 or not self._live_reach().due(int(events["t"][-1])):
             return tracker.feed(events, horizon_us)
         prepared = tracker.prepare(events)
         batch = tracker.advance(prepared, horizon_us)
@@ -418,10 +418,16 @@ class TrackerService:
 
     def _judge_reach(self, chunk: PreparedChunk, batch: CentrelineBatch) -> None:
         """Sample the chain's reach; say, once a span, a chain off the flag's length."""
-        misfit = self._reach.observe(chunk, batch)
+        reach = self._live_reach()
+        misfit = reach.observe(chunk, batch)
         if misfit:
-            span = f"{self._reach.span_s:g} s"
+            span = f"{reach.span_s:g} s"
             log.warning("tracker: over the last %s, %s: check tracker.length (and the root)", span, misfit)
+
+    def _live_reach(self) -> LiveReach:
+        if self._reach is None:
+            self._reach = LiveReach(self.tracker.params, self.units)
+        return self._reach
 
     def _failed(self, run: list[EventPacket], exc: Exception) -> None:
         """Count the packets of a run that raised while decoded or tracked (:func:`.tracker_decode.say_failed`)."""
