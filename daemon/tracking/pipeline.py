@@ -33,7 +33,7 @@ class TrackerPipeline:
         emit: called on the worker with each chunk's updates and the tag given to :meth:`feed`.
         depth: prepared chunks waiting for the worker at most (bounds the memory).
         observe: called on the worker with each prepared chunk and the updates it completed, before
-            ``emit`` (``flagtrack reconstruct`` samples the chain's reach there).
+            ``emit`` (``reconstruct`` and the live tracker sample the chain's reach there).
     """
 
     def __init__(
