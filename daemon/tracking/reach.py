@@ -34,8 +34,8 @@ class ReachSampler:
 
     def __init__(self, params: TrackerParams) -> None:
         chain = params.chain
-        longest = max(chain.link_lengths) if chain.link_lengths else chain.length / chain.n_joints
-        self._profile = ReachProfile(chain.length, chain.alpha * longest)  # a link's search area
+        band = chain.alpha * float(chain.lengths().max())  # a link's search area
+        self._profile = ReachProfile(chain.length, band)
         self._schedule = params.schedule
 
     def observe(self, chunk: PreparedChunk, batch: CentrelineBatch) -> None:
@@ -111,10 +111,11 @@ class LiveReach:
     def due(self, now_us: int) -> bool:
         """Whether a chunk ending at ``now_us`` (µs) is to be sampled (or ends a span): a caller that
         tracks with ``Tracker.feed`` prepares only those chunks apart."""
-        last, start = self._last_us, self._span_start_us
-        if last is None or start is None or now_us < start:
-            return True
-        return now_us - last >= self._every_us or now_us - start >= self._span_us
+        start = self._span_start_us
+        return start is None or now_us < start or self._sampling(now_us) or now_us - start >= self._span_us
+
+    def _sampling(self, now_us: int) -> bool:
+        return self._last_us is None or now_us - self._last_us >= self._every_us
 
     def observe(self, chunk: PreparedChunk, batch: CentrelineBatch) -> str | None:
         """Sample ``chunk`` when due; the misfit of a span that ended here, else None."""
@@ -123,7 +124,7 @@ class LiveReach:
         now_us = int(chunk.t[-1])
         if self._span_start_us is None or now_us < self._span_start_us:  # (a new stream's clock)
             self.restart(now_us)
-        if self._last_us is None or now_us - self._last_us >= self._every_us:
+        if self._sampling(now_us):
             self._last_us = now_us
             self._sampler.observe(chunk, batch)
         if self._span_start_us is None or now_us - self._span_start_us < self._span_us:
