@@ -37,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.rig.config import RigConfig, load_rig
     from flagtrack.daemon.rig.run import run_rig
+    from flagtrack.daemon.sweep.restart import nothing_to_resume
     from flagtrack.daemon.sweep.runlock import held_by
     from flagtrack.daemon.sweep.runlog import read_run
     from flagtrack.daemon.typed_yaml import from_mapping
@@ -48,7 +49,12 @@ def run(args: argparse.Namespace) -> int:
     if args.config is not None:
         rig = load_rig(args.config, services=())  # checked by run_rig once --runs-dir has changed it
     else:
-        stored = dict(read_run(args.resume).start.get("config", {}))
+        record = read_run(args.resume)
+        if (why := nothing_to_resume(record)) is not None:  # the rig and the tunnel are left alone
+            print(f"flagtrack sweep: {why}", file=sys.stderr)
+            print(_run_files(args.resume), file=sys.stderr)
+            return 0
+        stored = dict(record.start.get("config", {}))
         stored.pop("sweep", None)
         stored.pop("path", None)
         rig = from_mapping(RigConfig, stored, path=str(args.resume / "run.jsonl"), key="config")

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Literal
 
 from flagtrack.daemon.errors import FormatError
-from flagtrack.daemon.sweep.runlog import RUN_LOG, read_run
+from flagtrack.daemon.sweep.runlog import RUN_LOG, RunRecord, read_run
 
 
 @dataclass(frozen=True)
@@ -61,6 +61,18 @@ def start_decision(runs_dir: str | Path, run_name: str | None) -> StartDecision:
         f"run {run_dir} stopped ({reason[:200]}); not resumed on its own: "
         f"flagtrack sweep --resume {run_dir} once the cause is fixed",
     )
+
+
+def nothing_to_resume(record: RunRecord) -> str | None:
+    """Why ``flagtrack sweep --resume`` has nothing to do with this run (it finished with every
+    planned point done), or None: points are left to measure (or to measure again)."""
+    if record.stop is None or record.stop.get("reason") != "finished":
+        return None
+    done = {pid for pid, p in record.latest_points().items() if p.status == "done"}
+    planned = record.planned_ids
+    if not set(planned) <= done:
+        return None
+    return f"run {record.run_dir} is finished ({len(planned)} of {len(planned)} points done); nothing to resume"
 
 
 def _newest_run(runs_dir: Path) -> Path | None:

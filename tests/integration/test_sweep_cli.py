@@ -34,3 +34,39 @@ def test_a_sweep_that_never_began_is_not_exit_0(tmp_path: Path, capsys: pytest.C
     assert main(["sweep", "-c", str(path), "-q"]) == 1
     err = capsys.readouterr().err
     assert err.strip().splitlines()[-1] == "flagtrack sweep: no run was started (the lines above say why)"
+
+
+def _finished_run(run_dir: Path, last_status: str) -> Path:
+    """A run whose log says it finished; its last point ``last_status``. Its stored config names a
+    tunnel on a port that does not exist: starting the rig would fail loudly."""
+    from flagtrack.daemon.sweep.plan import Branch, SweepConfig, plan_points
+    from flagtrack.daemon.sweep.runlog import PointResult, RunLog
+
+    points = plan_points(SweepConfig(speeds=(3.0, 4.0), branches=(Branch.UP,)))
+    config = {"rig": "gone", "tunnel": {"driver": "ascii", "port": str(run_dir / "no-such-port")}}
+    with RunLog.create(run_dir, run_id="night", config=config, plan=points) as log:
+        for point in points:
+            log.point(PointResult.planned(point, status=last_status if point is points[-1] else "done"))
+        log.stop("finished")
+    return run_dir
+
+
+def test_resuming_a_finished_run_leaves_it_and_the_rig_alone(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Every point done: one line and exit 0, the run log untouched, no rig started (it started the
+    whole rig, ramped nothing and appended a resume and a stop record)."""
+    from flagtrack.daemon.sweep.restart import nothing_to_resume
+    from flagtrack.daemon.sweep.runlog import read_run
+
+    run_dir = _finished_run(tmp_path / "night", "done")
+    before = (run_dir / "run.jsonl").read_bytes()
+    assert main(["sweep", "--resume", str(run_dir), "-q"]) == 0
+    err = capsys.readouterr().err
+    assert f"flagtrack sweep: run {run_dir} is finished (2 of 2 points done); nothing to resume" in err
+    assert f"log {run_dir / 'run.jsonl'}" in err
+    assert (run_dir / "run.jsonl").read_bytes() == before
+
+    # a finished run with a failed point still has work: it is resumed, as before
+    failed = _finished_run(tmp_path / "failed", "failed")
+    assert nothing_to_resume(read_run(failed)) is None
