@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate
@@ -123,6 +125,45 @@ def test_the_rrd_holds_each_update_centreline_at_its_time(tmp_path: Path) -> Non
     for k, strip in enumerate(strips):
         assert len(strip) == 1  # one strip per update
         np.testing.assert_allclose(np.array(strip[0]), np.stack([x[k], -2 * x[k]], axis=-1))
+
+
+def test_a_new_run_keeps_the_previous_runs_view(tmp_path: Path) -> None:
+    """Every `up` and `sweep` of a rig writes the same `viewer.rrd_path`: the view already there is
+    renamed beside it (it was overwritten)."""
+    from flagtrack.daemon.services.viewer import close_recording
+
+    rrd = tmp_path / "live.rrd"
+    cfg = ViewerConfig(sink="rrd", rrd_path=rrd, update_rate_hz=None)
+    rec, first = open_recording(cfg)
+    assert "previous view" not in first
+    close_recording(rec)
+    earlier = rrd.read_bytes()
+    assert earlier
+    rec, second = open_recording(cfg)
+    close_recording(rec)
+    kept = [p for p in tmp_path.iterdir() if p != rrd]
+    assert len(kept) == 1 and kept[0].name.startswith("live-") and kept[0].suffix == ".rrd"
+    assert kept[0].read_bytes() == earlier and f"(the previous view kept as {kept[0].name})" in second
+    rec, _ = open_recording(cfg)  # the same second: a name of its own, nothing overwritten
+    close_recording(rec)
+    assert len(list(tmp_path.iterdir())) == 3
+
+
+def test_a_view_that_cannot_be_kept_is_one_error_naming_the_key(tmp_path: Path) -> None:
+    from flagtrack.daemon.errors import ConfigError
+    from flagtrack.daemon.services.viewer import close_recording
+
+    cfg = ViewerConfig(sink="rrd", rrd_path=tmp_path / "live.rrd", update_rate_hz=None)
+    close_recording(open_recording(cfg)[0])
+    tmp_path.chmod(0o500)
+    try:
+        if os.access(tmp_path, os.W_OK):
+            pytest.skip("running as a user who writes to read-only folders (root)")
+        with pytest.raises(ConfigError, match="cannot keep the previous view") as caught:
+            open_recording(cfg)
+        assert caught.value.key == "viewer.rrd_path"
+    finally:
+        tmp_path.chmod(0o700)
 
 
 def centreline_batch(n_t: int, n_s: int, t0_s: float = 0.0) -> CentrelineBatch:

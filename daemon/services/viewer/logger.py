@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import time
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
@@ -57,14 +58,39 @@ def open_recording(cfg: ViewerConfig) -> tuple[rr.RecordingStream, str]:
     elif sink == "rrd":
         path = Path(cfg.rrd_path).expanduser()
         path.parent.mkdir(parents=True, exist_ok=True)
+        kept = keep_previous_view(path)
         rec.save(path)
-        description = f"recording to {path.resolve()}"
+        description = f"recording to {path.resolve()}" + (f" (the previous view kept as {kept.name})" if kept else "")
     elif sink == "none":
         description = "nowhere (sink none)"
     else:
         raise ConfigError(f"unknown sink {sink!r}", key="viewer.sink")
     rec.send_blueprint(layout.blueprint(), make_active=True, make_default=True)
     return rec, description
+
+
+def keep_previous_view(path: Path) -> Path | None:
+    """Rename a non-empty ``path`` left by an earlier run to ``<stem>-<its mtime>.rrd`` beside it (a
+    new run's view would overwrite it); return the new name, or None when there was nothing to keep."""
+    try:
+        stat = path.stat()
+    except FileNotFoundError:
+        return None
+    if stat.st_size == 0 or not path.is_file():
+        return None
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(stat.st_mtime))
+    kept = path.with_name(f"{path.stem}-{stamp}{path.suffix}")
+    n = 1
+    while kept.exists():
+        n += 1
+        kept = path.with_name(f"{path.stem}-{stamp}-{n}{path.suffix}")
+    try:
+        path.rename(kept)
+    except OSError as exc:
+        raise ConfigError(
+            f"{path}: cannot keep the previous view as {kept.name}: {exc.strerror}", key="viewer.rrd_path"
+        ) from exc
+    return kept
 
 
 def close_recording(rec: rr.RecordingStream) -> None:
