@@ -3,7 +3,7 @@
 The chain's links all lie within ``L`` of the root, their search areas reach ``alpha r_k`` further,
 and the loss-of-track verdict weighs the events of a ring beyond them as the background (the
 chain's buckets, :mod:`.chain`): the tracker looks no further than ``L + 2 (1 + alpha) r_max``
-from the root (:func:`chain_reach`). A flag in a flow trails downstream of its root, so the reach
+from the root (:func:`search_radius`). A flag in a flow trails downstream of its root, so the reach
 is a sector of that radius around the rest direction (a half-disc by default; 180 degrees either
 side: the whole disc), plus a margin for what the geometry and the calibration get wrong. A pixel is
 in the reach when its centre, mapped to the tracking plane (pixels, or a calibration's units), lies
@@ -80,7 +80,7 @@ class Reach:
         return min(xs) - self.margin, min(ys) - self.margin, max(xs) + self.margin, max(ys) + self.margin
 
 
-def chain_reach(length: float, link_lengths: tuple[float, ...] | None, n_joints: int, alpha: float) -> float:
+def search_radius(length: float, link_lengths: tuple[float, ...] | None, n_joints: int, alpha: float) -> float:
     """How far from the root the tracker looks: ``L + 2 (1 + alpha) r_max`` (its links' search areas
     and the background ring of the loss-of-track verdict), in the units of ``length``."""
     longest = max(link_lengths) if link_lengths else length / n_joints

@@ -20,7 +20,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from flagtrack.daemon.core.reach import PixelBox, Reach, chain_reach, pixel_box
+from flagtrack.daemon.core.reach import PixelBox, Reach, pixel_box, search_radius
 from flagtrack.daemon.errors import ConfigError
 from flagtrack.daemon.rig.sections import RigSections
 from flagtrack.daemon.tracking.section import TrackingConfig
@@ -90,7 +90,7 @@ def auto_roi(
 
         mapping = load_mapping(tracker.calibration)
         image_size, units = mapping.image_size, mapping.units
-    radius = chain_reach(tracker.length, tracker.link_lengths, tracker.joints, tracker.alpha)
+    radius = search_radius(tracker.length, tracker.link_lengths, tracker.joints, tracker.alpha)
     try:
         reach = Reach(tracker.root, radius, tracker.direction_deg, half_angle_deg, margin_over_l * tracker.length)
     except ValueError as exc:

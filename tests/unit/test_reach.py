@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from flagtrack.daemon.core.mapping import AffineMapping
-from flagtrack.daemon.core.reach import PixelBox, Reach, chain_reach, pixel_box
+from flagtrack.daemon.core.reach import PixelBox, Reach, pixel_box, search_radius
 
 
 def sector_distance(reach: Reach, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -117,8 +117,8 @@ def test_a_reach_off_the_sensor_has_no_box() -> None:
 
 
 def test_the_chain_reaches_its_length_plus_its_areas_and_the_background_ring() -> None:
-    assert chain_reach(300.0, None, 10, 0.6) == pytest.approx(300 + 2 * 1.6 * 30)
-    assert chain_reach(1.0, (0.5, 0.3, 0.2), 3, 0.5) == pytest.approx(1 + 2 * 1.5 * 0.5)
+    assert search_radius(300.0, None, 10, 0.6) == pytest.approx(300 + 2 * 1.6 * 30)
+    assert search_radius(1.0, (0.5, 0.3, 0.2), 3, 0.5) == pytest.approx(1 + 2 * 1.5 * 0.5)
 
 
 @pytest.mark.parametrize(
