@@ -43,8 +43,11 @@ def point_line(state: SupervisorState) -> str:
     Labels, units and digits are those of ``daemon/sweep/quantities.py`` (as README.txt shows them):
     ``lost`` is the % of the point's updates the tracker flagged lost (``-`` when the record has none),
     ``stale`` the % whose shape rests on no recent events (shown when known),
-    ``e/L RMS`` the RMS error against the point sensor in % of L, shown when the point has one.
+    ``e/L RMS`` the RMS error against the point sensor in % of L, shown when the point has one;
+    ``SUSPECT`` ends the line of a point whose numbers may not be the flag's, with the chain's
+    ``reach`` when that is why (the run log's line says why in words).
     """
+    from flagtrack.daemon.core.chain_reach import TOLERANCE as REACH_TOLERANCE
     from flagtrack.daemon.sweep.quantities import show
 
     width = len(str(state.points_total))
@@ -57,9 +60,12 @@ def point_line(state: SupervisorState) -> str:
         lost += f"  {show('stale_fraction', state.stale_fraction)}"
     error = state.sensor_error_rms_over_l
     sensor = f"  {show('sensor_error_rms_over_l', error)}" if error >= 0 else ""
+    suspect = "  SUSPECT" if state.last_suspect else ""
+    if suspect and state.chain_reach >= 0 and abs(state.chain_reach - 1.0) > REACH_TOLERANCE:
+        suspect += f" ({show('chain_reach', state.chain_reach)})"
     return (
         f"{head}  {state.last_state:<8}  A/L {_number(state.amplitude_over_l, '5.3f', 5)}  "
-        f"f {_number(state.frequency_hz, '5.1f', 5)} Hz  {lost}{sensor}  {times}"
+        f"f {_number(state.frequency_hz, '5.1f', 5)} Hz  {lost}{sensor}{suspect}  {times}"
     )
 
 

@@ -296,7 +296,9 @@ class SupervisorState:
       unknown), ``last_status`` (done | failed | lossy), ``amplitude_over_l``, ``frequency_hz``,
       ``lost_fraction`` (updates the tracker flagged lost: -1 until the tracker has a lost flag),
       ``sensor_error_rms_over_l`` (RMS |e|/L against the point sensor: -1 without one),
-      ``stale_fraction`` (updates whose shape rests on no recent events: -1 when not known).
+      ``stale_fraction`` (updates whose shape rests on no recent events: -1 when not known),
+      ``chain_reach`` (where the flag's events ended along the chain, a fraction of L: -1 when not
+      judged), ``last_suspect`` (its numbers may not be the flag's: the run log says why).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.SUPERVISOR_STATE
@@ -324,6 +326,8 @@ class SupervisorState:
     sensor_error_rms_over_l: float = -1.0
     stale_fraction: float = -1.0
     point_records: int = 0
+    chain_reach: float = -1.0
+    last_suspect: bool = False
 
 
 @dataclass(frozen=True)

@@ -58,6 +58,8 @@ class PointFacts:
         lost_fraction: see :func:`lost_fraction`; stale_fraction: :func:`stale_fraction`.
         sensor_error_rms_over_l: RMS of |e|/L against the point sensor, NaN without a comparison.
         error: why a failed point failed.
+        chain_reach: where the flag's events ended along the chain, a fraction of L (NaN: not judged).
+        suspect: the point's numbers may not be the flag's (:func:`is_suspect`; the run log says why).
     """
 
     point_id: str
@@ -72,6 +74,8 @@ class PointFacts:
     sensor_error_rms_over_l: float
     error: str = ""
     stale_fraction: float = math.nan
+    chain_reach: float = math.nan
+    suspect: bool = False
 
     @classmethod
     def of(cls, result: PointResult) -> PointFacts:
@@ -89,6 +93,8 @@ class PointFacts:
             sensor_error_rms_over_l=result.sensor_error_rms_over_l,
             error=result.error or "",
             stale_fraction=stale_fraction(result),
+            chain_reach=result.chain_reach,
+            suspect=result.suspect,
         )
 
 

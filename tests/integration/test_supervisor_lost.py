@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from flagtrack.daemon.commands._progress import point_line
+from flagtrack.daemon.schema import SupervisorState
 from flagtrack.daemon.sweep.runlog import read_run
 from flagtrack.daemon.tracking.section import LostSection
 from tests.integration.test_supervisor import rig, run
@@ -38,11 +40,18 @@ def test_a_point_tracked_with_a_chain_longer_than_the_flag_is_suspect(tmp_path: 
     length = config.tracker.length
     assert length is not None
     tracker = config.tracker.with_overrides(length=1.15 * length)
-    supervisor, report, _ = run(dataclasses.replace(config, tracker=tracker))
+    states: list[SupervisorState] = []
+    supervisor, report, _ = run(
+        dataclasses.replace(config, tracker=tracker), during=lambda services, _: services[0].add_observer(states.append)
+    )
     assert supervisor.stop_reason == "finished" and not report.errors
     (point,) = read_run(tmp_path / "runs" / "run").latest_points().values()
     assert point.state == "flapping" and point.lost_fraction < 0.05 and point.suspect
     assert point.chain_reach == pytest.approx(1 / 1.15, abs=0.02)
+    # what `flagtrack sweep` prints for the point, from the state the supervisor published
+    last = [s for s in states if s.last_point == point.point_id][-1]
+    assert last.last_suspect and last.chain_reach == pytest.approx(point.chain_reach)
+    assert f"SUSPECT (reach {point.chain_reach:.3f})" in point_line(last)
     with open(tmp_path / "runs" / "run" / "summary.csv") as handle:
         (row,) = csv.DictReader(handle)
     assert row["suspect"] == "True" and float(row["chain_reach"]) == pytest.approx(point.chain_reach)

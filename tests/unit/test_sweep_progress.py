@@ -63,6 +63,9 @@ def test_lost_fraction_is_nan_until_records_carry_one() -> None:
     assert lost_fraction(later_record) == 0.125  # type: ignore[arg-type]
     facts = PointFacts.of(PointResult.planned(PLAN[2], state="flapping", amplitude_over_l=0.25, frequency_hz=11.0))
     assert facts.position == 3 and math.isnan(facts.lost_fraction) and math.isnan(facts.sensor_error_rms_over_l)
+    assert math.isnan(facts.chain_reach) and not facts.suspect
+    judged = PointFacts.of(PointResult.planned(PLAN[2], state="flapping", chain_reach=0.87, suspect=True))
+    assert judged.chain_reach == 0.87 and judged.suspect
 
 
 def state(**changes) -> SupervisorState:
@@ -111,6 +114,10 @@ def test_the_line_of_a_point_shows_its_facts_and_dashes_for_what_is_not_known() 
     assert "f     - Hz" in still and "e/L" not in still and "A/L 0.000" in still
     assert "lost 5.0 %" in point_line(state(lost_fraction=0.05))
     assert "FAILED" in point_line(state(last_status="failed"))
+    assert "SUSPECT" not in line
+    assert "SUSPECT (reach 0.870)  [0:42" in point_line(state(last_suspect=True, chain_reach=0.87))
+    lost = point_line(state(last_suspect=True, lost_fraction=0.4, chain_reach=1.002))
+    assert "lost 40.0 %" in lost and "SUSPECT  [0:42" in lost  # suspect for its lost updates, not its reach
     assert bar_text(state()) == "0:42 elapsed, ETA 1:38 | point 4: 5.00 m/s up, flag flapping"
     assert clock(3725) == "1:02:05" and clock(-1.0) == "?"
 
@@ -165,7 +172,7 @@ def test_quiet_shows_nothing_and_a_bar_is_drawn_when_asked() -> None:
 
 
 def test_new_state_fields_round_trip_and_default_to_no_sweep() -> None:
-    message = state(lost_fraction=0.01)
+    message = state(lost_fraction=0.01, chain_reach=0.87, last_suspect=True)
     assert decode(encode(message), SupervisorState) == message
     plain = SupervisorState("still", 1e4, "monitor")
     assert plain.points_total == 0 and plain.amplitude_over_l == -1.0 and plain.eta_s == -1.0

@@ -141,6 +141,8 @@ def progress_fields(progress: SweepProgress | None, now_s: float) -> dict[str, A
             lost_fraction=_known(last.lost_fraction),
             stale_fraction=_known(last.stale_fraction),
             sensor_error_rms_over_l=_known(last.sensor_error_rms_over_l),
+            chain_reach=_known(last.chain_reach),
+            last_suspect=last.suspect,
         )
     return fields
 
