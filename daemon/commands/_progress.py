@@ -18,6 +18,7 @@ from types import TracebackType
 from typing import Any, TextIO
 
 from flagtrack.daemon.schema import SupervisorState
+from flagtrack.daemon.services.runner import is_terminal
 
 REFRESH_S = 0.5  # the bar is redrawn at most this often (and at once when a point finishes)
 
@@ -91,7 +92,7 @@ class SweepProgressView:
     def __init__(self, stream: TextIO | None = None, *, quiet: bool = False, terminal: bool | None = None) -> None:
         self.stream = stream if stream is not None else sys.stderr
         self.quiet = quiet
-        self.terminal = _isatty(self.stream) if terminal is None else terminal
+        self.terminal = is_terminal(self.stream) if terminal is None else terminal
         self._lock = threading.Lock()
         self._bar: Any = None
         self._started = False
@@ -171,10 +172,3 @@ class SweepProgressView:
             self._bar.write(line, file=self.stream)
         else:
             print(line, file=self.stream, flush=True)
-
-
-def _isatty(stream: TextIO) -> bool:
-    try:
-        return stream.isatty()
-    except (AttributeError, ValueError):  # a closed or odd stream
-        return False

@@ -50,13 +50,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Build the rig from the config and flags, run it, report."""
     from flagtrack.daemon.commands._progress import SweepProgressView
+    from flagtrack.daemon.commands._recording_view import RecordingView
     from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.rig.run import run_rig
 
     rig, names = rig_from_args(args)
     _refuse_outputs_over_inputs(args, rig)
+    sweeping = "supervisor" in names  # (its points are recorded: the sweep's lines say so)
     try:
-        with SweepProgressView(quiet=args.quiet or "supervisor" not in names) as progress:
+        with (
+            SweepProgressView(quiet=args.quiet or not sweeping) as progress,
+            RecordingView(quiet=args.quiet or sweeping) as recording,
+        ):
             result = run_rig(
                 rig,
                 names,
@@ -65,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
                 shutdown_timeout_s=args.shutdown_timeout,
                 quiet=args.quiet,
                 on_supervisor_state=progress,
+                on_services=recording,
             )
     except ConfigError as exc:  # a value the command line gave is named as such, not as the file's key
         option = option_that_set(exc, args)

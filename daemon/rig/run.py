@@ -16,7 +16,15 @@ from flagtrack.daemon.rig.config import RigConfig, check_rig
 from flagtrack.daemon.rig.prepare import prepare_services
 from flagtrack.daemon.rig.table import in_table_order
 from flagtrack.daemon.services.centreline_file import CentrelineFileService
-from flagtrack.daemon.services.runner import RunReport, Service, StopEvent, run_services, stop_on_signals
+from flagtrack.daemon.services.runner import (
+    CLEAR_LINE,
+    RunReport,
+    Service,
+    StopEvent,
+    is_terminal,
+    run_services,
+    stop_on_signals,
+)
 from flagtrack.daemon.tracking.setup import processing_attrs, tracking_setup
 from flagtrack.daemon.transport import Bus
 from flagtrack.daemon.typed_yaml import require_output_file
@@ -38,6 +46,7 @@ def run_rig(
     quiet: bool = False,
     prepared: bool = False,
     on_supervisor_state: Callable[[SupervisorState], None] | None = None,
+    on_services: Callable[[Sequence[Service]], None] | None = None,
     command: str = "up",
 ) -> RigRun:
     """Open the bus, build the services, start them (in table order) and run them until a signal, a
@@ -46,6 +55,8 @@ def run_rig(
     ``prepared``: the caller already ran :func:`prepare_services` (to time the run without it).
     ``on_supervisor_state``: called with every state the supervisor publishes, in its thread (a
     command draws the sweep's progress with it; see ``SupervisorService.add_observer``).
+    ``on_services``: called with the services once they are built, before they start (a command
+    watches the recorder's file with it).
     ``command``: the command running the rig, named in the lines it prints (``flagtrack up: ...``).
 
     Returns:
@@ -57,8 +68,8 @@ def run_rig(
     """
 
     def say(text: str) -> None:
-        if not quiet:
-            print(f"flagtrack {command}: {text}", file=sys.stderr)
+        if not quiet:  # (on a terminal, over the status line a command may draw in place)
+            print(f"{CLEAR_LINE * is_terminal(sys.stderr)}flagtrack {command}: {text}", file=sys.stderr)
 
     # bad config: one clear line, before anything opens (the tracker setup then serves every step)
     check_rig(rig, names)
@@ -104,6 +115,8 @@ def run_rig(
                     0, CentrelineFileService(bus, centrelines, attrs, exit_after_final=exit_at_end_of_stream)
                 )
             say(f"{', '.join(s.name for s in services)} on {rig.bus_config.namespace}")
+            if on_services is not None:
+                on_services(services)
             report = run_services(
                 services,
                 shutdown_timeout_s=shutdown_timeout_s,

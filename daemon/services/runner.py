@@ -19,7 +19,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Protocol, TextIO, runtime_checkable
 
 from flagtrack.daemon.errors import FlagtrackError
 from flagtrack.daemon.services import sd_notify
@@ -210,12 +210,25 @@ class ServiceGroup:
         return self.report
 
 
+CLEAR_LINE = "\r\x1b[K"
+"""Carriage return and erase-to-end-of-line: a line printed on a terminal over a status line drawn in place."""
+
+
+def is_terminal(stream: TextIO) -> bool:
+    """Whether ``stream`` is a terminal (False for a closed or odd stream)."""
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):  # a closed or odd stream
+        return False
+
+
 def _say(line: str) -> None:
     """Write a line to stderr from a signal handler: straight to the file descriptor, since the handler
     may interrupt the main thread in the middle of its own write to ``sys.stderr`` (a second write
-    into the same buffered stream raises "reentrant call", in the main thread, and the line is lost)."""
+    into the same buffered stream raises "reentrant call", in the main thread, and the line is lost).
+    On a terminal the line first clears the one under the cursor (a status line redrawn in place)."""
     with contextlib.suppress(OSError):
-        os.write(2, (line + "\n").encode())
+        os.write(2, (CLEAR_LINE * os.isatty(2) + line + "\n").encode())
 
 
 @contextlib.contextmanager

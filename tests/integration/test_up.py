@@ -102,18 +102,29 @@ def size(path: Path) -> int:
 
 
 def test_sigint_stops_every_service_cleanly(tmp_path: Path) -> None:
-    proc = start("up", "-c", str(sim_rig(tmp_path)))
+    stderr = tmp_path / "stderr.txt"
+    with stderr.open("w") as err_file:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "flagtrack.daemon", "up", "-c", str(sim_rig(tmp_path))], stderr=err_file
+        )
     recorded, rrd = tmp_path / "rec" / "run.raw", tmp_path / "live.rrd"
     wait_until(
         lambda: size(recorded) > 10_000 and size(rrd) > 1000, 60, "the recorder and the viewer writing", poll_s=0.2
     )
+    wait_until(lambda: "flagtrack up: recording " in stderr.read_text(), 30, "the recording's line", poll_s=0.2)
     proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=30)
+    proc.wait(timeout=30)
+    err = stderr.read_text()
     assert proc.returncode == 130, err
     assert "stopping" in err and "did not stop" not in err
     info = flagtrack("events", "info", str(recorded), "--json")
     assert info.returncode == 0 and '"events"' in info.stdout
     assert rrd.stat().st_size > 1000
+    # where the events went, while and after (not a terminal: a line as it begins, one at the end)
+    assert f"flagtrack up: recording {recorded}  0:0" in err, err
+    ended = [line for line in err.splitlines() if line.startswith(f"flagtrack up: recorded {recorded}: ")]
+    assert len(ended) == 1 and f"{recorded.stat().st_size / 1e6:.1f} MB, 0:" in ended[0], err
+    assert "of camera time" in ended[0] and "lost" not in ended[0]
 
 
 STUBBORN = """
