@@ -234,6 +234,9 @@ class TrackerStatus:
     within its latency budget (0: all tracked); ``shed_packets``, ``shed_events``: the packets it
     skipped for it and their events (since the service started; they are not missing: the recorder
     and the rates have them).
+    ``chain_reach``: where the flag's events ended along the chain over the last span judged (10 s
+    of camera time), a fraction of L (1: at its tip; -1 before the first span, or when it had too
+    few events to judge).
     """
 
     TYPE: ClassVar[MessageType] = MessageType.TRACKER_STATUS
@@ -254,6 +257,7 @@ class TrackerStatus:
     shed_fraction: float = 0.0
     shed_packets: int = 0
     shed_events: int = 0
+    chain_reach: float = -1.0
 
 
 @dataclass(frozen=True)

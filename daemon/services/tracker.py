@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import threading
 import time
 from collections.abc import Collection
@@ -424,6 +425,12 @@ class TrackerService:
             span = f"{reach.span_s:g} s"
             log.warning("tracker: over the last %s, %s: check tracker.length (and the root)", span, misfit)
 
+    @property
+    def chain_reach(self) -> float:
+        """The chain's reach over the last span judged (a fraction of L), NaN before the first
+        (:attr:`.LiveReach.last`)."""
+        return self._reach.last if self._reach is not None else math.nan
+
     def _live_reach(self) -> LiveReach:
         if self._reach is None:
             self._reach = LiveReach(self.tracker.params, self.units)
@@ -487,6 +494,7 @@ def tracker_status(
         shed_fraction=_fraction(svc.shed.events - window["shed_events"], svc.events - window["events"]),
         shed_packets=svc.shed.packets,
         shed_events=svc.shed.events,
+        chain_reach=svc.chain_reach if math.isfinite(svc.chain_reach) else -1.0,
     )
 
 

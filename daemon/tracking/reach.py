@@ -3,6 +3,7 @@ sweep point's recording (:mod:`.core.chain_reach`)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -102,6 +103,9 @@ class LiveReach:
         self._sampler = ReachSampler(params)
         self._span_start_us: int | None = None
         self._last_us: int | None = None
+        self.last = math.nan
+        """The reach of the last span judged (a fraction of L), NaN before the first (or when its
+        span had too few events to judge)."""
 
     @property
     def span_s(self) -> float:
@@ -131,9 +135,10 @@ class LiveReach:
             return None
         reach = self._sampler.reach()
         self.restart(now_us)
+        self.last = math.nan if reach is None else reach.reach
         return None if reach is None else reach.misfit(self._params.chain.length, self._units)
 
     def restart(self, now_us: int | None = None) -> None:
-        """Forget the span so far (a new stream)."""
+        """Forget the span so far (a new stream; :attr:`last` stays until the next span is judged)."""
         self._sampler = ReachSampler(self._params)
         self._span_start_us, self._last_us = now_us, None

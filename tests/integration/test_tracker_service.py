@@ -574,8 +574,9 @@ def test_a_live_chain_longer_than_the_flag_is_said_in_the_log(
     path = tmp_path / "flag.raw"
     write_events(path, events, width=640, height=480, encoding="evt3")
     with caplog.at_level(logging.WARNING, logger="flagtrack.daemon.services.tracker"):
-        got, _, _ = live(path, CONFIG.with_overrides(length=length))
+        got, statuses, _ = live(path, CONFIG.with_overrides(length=length))
     assert np.mean(got.lost | got.stale) < 0.05  # found, whatever the length
+    assert statuses[-1].chain_reach == pytest.approx(200.0 / length, abs=0.02)  # a program reads it too
     said = [r.getMessage() for r in caplog.records if "check tracker.length" in r.getMessage()]
     assert bool(said) is warned, said
     if warned:
