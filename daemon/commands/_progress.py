@@ -80,8 +80,8 @@ def bar_text(state: SupervisorState) -> str:
     return f"{clock(state.elapsed_s)} elapsed, ETA {clock(state.eta_s)} | {now}"
 
 
-class SweepProgressView:
-    """Draws the progress of a sweep from the supervisor's states (call it with each one).
+class TerminalView:
+    """Lines on a stream and, on a terminal, a tqdm bar kept below them (log lines print above it).
 
     Args:
         stream: where to draw (default ``sys.stderr``).
@@ -93,20 +93,50 @@ class SweepProgressView:
         self.stream = stream if stream is not None else sys.stderr
         self.quiet = quiet
         self.terminal = is_terminal(self.stream) if terminal is None else terminal
-        self._lock = threading.Lock()
         self._bar: Any = None
-        self._started = False
-        self._finished = 0
-        self._records = 0
-        self._last_draw = 0.0
         self._redirect: contextlib.ExitStack | None = None
 
-    def __enter__(self) -> SweepProgressView:
-        if self.terminal and not self.quiet:  # log lines (a warning from a service) print above the bar
+    def _log_above_bar(self) -> None:
+        """From now on, on a terminal, log lines (a warning from a service) print above the bar."""
+        if self.terminal and not self.quiet and self._redirect is None:
             from tqdm.contrib.logging import logging_redirect_tqdm
 
             self._redirect = contextlib.ExitStack()
             self._redirect.enter_context(logging_redirect_tqdm())
+
+    def _close_bar(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+
+    def _close_terminal(self) -> None:
+        """Leave the bar as it last was and stop redirecting the log (idempotent)."""
+        self._close_bar()
+        if self._redirect is not None:
+            self._redirect.close()
+            self._redirect = None
+
+    def _write(self, line: str) -> None:
+        if self._bar is not None:
+            self._bar.write(line, file=self.stream)
+        else:
+            print(line, file=self.stream, flush=True)
+
+
+class SweepProgressView(TerminalView):
+    """Draws the progress of a sweep from the supervisor's states (call it with each one); the
+    arguments are :class:`TerminalView`'s."""
+
+    def __init__(self, stream: TextIO | None = None, *, quiet: bool = False, terminal: bool | None = None) -> None:
+        super().__init__(stream, quiet=quiet, terminal=terminal)
+        self._lock = threading.Lock()
+        self._started = False
+        self._finished = 0
+        self._records = 0
+        self._last_draw = 0.0
+
+    def __enter__(self) -> SweepProgressView:
+        self._log_above_bar()
         return self
 
     def __exit__(
@@ -141,12 +171,7 @@ class SweepProgressView:
     def close(self) -> None:
         """Leave the bar as it last was and stop redirecting the log (idempotent)."""
         with self._lock:
-            if self._bar is not None:
-                self._bar.close()
-                self._bar = None
-            if self._redirect is not None:
-                self._redirect.close()
-                self._redirect = None
+            self._close_terminal()
 
     def _start(self, state: SupervisorState) -> None:
         self._started = True
@@ -166,9 +191,3 @@ class SweepProgressView:
             return
         before = f", {state.points_done} done before" if state.points_done else ""
         self._write(f"sweep: {state.points_total} points{before}, ETA {clock(state.eta_s)}")
-
-    def _write(self, line: str) -> None:
-        if self._bar is not None:
-            self._bar.write(line, file=self.stream)
-        else:
-            print(line, file=self.stream, flush=True)

@@ -8,9 +8,7 @@ It reads the recorder service's open part from its own thread: sizes and counts 
 
 from __future__ import annotations
 
-import contextlib
 import json
-import sys
 import threading
 import time
 from collections.abc import Sequence
@@ -18,8 +16,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, TextIO
 
-from flagtrack.daemon.commands._progress import clock
-from flagtrack.daemon.services.runner import is_terminal
+from flagtrack.daemon.commands._progress import TerminalView, clock
 
 TICK_S = 1.0  # the terminal's line is redrawn this often
 PLAIN_EVERY_S = 60.0  # elsewhere, a line this often
@@ -52,28 +49,22 @@ def recorded_line(path: Path) -> str:
     return f"recorded {path}: {said}"
 
 
-class RecordingView:
+class RecordingView(TerminalView):
     """Shows the recorder service's recording while a rig runs (call it with the rig's services).
 
     Args:
         command: the command, for the plain lines (``flagtrack up: recording ...``).
-        stream: where to draw (default ``sys.stderr``).
-        quiet: draw nothing.
-        terminal: redraw one line (default: when ``stream`` is a terminal); otherwise plain lines.
+        stream, quiet, terminal: :class:`.TerminalView`'s (on a terminal, one line redrawn in place).
     """
 
     def __init__(
         self, command: str = "up", stream: TextIO | None = None, *, quiet: bool = False, terminal: bool | None = None
     ) -> None:
+        super().__init__(stream, quiet=quiet, terminal=terminal)
         self.command = command
-        self.stream = stream if stream is not None else sys.stderr
-        self.quiet = quiet
-        self.terminal = is_terminal(self.stream) if terminal is None else terminal
         self._recorder: Any = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._bar: Any = None
-        self._redirect: contextlib.ExitStack | None = None
         self._reported: set[Path] = set()
         self._shown: Path | None = None
         self._last_plain = 0.0
@@ -84,11 +75,7 @@ class RecordingView:
         self._recorder = next((s for s in services if getattr(s, "name", "") == "recorder"), None)
         if self._recorder is None or self.quiet:
             return
-        if self.terminal:
-            from tqdm.contrib.logging import logging_redirect_tqdm
-
-            self._redirect = contextlib.ExitStack()
-            self._redirect.enter_context(logging_redirect_tqdm())
+        self._log_above_bar()
         self._thread = threading.Thread(target=self._watch, name="recording-view", daemon=True)
         self._thread.start()
 
@@ -106,12 +93,7 @@ class RecordingView:
         if self._thread is not None:
             self._thread.join(timeout=5)
             self._thread = None
-        if self._bar is not None:
-            self._bar.close()
-            self._bar = None
-        if self._redirect is not None:
-            self._redirect.close()
-            self._redirect = None
+        self._close_terminal()
         if self._recorder is not None and not self.quiet:
             self._say_finished()
 
@@ -119,9 +101,7 @@ class RecordingView:
         """Draw the state of the recording at monotonic time ``now_s`` (the watch thread's step)."""
         part = self._recorder.current
         if part is None or not part.opened:  # not recording (any more): no line left standing
-            if self._bar is not None:
-                self._bar.close()
-                self._bar = None
+            self._close_bar()
             self._shown = None
             self._say_finished()
             return
@@ -158,9 +138,3 @@ class RecordingView:
 
             self._bar = tqdm(file=self.stream, bar_format="{desc}", dynamic_ncols=True, leave=False)
         self._bar.set_description_str(line, refresh=True)
-
-    def _write(self, line: str) -> None:
-        if self._bar is not None:
-            self._bar.write(line, file=self.stream)
-        else:
-            print(line, file=self.stream, flush=True)
