@@ -16,7 +16,7 @@ import threading
 from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from flagtrack.daemon.schema import FlagState, SupervisorState
 from flagtrack.daemon.services.supervisor.busside import BusSide
@@ -32,6 +32,9 @@ from flagtrack.daemon.sweep.runlog import PointResult
 from flagtrack.daemon.sweep.runner import SweepRunner, SweepSettings
 from flagtrack.daemon.sweep.session import Limits, Monitoring, Session
 from flagtrack.daemon.transport import Bus
+
+if TYPE_CHECKING:
+    from flagtrack.daemon.tracking.setup import TrackingSetup
 
 __all__ = ["FlagGeometry", "SupervisorService"]  # FlagGeometry: where the rig builds it from
 
@@ -49,7 +52,7 @@ class SupervisorService:
         rig_snapshot: the whole rig config, stored in the run's start record.
         resume_dir: resume this run instead of starting a new one.
         sensor: a point sensor (``SensorConfig``) compared with each point's reconstruction, or None.
-        tracking: the rig's tracking set-up (``TrackingSetup``), for each flapping point's chain
+        tracking: the rig's tracking set-up, for each flapping point's chain
             reach (:class:`.measure.BusMeasure`), or None.
     """
 
@@ -65,10 +68,10 @@ class SupervisorService:
         rig_snapshot: dict[str, Any],
         resume_dir: Path | None = None,
         sensor: Any = None,
-        tracking: Any = None,
+        tracking: TrackingSetup | None = None,
     ) -> None:
         self.bus, self.cfg, self.flag = bus, cfg, flag
-        self.tracking = tracking  # the rig's TrackingSetup: a point's chain reach is judged with it
+        self.tracking = tracking  # a point's chain reach is judged with it
         self._open_tunnel, self.camera_id = open_tunnel, camera_id
         self.tunnel: Any = None  # opened by start()
         self.monitor: BusMonitor
