@@ -16,12 +16,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-_CLOSE = object()
-
 
 @dataclass(frozen=True)
 class Answer:
-    """What one call of the law gave: its value, or why it is a fault; and how long it took, s."""
+    """What one call of the law gave: its value, or why it is a fault; and how long it took from the
+    call, s (the wait for the law's thread included)."""
 
     value: object
     fault: str
@@ -42,7 +41,8 @@ class LawCall:
     ) -> None:
         self._function, self._check = function, check
         self.timeout_s = timeout_s
-        self._calls: queue.SimpleQueue[object] = queue.SimpleQueue()
+        self._calls: queue.SimpleQueue[tuple[object, float] | None] = queue.SimpleQueue()
+        """(state, when it was called, monotonic s); None to close."""
         self._answers: queue.SimpleQueue[Answer] = queue.SimpleQueue()
         self._thread = threading.Thread(target=self._serve, name=f"control-{name}", daemon=True)
         self._thread.start()
@@ -60,7 +60,7 @@ class LawCall:
         if self.busy:
             raise RuntimeError("the law has not returned from its last call")
         self.called_at_s = time.monotonic()
-        self._calls.put(state)
+        self._calls.put((state, self.called_at_s))
         answer = self._answer(self.timeout_s)
         if answer is not None:
             return answer
@@ -77,7 +77,7 @@ class LawCall:
 
     def close(self) -> None:
         """Let the thread end once the law has returned."""
-        self._calls.put(_CLOSE)
+        self._calls.put(None)
 
     def _answer(self, timeout_s: float) -> Answer | None:
         try:
@@ -88,10 +88,10 @@ class LawCall:
         return answer
 
     def _serve(self) -> None:
-        while (state := self._calls.get()) is not _CLOSE:
-            start_s = time.monotonic()
+        while (call := self._calls.get()) is not None:
+            state, called_at_s = call
             try:
                 value, fault = self._check(self._function(state))
             except BaseException as exc:  # noqa: BLE001 - a user's law: whatever it raises is a fault
                 value, fault = None, f"raised {type(exc).__name__}" + (f": {exc}" if str(exc) else "")
-            self._answers.put(Answer(value, fault, time.monotonic() - start_s))
+            self._answers.put(Answer(value, fault, time.monotonic() - called_at_s))
