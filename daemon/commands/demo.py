@@ -149,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
         )
     supervisor = result.service("supervisor")
     viewer = result.service("viewer")
-    rrd = Path(viewer.cfg.rrd_path).resolve() if viewer is not None and "recording to" in viewer.description else None
+    rrd = viewer.rrd_path if viewer is not None else None
     reason = supervisor.stop_reason if supervisor is not None else "not run"
     summary, text = demo_report(out / "sweep", rrd, step_mps)
     print(

@@ -168,9 +168,9 @@ def _report_end(
     if centrelines is not None:
         say(f"centrelines in {centrelines}")
     for service in services:
-        description = getattr(service, "description", "")
-        if description:
-            say(f"viewer {description}")
+        end_line = getattr(service, "end_line", None)
+        if end_line is not None and (line := end_line()):
+            say(line)
 
 
 @dataclass(frozen=True)

@@ -125,6 +125,7 @@ def test_sigint_stops_every_service_cleanly(tmp_path: Path) -> None:
     ended = [line for line in err.splitlines() if line.startswith(f"flagtrack up: recorded {recorded}: ")]
     assert len(ended) == 1 and f"{recorded.stat().st_size / 1e6:.1f} MB, 0:" in ended[0], err
     assert "of camera time" in ended[0] and "lost" not in ended[0]
+    assert f"flagtrack up: Rerun view saved in {rrd.resolve()} (open it with: rerun " in err, err
 
 
 STUBBORN = """

@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 from flagtrack.daemon.problems import ProblemLog
@@ -12,7 +13,7 @@ from flagtrack.daemon.schema import CentrelineMessage, EventPacket, EventRate, S
 from flagtrack.daemon.services.sd_notify import beat
 from flagtrack.daemon.transport import Bus
 
-from .config import ViewerConfig
+from .config import ViewerConfig, effective_sink
 from .logger import RerunLogger, close_recording, open_recording
 
 log = logging.getLogger(__name__)
@@ -28,6 +29,8 @@ class ViewerService:
         self.cfg = cfg
         self.exit_after_final = exit_after_final
         self.description = ""
+        self.rrd_path: Path | None = None
+        """The ``.rrd`` file this view is saved to, when its sink is a file (after :meth:`start`)."""
         self.frames = 0
         self.updates = 0
         self.unusable = 0  # messages (or frames) that could not be logged
@@ -51,7 +54,13 @@ class ViewerService:
             "supervisor": bus.subscribe(keys.supervisor_state(), SupervisorState, capacity=1000, ring=True),
         }
         self._rec, self.description = open_recording(self.cfg)
+        if effective_sink(self.cfg) == "rrd":
+            self.rrd_path = Path(self.cfg.rrd_path).expanduser().resolve()
         log.info("viewer: %s", self.description)
+
+    def end_line(self) -> str:
+        """What a command says of this view once the rig has stopped ("" when nothing is left to open)."""
+        return f"Rerun view saved in {self.rrd_path} (open it with: rerun {self.rrd_path})" if self.rrd_path else ""
 
     def close(self) -> None:
         """Close the recording, for a viewer that will not run (``run`` closes it itself)."""
