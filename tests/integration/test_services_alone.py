@@ -91,8 +91,10 @@ viewer: {{sink: rrd, rrd_path: {tmp_path / "view.rrd"}}}
     tracking = [s for s in statuses if s.state == "tracking" and s.updates_per_s > 0]
     assert tracking, statuses
     # each status counts over about 1 s (status_interval_s): summed, the rates give back what flowed, however
-    # a stall and its catch-up moved it between windows (one update per tau of camera time, every event)
-    assert sum(s.updates_per_s for s in statuses) == pytest.approx(len(t_offline), rel=0.2)
-    assert sum(s.events_per_s for s in statuses) == pytest.approx(len(read_events(recording).events), rel=0.2)
+    # a stall and its catch-up moved it between windows (one update per tau of camera time, every event);
+    # a window a loaded host stretched past 1 s divides by its length: less, never more
+    updates, events = len(t_offline), len(read_events(recording).events)
+    assert 0.6 * updates <= sum(s.updates_per_s for s in statuses) <= 1.2 * updates
+    assert 0.6 * events <= sum(s.events_per_s for s in statuses) <= 1.2 * events
     assert statuses[-1].missing_packets == 0 and statuses[-1].malformed_packets == 0
     assert 0.0 <= min(s.lag_s for s in tracking) < 0.5

@@ -3,6 +3,7 @@ keep-alive, start from the current speed, and fault injection (link lost, readba
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 
@@ -115,14 +116,16 @@ def test_link_lost_mid_operation_fails_and_watchdog_brings_it_to_zero(sim: Simul
         tunnel.close()
 
 
-def test_keepalive_holds_the_speed_longer_than_the_watchdog(sim: SimulatedTunnel) -> None:
-    tunnel, _ = make_tunnel(sim)
-    with tunnel:
-        tunnel.set_speed_mps(5.0)
-        time.sleep(2 * SIM.watchdog_s)  # idle: only the keep-alive talks
-        assert sim.watchdog_trips == 0
-        assert tunnel.read_speed_mps() == pytest.approx(5.0, abs=SAFETY.tolerance_mps)
-        assert tunnel.status().keepalive_failures == 0
+def test_keepalive_holds_the_speed_longer_than_the_watchdog(sim_params: SimParams) -> None:
+    watchdog_s = 1.2  # a 1.1 s stall of a loaded host between keep-alives (0.1 s) would still trip it
+    with SimulatedTunnel(dataclasses.replace(sim_params, watchdog_s=watchdog_s)) as sim:
+        tunnel, _ = make_tunnel(sim, dataclasses.replace(SAFETY, watchdog_s=watchdog_s))
+        with tunnel:
+            tunnel.set_speed_mps(5.0)
+            time.sleep(2 * watchdog_s)  # idle: only the keep-alive talks
+            assert sim.watchdog_trips == 0
+            assert tunnel.read_speed_mps() == pytest.approx(5.0, abs=SAFETY.tolerance_mps)
+            assert tunnel.status().keepalive_failures == 0
 
 
 def test_start_reads_the_current_speed_and_ramps_from_it() -> None:

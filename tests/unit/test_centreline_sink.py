@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
+import types
 from pathlib import Path
 
 import h5py
@@ -88,17 +88,23 @@ def test_batches_are_appended_together_at_the_bound_or_on_flush(tmp_path: Path, 
     assert_series_equal(got, CentrelineBatch.concatenate(batches))
 
 
-def test_pending_batches_are_appended_once_the_interval_has_passed(tmp_path: Path, appends: list[int]) -> None:
+def test_pending_batches_are_appended_once_the_interval_has_passed(
+    tmp_path: Path, appends: list[int], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    now_s = [100.0]
+    clock = types.SimpleNamespace(monotonic=lambda: now_s[0])  # (a stalled host moves no interval)
+    monkeypatch.setattr(centreline, "time", clock)
     with CentrelineSink(tmp_path / "c.h5", {"units": "px"}, flush_interval_s=0.2) as sink:
         sink.add(make_batch(3))
         sink.add(make_batch(2, t0=1.0))
+        now_s[0] += 0.19
         sink.flush_if_due()
         assert appends == []
-        time.sleep(0.25)
+        now_s[0] += 0.01
         sink.flush_if_due()  # a caller's loop, without a batch
         assert appends == [5]
         sink.add(make_batch(4, t0=2.0))
-        time.sleep(0.25)
+        now_s[0] += 0.25
         sink.add(make_batch(1, t0=3.0))  # add checks the interval too
         assert appends == [5, 5]
 
