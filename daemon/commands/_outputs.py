@@ -57,3 +57,44 @@ def only_yaml_sections(*sections: str) -> Callable[[Path], bool]:
     """Whether a file is YAML whose top level holds no keys but ``sections`` (an earlier output of the
     command, not a rig config)."""
     return yaml_file_where(lambda data: data is None or (isinstance(data, dict) and set(data) <= set(sections)))
+
+
+def starts_with(*signatures: bytes) -> Callable[[Path], bool]:
+    """Whether a file begins with one of ``signatures`` (its format's magic bytes)."""
+
+    def check(path: Path) -> bool:
+        try:
+            with path.open("rb") as file:
+                head = file.read(max(map(len, signatures)))
+        except OSError:
+            return False
+        return head.startswith(signatures)
+
+    return check
+
+
+RRD = starts_with(b"RRF")
+"""A Rerun ``.rrd`` file (an earlier view)."""
+
+PICTURES = {".png": b"\x89PNG\r\n\x1a\n", ".pdf": b"%PDF", ".svg": b"<?xml"}
+"""The picture formats a snapshot is written in, by suffix, with their signatures."""
+
+
+def check_picture(output: Path, option: str, inputs: Iterable[Path | None] = (), *, makes_folder: bool = False) -> None:
+    """As :func:`check_output`, and refuse a picture ``output`` whose suffix names no format of
+    :data:`PICTURES` (matplotlib would fail after the work, or write ``OUT.png`` for ``OUT``); an
+    earlier picture of its kind may be replaced."""
+    check_output(output, option, inputs, makes_folder=makes_folder)
+    signature = PICTURES.get(output.suffix.lower())
+    if signature is None:
+        kinds = ", ".join(PICTURES)
+        raise ConfigError(f"{option} {output}: give a picture file ({kinds}), not {output.suffix or 'no suffix'}")
+    holds = f"a {output.suffix} picture"
+    check_output(output, option, replaceable=starts_with(signature), holds=holds, makes_folder=makes_folder)
+
+
+def centrelines_file(path: Path) -> bool:
+    """Whether ``path`` holds flagtrack centrelines (an earlier output that may be replaced)."""
+    from flagtrack.drivers.formats.centreline import is_centreline_file
+
+    return is_centreline_file(path)

@@ -82,17 +82,19 @@ class _Plan:
 
 
 def _plan(args: argparse.Namespace) -> _Plan:
-    from flagtrack.daemon.commands._outputs import check_output
+    from flagtrack.daemon.commands._outputs import RRD, check_output, check_picture
     from flagtrack.daemon.core.events import MAX_SENSOR_PX
     from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.typed_yaml import require_output_file
 
     rig, tracker = _rig_and_tracker(args)  # (reads only: nothing is written before the outputs are checked)
     inputs = (args.replay, args.config, tracker.calibration)
-    for option, output in (("--snapshot", args.snapshot), ("--rrd", args.rrd)):
-        if output is not None:
-            require_output_file(output, key=option, path=None)
-            check_output(output, option, inputs, makes_folder=True)
+    if args.snapshot is not None:
+        require_output_file(args.snapshot, key="--snapshot", path=None)
+        check_picture(args.snapshot, "--snapshot", inputs, makes_folder=True)
+    if args.rrd is not None:
+        require_output_file(args.rrd, key="--rrd", path=None)
+        check_output(args.rrd, "--rrd", inputs, replaceable=RRD, holds="a Rerun view (.rrd)", makes_folder=True)
     params = _params(args)
     viewer, note = _viewer(args, rig)
     speed = args.speed if args.speed is not None else (1.0 if viewer is not None and viewer.sink != "rrd" else 0.0)

@@ -151,15 +151,15 @@ def _check_outputs(recording: Path, output: Path, figure: Path | None) -> None:
     """Refuse, before any work, outputs that cannot be written or would replace the recording, each
     other, or a file that is not an earlier calibration (a rig config given as ``-o``)."""
     from flagtrack.calibration.calfile import FORMAT
-    from flagtrack.daemon.commands._outputs import check_output, yaml_file_where
+    from flagtrack.daemon.commands._outputs import check_output, check_picture, yaml_file_where
     from flagtrack.daemon.errors import ConfigError
 
     is_calibration = yaml_file_where(lambda data: isinstance(data, dict) and data.get("format") == FORMAT)
     check_output(output, "-o", (recording,), replaceable=is_calibration, holds="a calibration")
     if figure is not None:
-        check_output(figure, "--figure", (recording, output))
         if figure.resolve() == output.resolve():
             raise ConfigError(f"--figure {figure}: is the calibration's own file (-o)")
+        check_picture(figure, "--figure", (recording, output))
 
 
 def _calibrate(args: argparse.Namespace) -> int:

@@ -21,12 +21,22 @@ INFO_KEYS = ("format", "encoding", "width", "height", "events", "on", "off", "t_
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``info`` and ``convert`` actions."""
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
-    info = actions.add_parser("info", help="format, size, event counts and time span of a file")
-    info.add_argument("file", type=Path)
+    info = actions.add_parser(
+        "info",
+        help="format, size, event counts and time span of a file",
+        description="Read an event file through and print its format, sensor size, event counts and time "
+        "span (docs/formats.md).",
+    )
+    info.add_argument("file", type=Path, help="the event file")
     info.add_argument("--json", action="store_true", help="print one JSON object")
-    convert = actions.add_parser("convert", help="convert between formats (chosen by the extensions)")
-    convert.add_argument("input", type=Path)
-    convert.add_argument("output", type=Path)
+    convert = actions.add_parser(
+        "convert",
+        help="convert between formats (chosen by the extensions)",
+        description="Stream an event file into another format, chosen by the output's extension (.raw EVT "
+        "2.0/3.0, .dat, .npy, .csv); an existing output is refused, never replaced (docs/formats.md).",
+    )
+    convert.add_argument("input", type=Path, help="the event file to read")
+    convert.add_argument("output", type=Path, help="the file to write (a new one)")
     convert.add_argument(
         "--encoding",
         choices=("evt2", "evt3"),
@@ -99,11 +109,13 @@ def run_info(args: argparse.Namespace) -> int:
 
 def run_convert(args: argparse.Namespace) -> int:
     """Stream ``input`` into ``output``."""
-    from flagtrack.daemon.errors import FormatError
+    from flagtrack.daemon.errors import ConfigError, FormatError
     from flagtrack.drivers.formats import file_format, open_events, open_writer
 
     if args.input.resolve() == args.output.resolve():
         raise FormatError("input and output are the same file", path=str(args.input))
+    if args.output.is_file() and args.output.stat().st_size:  # (a recording made before, most likely)
+        raise ConfigError(f"{args.output}: exists (it is left as is: give a new name, or delete it first)")
     out_kind = file_format(args.output, sniff=False)
     with open_events(args.input, strict=args.strict) as reader:
         info = reader.info

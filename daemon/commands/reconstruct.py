@@ -111,7 +111,9 @@ def _why_no_updates(summary: ReconstructSummary, t_start_s: float | None, t_stop
 
 
 def check_paths(events: Path, output: Path, config: Path | None) -> None:
-    """Refuse, before any work, an input or output the command cannot use (one line, exit 2)."""
+    """Refuse, before any work, an input or output the command cannot use (one line, exit 2); an
+    earlier centreline file is replaced, any other file refused."""
+    from flagtrack.daemon.commands._outputs import centrelines_file, check_output
     from flagtrack.daemon.errors import ConfigError
 
     for path in (events, config):
@@ -125,6 +127,7 @@ def check_paths(events: Path, output: Path, config: Path | None) -> None:
         raise ConfigError(f"-o {output}: is the event file itself (it would be overwritten)")
     if output.exists() and config is not None and config.exists() and output.resolve() == config.resolve():
         raise ConfigError(f"-o {output}: is the config file itself (it would be overwritten)")
+    check_output(output, "-o", replaceable=centrelines_file, holds="flagtrack centrelines (HDF5)")
 
 
 def _sensor_check(setup: TrackingSetup, args: argparse.Namespace) -> Callable[[int, int], None]:

@@ -87,12 +87,16 @@ def run(args: argparse.Namespace) -> int:
 def _refuse_outputs_over_inputs(args: argparse.Namespace, rig: RigConfig) -> None:
     """``--centrelines`` or ``--rrd`` naming the recording, the rig config or the calibration (the
     folders are checked with the rig's), or ``--record`` naming a recording made before."""
-    from flagtrack.daemon.commands._outputs import check_output
+    from flagtrack.daemon.commands._outputs import RRD, centrelines_file, check_output
 
     inputs = (args.replay, args.config, rig.tracker.calibration)
-    for option, output in (("--centrelines", args.centrelines), ("--rrd", args.rrd)):
-        if output is not None:
-            check_output(output, option, inputs, makes_folder=True)
+    if args.centrelines is not None:
+        holds = "flagtrack centrelines (HDF5)"
+        check_output(
+            args.centrelines, "--centrelines", inputs, replaceable=centrelines_file, holds=holds, makes_folder=True
+        )
+    if args.rrd is not None:
+        check_output(args.rrd, "--rrd", inputs, replaceable=RRD, holds="a Rerun view (.rrd)", makes_folder=True)
     if args.record is not None:  # a second `up --record NAME` replaced the first recording without a word
         from flagtrack.daemon.errors import ConfigError
         from flagtrack.daemon.services.recorder import recording_base

@@ -32,7 +32,7 @@ from flagtrack.daemon import __version__
 from flagtrack.daemon.core.centreline import CentrelineBatch
 from flagtrack.daemon.errors import FormatError
 from flagtrack.drivers.atomic import PendingFile
-from flagtrack.drivers.formats.centreline_layout import describe_datasets, hdf5_attrs, root_format_attrs
+from flagtrack.drivers.formats.centreline_layout import FORMAT, describe_datasets, hdf5_attrs, root_format_attrs
 
 _PER_UPDATE = ("t", "x", "y", "joints/x", "joints/y", "delta_rms", "n_events")
 _MAX_PENDING_VALUES = 1 << 23
@@ -378,6 +378,15 @@ def write_centrelines(path: str | Path, batch: CentrelineBatch, attrs: Mapping[s
     """Write a whole series to ``path`` in one go."""
     with CentrelineWriter(path, batch.s, batch.joints_x.shape[1] - 1, attrs) as writer:
         writer.append(batch)
+
+
+def is_centreline_file(path: str | Path) -> bool:
+    """Whether ``path`` is a flagtrack centreline file (an earlier output that may be replaced)."""
+    try:
+        with h5py.File(path, "r") as f:
+            return _decode_attr(f.attrs.get("format", "")) == FORMAT or all(name in f for name in ("t", "s", "joints"))
+    except (OSError, ValueError):
+        return False
 
 
 def read_centrelines(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any]]:

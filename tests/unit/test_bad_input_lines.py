@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 
@@ -28,12 +29,14 @@ def test_an_event_beyond_any_sensor_is_refused_and_an_earlier_output_kept(
     raw["w"] = 10_000 | (20 << 14)  # x 10 000, y 20
     (tmp_path / "junk.dat").write_bytes(raw.tobytes())
     earlier = tmp_path / "out.h5"
-    earlier.write_bytes(b"an earlier result")
+    with h5py.File(earlier, "w") as f:  # (an earlier result: -o replaces one, and no other file)
+        f.attrs["format"] = "flagtrack-centrelines"
+    before = earlier.read_bytes()
     argv = ["reconstruct", str(tmp_path / "junk.dat"), "-o", str(earlier), "--root", "150", "240", "--length", "300"]
     assert main(argv) == 2
     line = _one_line(capsys)
     assert "junk.dat" in line and "(10000, 20): beyond any event sensor" in line, line
-    assert earlier.read_bytes() == b"an earlier result" and sorted(p.name for p in tmp_path.iterdir()) == [
+    assert earlier.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == [
         "junk.dat",
         "out.h5",
     ]

@@ -20,7 +20,10 @@ def folder(tmp_path: Path) -> Path:
     events = np.zeros(100, EVENT_DTYPE)
     events["t"] = np.arange(100) * 10
     write_events(tmp_path / "rec.raw", events, width=640, height=480)
+    write_events(tmp_path / "other.raw", events, width=640, height=480)  # a recording made before
     (tmp_path / "rig.yaml").write_text(RIG)
+    (tmp_path / "rig.yaml.csv").write_text("t,x,y,p\n")
+    (tmp_path / "old.png").write_text("notes, not a picture")
     return tmp_path
 
 
@@ -37,6 +40,22 @@ CASES = [
     (["up", "-c", "rig.yaml", "--rrd", "rig.yaml", "-q"], "--rrd rig.yaml: is the input"),
     (["reconstruct", "rec.raw", "-o", "rig.yaml", "-c", "rig.yaml"], "-o rig.yaml: is the config file itself"),
     (["up", "-c", "rig.yaml", "--root", "900", "100", "-q"], "--root: (900, 100) is off the 640 x 480 sensor"),
+    # a file of another kind: each was overwritten, exit 0 (a recording became HDF5, a config a picture)
+    (["reconstruct", "rec.raw", "-o", "other.raw", "--root", "150", "240", "--length", "300"],
+     "-o other.raw: holds something else than flagtrack centrelines (HDF5)"),
+    (["reconstruct", "rec.raw", "-o", "rig.yaml", "--root", "150", "240", "--length", "300"],
+     "-o rig.yaml: holds something else than flagtrack centrelines"),
+    (["up", "--replay", "rec.raw", "--centrelines", "rig.yaml", "--exit-at-eof", "-q"],
+     "--centrelines rig.yaml: holds something else than flagtrack centrelines"),
+    (["up", "-c", "rig.yaml", "--rrd", "other.raw", "-q"], "--rrd other.raw: holds something else than a Rerun view"),
+    (["aim", "--replay", "rec.raw", "--rrd", "rig.yaml", "-q"], "--rrd rig.yaml: holds something else than a Rerun"),
+    (["aim", "--replay", "rec.raw", "--snapshot", "rig.yaml", "--viewer", "none", "-q"],
+     "--snapshot rig.yaml: give a picture file (.png, .pdf, .svg), not .yaml"),
+    (["aim", "--replay", "rec.raw", "--snapshot", "view", "--viewer", "none", "-q"], "not no suffix"),
+    (["aim", "--replay", "rec.raw", "--snapshot", "old.png", "--viewer", "none", "-q"],
+     "--snapshot old.png: holds something else than a .png picture"),
+    (["events", "convert", "rec.raw", "other.raw"], "other.raw: exists (it is left as is"),
+    (["events", "convert", "rec.raw", "rig.yaml.csv"], "rig.yaml.csv: exists"),
 ]  # fmt: skip
 
 
@@ -90,8 +109,23 @@ def test_aim_refuses_a_snapshot_onto_the_rigs_calibration(
 def test_reconstruct_writes_through_a_symbolic_link(folder: Path) -> None:
     """The atomic write renamed a new file over the link (the link's target kept the old result)."""
     (folder / "results").mkdir()
-    (folder / "results" / "out.h5").write_bytes(b"old")
-    (folder / "out.h5").symlink_to(folder / "results" / "out.h5")
-    argv = ["reconstruct", str(folder / "rec.raw"), "-o", str(folder / "out.h5"), "--root", "150", "240"]
-    assert main([*argv, "--length", "300"]) == 0
-    assert (folder / "out.h5").is_symlink() and (folder / "results" / "out.h5").read_bytes()[:4] == b"\x89HDF"
+    target = folder / "results" / "out.h5"
+    argv = ["reconstruct", str(folder / "rec.raw"), "--root", "150", "240", "--length", "300"]
+    assert main([*argv, "-o", str(target), "--t-stop", "0.0005"]) == 0  # an earlier result, replaced
+    earlier = target.read_bytes()
+    (folder / "out.h5").symlink_to(target)
+    assert main([*argv, "-o", str(folder / "out.h5")]) == 0
+    assert (folder / "out.h5").is_symlink() and target.read_bytes()[:4] == b"\x89HDF" and target.read_bytes() != earlier
+
+
+def test_earlier_outputs_of_each_kind_are_replaced(folder: Path) -> None:
+    """A centreline file, a Rerun view and a picture made before are what these options write again."""
+    from flagtrack.daemon.commands._outputs import PICTURES, RRD, centrelines_file, check_picture
+
+    argv = ["reconstruct", str(folder / "rec.raw"), "--root", "150", "240", "--length", "300", "-o"]
+    assert main([*argv, str(folder / "c.h5")]) == 0 and main([*argv, str(folder / "c.h5")]) == 0
+    assert centrelines_file(folder / "c.h5") and not centrelines_file(folder / "rec.raw")
+    (folder / "v.rrd").write_bytes(b"RRF2\x00\x29")
+    assert RRD(folder / "v.rrd") and not RRD(folder / "rig.yaml")
+    (folder / "a.png").write_bytes(PICTURES[".png"] + b"...")
+    check_picture(folder / "a.png", "--snapshot")
