@@ -3,6 +3,7 @@ a file that holds something else than what it writes."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,8 @@ def check_output(
         raise ConfigError(f"{option} {output}: is a directory (give the file to write)")
     if not makes_folder and not output.parent.is_dir():
         raise ConfigError(f"{option} {output}: folder {output.parent} does not exist")
+    if output.parent.is_dir() and not os.access(output.parent, os.W_OK | os.X_OK):
+        raise ConfigError(f"{option} {output}: folder {output.parent} is not writable")
     if not output.exists():
         return
     for source in inputs:

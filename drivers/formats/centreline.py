@@ -20,6 +20,7 @@ goes through one :class:`CentrelineSink`: one shape check, one batching rule and
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -57,7 +58,11 @@ class CentrelineWriter:
 
     def __init__(self, path: str | Path, s: np.ndarray, n_joints: int, attrs: Mapping[str, Any]) -> None:
         self.path = Path(path)
-        self._file = h5py.File(self.path, "w")
+        try:
+            self._file = h5py.File(self.path, "w")
+        except OSError as exc:  # (h5py's text: its flags and internal names)
+            why = os.strerror(exc.errno) if exc.errno else str(exc)
+            raise FormatError(f"cannot create a file in {self.path.parent}: {why}", path=str(self.path)) from None
         n_s = len(s)
         self._file.create_dataset("s", data=np.asarray(s, dtype=np.float64))
         chunk_t = 256  # rows per chunk; the last chunk's unused rows take disk (1024: a 2 s point's file +40 %)

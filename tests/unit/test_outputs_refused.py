@@ -3,6 +3,7 @@ line naming the option, exit 2, the file left as it was (it was overwritten, exi
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -129,3 +130,27 @@ def test_earlier_outputs_of_each_kind_are_replaced(folder: Path) -> None:
     assert RRD(folder / "v.rrd") and not RRD(folder / "rig.yaml")
     (folder / "a.png").write_bytes(PICTURES[".png"] + b"...")
     check_picture(folder / "a.png", "--snapshot")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes anywhere")
+def test_an_output_in_a_folder_without_write_permission_is_refused(
+    folder: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """h5py's own error came after the work: its flags and the temporary file's name."""
+    locked = folder / "locked"
+    locked.mkdir(mode=0o500)
+    argv = ["reconstruct", str(folder / "rec.raw"), "-o", str(locked / "c.h5"), "--root", "150", "240"]
+    assert main([*argv, "--length", "300"]) == 2
+    assert f"folder {locked} is not writable" in capsys.readouterr().err
+
+
+def test_a_centreline_file_that_cannot_be_created_says_why_in_its_own_words(tmp_path: Path) -> None:
+    from flagtrack.daemon.errors import FormatError
+    from flagtrack.drivers.formats.centreline import CentrelineWriter
+
+    with pytest.raises(FormatError) as info:
+        CentrelineWriter(tmp_path / "gone" / ".c.h5.tmp", np.linspace(0, 1, 5), 4, {"units": "px"})
+    assert (
+        str(info.value)
+        == f"{tmp_path / 'gone' / '.c.h5.tmp'}: cannot create a file in {tmp_path / 'gone'}: No such file or directory"
+    )
