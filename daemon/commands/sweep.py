@@ -71,6 +71,8 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ConfigError(str(exc), key="supervisor", path=str(args.config or args.resume)) from exc
     rig = dataclasses.replace(rig, supervisor=supervisor)
+    if args.resume is None and supervisor.run_name:
+        _refuse_an_earlier_run(Path(supervisor.runs_dir) / supervisor.run_name, args.config)
     names = [*dict.fromkeys([*rig.services, "supervisor"])]
     with SweepProgressView(quiet=args.quiet) as progress:
         result = run_rig(
@@ -94,6 +96,31 @@ def run(args: argparse.Namespace) -> int:
     # no run folder: the sweep never began (services that did not appear, a run in use): said, not 0
     print("flagtrack sweep: no run was started (the lines above say why)", file=sys.stderr)
     return result.code or 1
+
+
+def _refuse_an_earlier_run(run_dir: Path, config: Path) -> None:
+    """A new sweep into the folder of an earlier run (a fixed ``supervisor.run_name``): one line before
+    the rig starts, saying whether to resume it or to name another run."""
+    from flagtrack.daemon.errors import ConfigError, FormatError
+    from flagtrack.daemon.sweep.restart import nothing_to_resume
+    from flagtrack.daemon.sweep.runlog import RUN_LOG, read_run
+
+    if not (run_dir / RUN_LOG).exists():
+        return
+    another = "set another supervisor.run_name (or --runs-dir)"
+    try:
+        finished = nothing_to_resume(read_run(run_dir)) is not None
+    except FormatError:
+        finished = False
+    if finished:
+        raise ConfigError(
+            f"run {run_dir} exists and is finished: {another}", key="supervisor.run_name", path=str(config)
+        )
+    raise ConfigError(
+        f"run {run_dir} exists: resume it (flagtrack sweep --resume {run_dir}) or {another}",
+        key="supervisor.run_name",
+        path=str(config),
+    )
 
 
 def _run_files(run_dir: Path) -> str:
