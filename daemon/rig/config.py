@@ -18,6 +18,7 @@ files each checks are the service table's (:mod:`.table`).
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -152,8 +153,25 @@ def check_rig(rig: RigConfig, services: Sequence[str], findings: Findings | None
     from flagtrack.daemon.rig.certificates import check_certificates
 
     findings = findings if findings is not None else Findings()
+    if services:  # (none: the file is read, not run)
+        check_endpoints(rig, findings)
     for spec in in_table_order(list(services)):
         if spec.check is not None:
             spec.check(rig, findings)
     check_certificates(rig, services, findings)
     return findings
+
+
+PLACEHOLDER_HOST = re.compile(r"[A-Z][A-Z0-9]*(_[A-Z0-9]+)+")
+"""A host written as a word for the lab to replace (``ROUTER_HOST`` in the two-host examples)."""
+
+
+def check_endpoints(rig: RigConfig, findings: Findings) -> None:
+    """Note a bus endpoint whose host is still a placeholder (Zenoh's own error names its source file)."""
+    bus = rig.bus_config
+    for name in ("connect", "listen"):
+        for i, endpoint in enumerate(getattr(bus, name)):
+            host = endpoint.partition("/")[2].rpartition(":")[0] or endpoint.partition("/")[2]
+            if PLACEHOLDER_HOST.fullmatch(host):
+                text = f"{endpoint}: {host} is a placeholder; put the host's name or address there"
+                findings.note(text, key=f"bus.{name}[{i}]", path=rig.path)

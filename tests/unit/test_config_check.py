@@ -284,3 +284,18 @@ def test_a_device_not_plugged_in_is_a_note_left_to_the_rig_when_strict(tmp_path:
     ):
         check_rig_file(path, strict=True)  # one line, naming what else is left
     load_rig(path)  # the rig's own commands say so when they open it
+
+
+def test_a_placeholder_host_is_a_to_do_and_an_error_for_the_rig(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """deploy/'s two-host examples connect to ROUTER_HOST: config check passed them silently, and `up`
+    failed in Zenoh's words (naming a source file of Zenoh's)."""
+    path = rig_file(tmp_path, bus={"connect": ["tcp/127.0.0.1:7447", "tcp/ROUTER_HOST:7447"]})
+    report = check_rig_file(path)
+    assert [(n.key, n.pending) for n in report.notes] == [("bus.connect[1]", True)]
+    assert "ROUTER_HOST is a placeholder; put the host's name or address there" in report.notes[0].text
+    assert main(["up", "-c", str(path), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "key 'bus.connect[1]': tcp/ROUTER_HOST:7447: ROUTER_HOST is a placeholder" in err[0], err
+    assert check_rig_file(rig_file(tmp_path, bus={"connect": ["tcp/router-1.lab:7447"]})).notes == ()
