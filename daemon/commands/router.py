@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -56,11 +57,13 @@ class RouterService:
 
     name = "router"
 
-    def __init__(self, bus: Bus) -> None:
-        self.bus = bus
+    def __init__(self, bus: Bus, ready_line: str) -> None:
+        self.bus, self.ready_line = bus, ready_line
 
     def start(self) -> None:
-        """Nothing to open: the session is the caller's (opened first: a busy port is one clear line)."""
+        """Say it listens: once the signals are handled (a script that signals on this line stops it
+        cleanly). Nothing to open: the session is the caller's (opened first: a busy port is one line)."""
+        print(self.ready_line, file=sys.stderr, flush=True)
 
     def run(self, stop: threading.Event) -> None:
         from flagtrack.daemon.services.sd_notify import beat
@@ -115,7 +118,6 @@ def zenohd_config(settings: dict[str, Any]) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     """Serve until interrupted: the first SIGINT/SIGTERM closes gracefully, a second forces (runner.py)."""
     import json
-    import sys
 
     from flagtrack.daemon.security.config import REDACTED
     from flagtrack.daemon.services.runner import run_services
@@ -140,8 +142,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     bus = Bus(cfg)  # a bad endpoint or a busy port: one clear line (ConfigError), before any signal handling
     what = " (mutual TLS" + (", access control" if cfg.access_control else "") + ")" if cfg.secured else ""
-    print(f"flagtrack router: listening on {', '.join(cfg.listen)}{what}", file=sys.stderr, flush=True)
-    report = run_services([RouterService(bus)], shutdown_timeout_s=args.shutdown_timeout)
+    ready = f"flagtrack router: listening on {', '.join(cfg.listen)}{what}"
+    report = run_services([RouterService(bus, ready)], shutdown_timeout_s=args.shutdown_timeout)
     if report.abandoned:
         print(f"flagtrack router: did not close within {args.shutdown_timeout:g} s", file=sys.stderr)
         return 1

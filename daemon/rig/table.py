@@ -333,8 +333,7 @@ def _check_camera(rig: RigSections, findings: Findings) -> None:
     camera = rig.camera
     if camera.adapter == "replay" and camera.replay is not None and findings.files:
         require_file(camera.replay.path, key="camera.replay.path", path=rig.path)
-        if not findings.strict:  # config check: a recording it can read (strict, the replay reads it itself)
-            _check_recording(camera.replay.path, rig.path)
+        _check_recording(camera.replay.path, rig.path)  # (its header: before any service starts)
     if camera.adapter in HARDWARE_ADAPTERS:  # what only the device can say: when up opens it, first
         from flagtrack.daemon.rig.camera_auto import resolve_auto
 

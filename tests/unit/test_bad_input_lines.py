@@ -154,6 +154,18 @@ def test_numbers_and_folders_a_command_cannot_use_are_one_line(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.raw"]
 
 
+def test_a_replay_that_is_no_recording_is_one_line_before_the_rig_starts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The camera service failed on it once every service was up: an ERROR line, then exit 1."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "junk.raw").write_bytes(np.random.default_rng(1).bytes(20_000))
+    assert main(["up", "--replay", "junk.raw", "--root", "100", "100", "--length", "50", "--exit-at-eof"]) == 2
+    line = _one_line(capsys)
+    assert line == "flagtrack up: error: --replay: junk.raw, byte 0: not a RAW file: no '%' header (encoding unknown)"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["junk.raw"]
+
+
 @pytest.mark.parametrize("name", ["empty.dat", "empty.raw", "empty.npy", "empty.csv"])
 def test_a_zero_byte_recording_is_one_line_whatever_its_format(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str
