@@ -11,6 +11,10 @@ import json
 import sys
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from flagtrack.drivers.formats.reader import EventChunk
 
 COMMAND = "events"
 HELP = "inspect (info) and convert event files: .raw EVT 2.0/2.1/3.0, .dat, .aedat4, .npy, .csv"
@@ -65,6 +69,22 @@ def _progress(total: int, description: str, disabled: bool):  # noqa: ANN202
     )
 
 
+def _refuse_beyond_any_sensor(chunk: EventChunk, path: Path) -> None:
+    """A pixel no sensor has (a random file read as a headerless DAT): the error ``reconstruct`` gives."""
+    from flagtrack.daemon.core.events import MAX_SENSOR_PX
+    from flagtrack.daemon.errors import FormatError
+
+    if len(chunk.events):
+        x, y = int(chunk.events["x"].max()), int(chunk.events["y"].max())
+        if max(x, y) >= MAX_SENSOR_PX:
+            raise FormatError(
+                f"an event at pixel ({x}, {y}): beyond any event sensor ({MAX_SENSOR_PX} pixels a side at most): "
+                "not an event recording, or a corrupt one",
+                path=str(path),
+                offset=chunk.byte_offset,
+            )
+
+
 def file_summary(path: Path, *, strict: bool = False, progress: bool = False) -> dict:
     """The ``events info`` figures of a file, by one streaming pass (bounded memory)."""
     from flagtrack.drivers.formats import open_events
@@ -74,6 +94,7 @@ def file_summary(path: Path, *, strict: bool = False, progress: bool = False) ->
         events = on = triggers = 0
         t_first = t_last = None
         for chunk in reader:
+            _refuse_beyond_any_sensor(chunk, path)
             n = len(chunk.events)
             if n:
                 events += n
@@ -131,14 +152,19 @@ def run_convert(args: argparse.Namespace) -> int:
         elif args.encoding:
             raise FormatError("--encoding applies to .raw outputs only", path=str(args.output))
         count = 0
-        with (
-            open_writer(args.output, width=width, height=height, encoding=encoding) as writer,
-            _progress(reader.size_bytes, args.input.name, args.no_progress) as bar,
-        ):
-            for chunk in reader:
-                writer.write(chunk.events, chunk.triggers)
-                count += len(chunk.events)
-                bar.update(max(chunk.byte_offset - bar.n, 0))
+        try:
+            with (
+                open_writer(args.output, width=width, height=height, encoding=encoding) as writer,
+                _progress(reader.size_bytes, args.input.name, args.no_progress) as bar,
+            ):
+                for chunk in reader:
+                    _refuse_beyond_any_sensor(chunk, args.input)
+                    writer.write(chunk.events, chunk.triggers)
+                    count += len(chunk.events)
+                    bar.update(max(chunk.byte_offset - bar.n, 0))
+        except BaseException:  # (Ctrl-C too) a part of the output is no file to keep: it would block a new try
+            args.output.unlink(missing_ok=True)
+            raise
     print(f"{args.output}: {count} events", file=sys.stderr)
     return 0
 

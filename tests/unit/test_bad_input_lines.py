@@ -154,6 +154,23 @@ def test_numbers_and_folders_a_command_cannot_use_are_one_line(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.raw"]
 
 
+@pytest.mark.parametrize("action", [["info"], ["convert", "--no-progress"]])
+def test_events_refuses_a_pixel_beyond_any_sensor_as_reconstruct_does(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], action: list[str]
+) -> None:
+    """A random file read as a headerless DAT: `events info` said 625 events with t_first > t_last,
+    exit 0 (--strict too); `convert` wrote pixels like (8537, 8979)."""
+    raw = np.zeros(10, dtype=[("t", "<u4"), ("w", "<u4")])
+    raw["t"] = np.arange(10) * 100
+    raw["w"] = 10_000 | (20 << 14)
+    (tmp_path / "junk.dat").write_bytes(raw.tobytes())
+    outputs = [str(tmp_path / "junk.csv")] if action[0] == "convert" else []
+    assert main(["events", action[0], str(tmp_path / "junk.dat"), *outputs, *action[1:]]) == 2
+    line = _one_line(capsys)
+    assert "junk.dat, byte 0: an event at pixel (10000, 20): beyond any event sensor" in line, line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["junk.dat"]  # no part of an output left
+
+
 def test_a_replay_that_is_no_recording_is_one_line_before_the_rig_starts(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
