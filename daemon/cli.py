@@ -79,14 +79,32 @@ def _configure_logging(verbose: int) -> None:
         logging.getLogger(name).setLevel(logging.DEBUG if verbose >= 2 else logging.CRITICAL)
 
 
-def _print_warnings_as_lines(command: str) -> None:
-    """Warnings (a damaged file's words skipped, a truncated end) print as one line, as errors do."""
+class _WarningLines:
+    """Warnings (a damaged file's words skipped, a truncated end) print as one line each, as errors do,
+    the first :attr:`SHOWN` of them unless ``every`` (-v): a file damaged over 100 kB gave 160 lines."""
 
-    def show(message: Warning | str, *_where: Any, **_named: Any) -> None:
+    SHOWN = 10
+
+    def __init__(self, command: str, every: bool) -> None:
+        self.command, self.every = command, every
+        self.shown = self.hidden = 0
+
+    def show(self, message: Warning | str, *_where: Any, **_named: Any) -> None:
         """``warnings.showwarning``: the category, file, line and stream are left out."""
-        print(f"flagtrack {command}: warning: {message}", file=sys.stderr)
+        if self.every or self.shown < self.SHOWN:
+            self.shown += 1
+            print(f"flagtrack {self.command}: warning: {message}", file=sys.stderr)
+        else:
+            self.hidden += 1
 
-    warnings.showwarning = show
+    def close(self) -> None:
+        """Say how many were not shown, if any."""
+        if self.hidden:
+            print(
+                f"flagtrack {self.command}: {self.hidden} more warnings not shown (flagtrack -v {self.command} ... shows each)",
+                file=sys.stderr,
+            )
+            self.hidden = 0
 
 
 def _exit_at_once(status: int) -> None:
@@ -121,13 +139,16 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     jit_hook.loader = load_compiled_kernels  # the kernels built ahead of time, if any (no numba import)
     previous = warnings.showwarning
-    _print_warnings_as_lines(args.command)
+    warning_lines = _WarningLines(args.command, every=args.verbose > 0)
+    warnings.showwarning = warning_lines.show
     try:
         status = int(args.run(args) or 0)
+        warning_lines.close()
         if exit_now and getattr(sys.modules.get(args.run.__module__), "EXIT_AT_ONCE", False):
             _exit_at_once(status)
         return status
     except FlagtrackError as exc:
+        warning_lines.close()  # (before the error line, which stays the last)
         print(f"flagtrack {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # a path a command did not check itself: still one line (the traceback at DEBUG)
@@ -139,6 +160,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"flagtrack {args.command}: interrupted", file=sys.stderr)
         return 130
     finally:
+        warning_lines.close()
         warnings.showwarning = previous  # main() is also called in-process (tests)
 
 

@@ -68,7 +68,10 @@ def run(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     if summary.skipped_bytes:
-        ranges = ", ".join(f"{a}-{b}" for a, b in summary.skipped_bytes)
+        skipped = summary.skipped_bytes
+        ranges = ", ".join(f"{a}-{b}" for a, b in skipped[:5])
+        if len(skipped) > 5:
+            ranges += f" and {len(skipped) - 5} more stretches up to byte {skipped[-1][1]}"
         print(
             f"{args.file}: damaged: skipped bytes {ranges} (at most {summary.events_lost_at_most} events lost; "
             "--strict refuses such a file)",

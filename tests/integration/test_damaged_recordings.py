@@ -59,3 +59,30 @@ def test_batch_strict_fails_the_damaged_input_only(damaged: tuple[Path, int], re
             assert f"byte {at}" in rows["damaged.raw"]["error"]
         else:
             assert f"bytes {at}-" in result.stderr  # the warning is reported with its input
+
+
+def test_a_file_damaged_in_many_places_gives_ten_warnings_and_a_count(
+    recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A 100 kB stretch of noise gave 160 warning lines from `events info`, and `reconstruct` one line
+    listing 155 byte ranges; -v still shows each."""
+    from flagtrack.daemon.cli import main
+
+    data = bytearray(recording.read_bytes())
+    body = data.index(b"% end\n") + 6
+    for at in range(body + 2048, len(data) - 2, 2048):  # a reserved word every 2 kB
+        data[at : at + 2] = (0xC123).to_bytes(2, "little")
+    path = tmp_path / "damaged.raw"
+    path.write_bytes(bytes(data))
+    assert main(["-v", "events", "info", str(path)]) == 0
+    every = len([line for line in capsys.readouterr().err.splitlines() if "warning: " in line])
+    assert every > 15  # (a stretch skipped runs to the next time base: some words fall in one)
+    assert main(["events", "info", str(path)]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len([line for line in err if "warning: " in line]) == 10
+    hidden = f"flagtrack events: {every - 10} more warnings not shown (flagtrack -v events ... shows each)"
+    assert err[-1] == hidden, err[-1]
+    done = flagtrack("reconstruct", str(path), "-o", str(tmp_path / "c.h5"), "--root", "100", "240", "--length", "200")
+    assert done.returncode == 0, done.stderr
+    damaged = [line for line in done.stderr.splitlines() if ": damaged: skipped bytes" in line]
+    assert len(damaged) == 1 and f"and {every - 5} more stretches up to byte" in damaged[0], damaged
