@@ -21,13 +21,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from flagtrack.daemon.security.cert_days import CA_DAYS, LEAF_DAYS, WARN_DAYS
 
     sub = parser.add_subparsers(dest="certs_command", metavar="ACTION", required=True)
-    init = sub.add_parser("init", help="a new CA and one certificate per identity")
+    init = sub.add_parser(
+        "init",
+        help="a new CA and one certificate per identity",
+        description="Make a new certificate authority in DIR and one key and certificate per identity, for a "
+        "bus secured with mutual TLS (docs/security.md).",
+    )
     init.add_argument("directory", type=Path, metavar="DIR")
     init.add_argument(
         "--identities", default=DEFAULT_IDENTITIES, help=f"comma-separated identities (default {DEFAULT_IDENTITIES})"
     )
     init.add_argument("--ca-days", type=int, default=CA_DAYS, help=f"validity of the CA, days (default {CA_DAYS})")
-    issue = sub.add_parser("issue", help="issue (or with --replace renew) one identity's key and certificate")
+    issue = sub.add_parser(
+        "issue",
+        help="issue (or with --replace renew) one identity's key and certificate",
+        description="Issue one identity's key and certificate from the CA in DIR; --replace renews one that "
+        "exists, with a new key (docs/security.md).",
+    )
     issue.add_argument("directory", type=Path, metavar="DIR")
     issue.add_argument("name", metavar="NAME")
     issue.add_argument("--replace", action="store_true", help="renew an identity that exists (a new key too)")
@@ -40,7 +50,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             help="a host name or address the certificate names (repeatable; default localhost and 127.0.0.1)",
         )
         p.add_argument("--days", type=int, default=LEAF_DAYS, help=f"validity, days (default {LEAF_DAYS})")
-    check = sub.add_parser("check", help="what expires when; non-zero exit if something must be renewed")
+    check = sub.add_parser(
+        "check",
+        help="what expires when; non-zero exit if something must be renewed",
+        description="Say when the CA and each certificate in DIR expire; exit non-zero if one must be renewed "
+        "within --within-days (docs/security.md).",
+    )
     check.add_argument("directory", type=Path, metavar="DIR")
     check.add_argument(
         "--within-days",

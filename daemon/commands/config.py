@@ -25,7 +25,12 @@ Example: flagtrack config check deploy/rig-single-pc.yaml. More: docs/first-day.
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The ``check`` action and its options."""
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
-    check = actions.add_parser("check", help="check a rig config and say what it would run")
+    check = actions.add_parser(
+        "check",
+        help="check a rig config and say what it would run",
+        description="Check a whole rig config (or a part of one) without opening any device and say what it "
+        "would run; what this host still lacks is listed under 'to do:' (docs/commands.md, docs/first-day.md).",
+    )
     check.add_argument("config", type=Path, metavar="RIG.yaml", help="the rig config (or a part of one)")
     check.add_argument(
         "--services",

@@ -45,7 +45,12 @@ MEANINGS = {
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """``compare`` is the only action for now."""
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
-    compare = sub.add_parser("compare", help="compare RECON.h5 with TRUTH.h5")
+    compare = sub.add_parser(
+        "compare",
+        help="compare RECON.h5 with TRUTH.h5",
+        description="Compare a reconstructed centreline file with a ground truth (a simulated recording's) and "
+        "print the errors between them (docs/simulator.md).",
+    )
     compare.add_argument("recon", help="reconstructed centreline file")
     compare.add_argument("truth", help="ground-truth centreline file (at least /t, /s, /x, /y)")
     compare.add_argument("--json", action="store_true", help="print one JSON object")

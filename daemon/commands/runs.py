@@ -21,7 +21,12 @@ More: docs/commands.md.
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The ``list`` action and its arguments."""
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
-    listing = actions.add_parser("list", help="list the runs of a folder")
+    listing = actions.add_parser(
+        "list",
+        help="list the runs of a folder",
+        description="List the sweep and control runs of a folder, one line each: when it started, its points, "
+        "the onset and decay speeds found, its status; a run whose log is damaged says so (docs/commands.md).",
+    )
     listing.add_argument("runs_dir", type=Path, metavar="RUNS_DIR", help="a folder of sweep run folders")
     listing.add_argument("--json", action="store_true", help="print one JSON array instead of a table")
 

@@ -24,7 +24,12 @@ its port). More: docs/tunnel.md, docs/commands.md.
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``sim``, ``get``, ``set`` and ``stop`` actions."""
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
-    sim = actions.add_parser("sim", help="run a simulated tunnel on a pty and print its path")
+    sim = actions.add_parser(
+        "sim",
+        help="run a simulated tunnel on a pty and print its path",
+        description="Run a simulated wind-tunnel controller on a pseudo-terminal and print its path, to try "
+        "the tunnel commands and a rig without the tunnel (docs/tunnel.md).",
+    )
     sim.add_argument("-c", "--config", help="rig config whose tunnel.sim / tunnel.modbus to use")
     sim.add_argument("--protocol", choices=("ascii", "modbus"), help="protocol (default: config or ascii)")
     sim.add_argument("--tau-s", type=float, help="time constant of the air speed, s")
@@ -36,7 +41,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         ("set", "ramp to a speed and hold it"),
         ("stop", "ramp to zero"),
     ):
-        sub = actions.add_parser(name, help=text)
+        sub = actions.add_parser(
+            name,
+            help=text,
+            description=f"{text[0].upper()}{text[1:]}, through the rig "
+            "config's tunnel section and its safety limits (docs/tunnel.md).",
+        )
         if name == "set":
             sub.add_argument("speed_mps", type=float, help="target speed, m/s")
             sub.add_argument(
