@@ -186,8 +186,8 @@ def demo_report(run_dir: Path, rrd: Path | None, step_mps: float) -> tuple[dict[
         "run_json": str(run_dir / "run.json"),
     }
     found = [
-        f"  onset  {_detected(onset)} (simulated {ONSET_MPS} m/s)",
-        f"  decay  {_detected(decay)} (simulated {DECAY_MPS} m/s)",
+        f"  onset  {_detected(onset)} (points {step_mps:g} m/s apart; simulated {ONSET_MPS} m/s)",
+        f"  decay  {_detected(decay)} (points {step_mps:g} m/s apart; simulated {DECAY_MPS} m/s)",
         f"  sensor {sensor['text']}",
     ]
     lines = [
