@@ -123,6 +123,23 @@ def _refuse_an_earlier_run(run_dir: Path, config: Path) -> None:
     )
 
 
+def _found_line(run_dir: Path) -> str:
+    """The onset and decay the run found and its points done, from its ``run.json`` ("" without one)."""
+    import json
+
+    try:
+        run = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
+        onset, decay, counts = run["onset_mps"], run["decay_mps"], run["counts"]
+        done = f"{counts['done']} of {counts['planned']} points done"
+    except (OSError, ValueError, KeyError, TypeError):
+        return ""
+
+    def speed(value: float | None) -> str:
+        return "not observed" if value is None else f"{value:g} m/s"
+
+    return f"  found   onset {speed(onset)} going up, decay {speed(decay)} coming down; {done}"
+
+
 def _run_files(run_dir: Path) -> str:
     """Where the run's files are: those written, then those that are not (the lines above say why)."""
     files = [
@@ -132,7 +149,8 @@ def _run_files(run_dir: Path) -> str:
         ("about", "README.txt", " (what each file is; run.json for programs)"),
     ]
     written = {name: (run_dir / name).exists() for _, name, _ in files}
-    lines = [f"  {label} {run_dir / name}{note}" for label, name, note in files if written[name]]
+    lines = [line] if (line := _found_line(run_dir)) else []
+    lines += [f"  {label} {run_dir / name}{note}" for label, name, note in files if written[name]]
     missing = [name for name, there in written.items() if not there]
     if missing:
         lines.append(f"  not written: {', '.join(missing)} (the lines above say why)")

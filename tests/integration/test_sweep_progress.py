@@ -82,6 +82,9 @@ def test_quiet_sweep_prints_no_progress_only_the_result(tmp_path: Path) -> None:
     assert not point_lines(result.stderr) and "sweep: 3 points" not in result.stderr and "ETA" not in result.stderr
     assert "flagtrack sweep: finished; run folder" in result.stderr  # the result still says where the run is
     assert read_run(tmp_path / "runs" / "run").stop["reason"] == "finished"
+    run = json.loads((tmp_path / "runs" / "run" / "run.json").read_text())  # and what it found, as run.json says
+    onset, decay = (f"{v:g} m/s" if v is not None else "not observed" for v in (run["onset_mps"], run["decay_mps"]))
+    assert f"  found   onset {onset} going up, decay {decay} coming down; 3 of 3 points done\n" in result.stderr
     readme = (tmp_path / "runs" / "run" / "README.txt").read_text()  # run as python -m flagtrack.daemon
     assert f"Command    flagtrack sweep -c {tmp_path / 'rig.yaml'} --quiet\n" in readme, readme[:400]
 
