@@ -152,11 +152,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"flagtrack {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # a path a command did not check itself: still one line (the traceback at DEBUG)
+        warning_lines.close()
         log.debug("flagtrack %s failed", args.command, exc_info=exc)
         where = ": ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
         print(f"flagtrack {args.command}: error: {where + ': ' if where else ''}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        warning_lines.close()
         print(f"flagtrack {args.command}: interrupted", file=sys.stderr)
         return 130
     finally:

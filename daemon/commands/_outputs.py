@@ -16,14 +16,14 @@ def check_output(
     option: str,
     inputs: Iterable[Path | None] = (),
     *,
-    replaceable: Callable[[Path], bool] | None = None,
+    replaceable: Callable[[Path], bool | None] | None = None,
     holds: str = "",
     makes_folder: bool = False,
 ) -> None:
     """Refuse ``output`` (given as ``option``) in one line when it cannot be written or would destroy
     something: a folder, in a folder that does not exist (unless the command ``makes_folder``), one
     of ``inputs`` itself, or (where ``replaceable`` says so of the non-empty file there) a file that
-    is not ``holds``."""
+    is not ``holds``, or one it cannot tell (None: unreadable, damaged)."""
     if output.is_dir():
         raise ConfigError(f"{option} {output}: is a directory (give the file to write)")
     if not makes_folder and not output.parent.is_dir():
@@ -35,7 +35,14 @@ def check_output(
     for source in inputs:
         if source is not None and source.exists() and output.resolve() == source.resolve():
             raise ConfigError(f"{option} {output}: is the input {source} itself (it would be overwritten)")
-    if replaceable is not None and output.stat().st_size and not replaceable(output):
+    if replaceable is None or not output.stat().st_size:
+        return
+    kind = replaceable(output)
+    if kind is None:
+        raise ConfigError(
+            f"{option} {output}: cannot be read (damaged, in use or no permission): delete it or give a new file"
+        )
+    if not kind:
         raise ConfigError(f"{option} {output}: holds something else than {holds}: give a new file (it is left as is)")
 
 
@@ -62,15 +69,15 @@ def only_yaml_sections(*sections: str) -> Callable[[Path], bool]:
     return yaml_file_where(lambda data: data is None or (isinstance(data, dict) and set(data) <= set(sections)))
 
 
-def starts_with(*signatures: bytes) -> Callable[[Path], bool]:
-    """Whether a file begins with one of ``signatures`` (its format's magic bytes)."""
+def starts_with(*signatures: bytes) -> Callable[[Path], bool | None]:
+    """Whether a file begins with one of ``signatures`` (its format's magic bytes); None: unreadable."""
 
-    def check(path: Path) -> bool:
+    def check(path: Path) -> bool | None:
         try:
             with path.open("rb") as file:
                 head = file.read(max(map(len, signatures)))
         except OSError:
-            return False
+            return None
         return head.startswith(signatures)
 
     return check
@@ -96,7 +103,7 @@ def check_picture(output: Path, option: str, inputs: Iterable[Path | None] = (),
     check_output(output, option, replaceable=starts_with(signature), holds=holds, makes_folder=makes_folder)
 
 
-def centrelines_file(path: Path) -> bool:
+def centrelines_file(path: Path) -> bool | None:
     """Whether ``path`` holds flagtrack centrelines (an earlier output that may be replaced)."""
     from flagtrack.drivers.formats.centreline import is_centreline_file
 

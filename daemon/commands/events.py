@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -135,7 +136,7 @@ def run_convert(args: argparse.Namespace) -> int:
 
     if args.input.resolve() == args.output.resolve():
         raise FormatError("input and output are the same file", path=str(args.input))
-    if args.output.is_file() and args.output.stat().st_size:  # (a recording made before, most likely)
+    if os.path.lexists(args.output):  # (a recording made before, most likely; a link too: what it names)
         raise ConfigError(f"{args.output}: exists (it is left as is: give a new name, or delete it first)")
     out_kind = file_format(args.output, sniff=False)
     with open_events(args.input, strict=args.strict) as reader:
@@ -162,8 +163,8 @@ def run_convert(args: argparse.Namespace) -> int:
                     writer.write(chunk.events, chunk.triggers)
                     count += len(chunk.events)
                     bar.update(max(chunk.byte_offset - bar.n, 0))
-        except BaseException:  # (Ctrl-C too) a part of the output is no file to keep: it would block a new try
-            args.output.unlink(missing_ok=True)
+        except BaseException:  # (Ctrl-C too) the part written is no file to keep: it would block a new try
+            args.output.unlink(missing_ok=True)  # (a file this command made: nothing was there, above)
             raise
     print(f"{args.output}: {count} events", file=sys.stderr)
     return 0

@@ -103,11 +103,16 @@ def _refuse_an_earlier_run(run_dir: Path, config: Path) -> None:
     the rig starts, saying whether to resume it or to name another run."""
     from flagtrack.daemon.errors import ConfigError, FormatError
     from flagtrack.daemon.sweep.restart import nothing_to_resume
+    from flagtrack.daemon.sweep.runlock import held_by
     from flagtrack.daemon.sweep.runlog import RUN_LOG, read_run
 
     if not (run_dir / RUN_LOG).exists():
         return
     another = "set another supervisor.run_name (or --runs-dir)"
+    if (holder := held_by(run_dir)) is not None:
+        raise ConfigError(
+            f"run {run_dir} is in use by {holder}: {another}", key="supervisor.run_name", path=str(config)
+        )
     try:
         finished = nothing_to_resume(read_run(run_dir)) is not None
     except FormatError:

@@ -153,8 +153,6 @@ def check_rig(rig: RigConfig, services: Sequence[str], findings: Findings | None
     from flagtrack.daemon.rig.certificates import check_certificates
 
     findings = findings if findings is not None else Findings()
-    if services:  # (none: the file is read, not run)
-        check_endpoints(rig, findings)
     for spec in in_table_order(list(services)):
         if spec.check is not None:
             spec.check(rig, findings)
@@ -162,16 +160,18 @@ def check_rig(rig: RigConfig, services: Sequence[str], findings: Findings | None
     return findings
 
 
-PLACEHOLDER_HOST = re.compile(r"[A-Z][A-Z0-9]*(_[A-Z0-9]+)+")
+PLACEHOLDER_HOST = re.compile(r"[A-Z][A-Z0-9_]*_HOST")
 """A host written as a word for the lab to replace (``ROUTER_HOST`` in the two-host examples)."""
 
 
 def check_endpoints(rig: RigConfig, findings: Findings) -> None:
-    """Note a bus endpoint whose host is still a placeholder (Zenoh's own error names its source file)."""
+    """Note a bus endpoint whose host is still a placeholder (Zenoh's own error names its source file):
+    for the commands that open the rig's bus, and ``config check``."""
     bus = rig.bus_config
     for name in ("connect", "listen"):
         for i, endpoint in enumerate(getattr(bus, name)):
-            host = endpoint.partition("/")[2].rpartition(":")[0] or endpoint.partition("/")[2]
+            address = re.split(r"[#?]", endpoint.partition("/")[2], maxsplit=1)[0]  # (without #iface=... ?...)
+            host = address.rpartition(":")[0] or address
             if PLACEHOLDER_HOST.fullmatch(host):
                 text = f"{endpoint}: {host} is a placeholder; put the host's name or address there"
                 findings.note(text, key=f"bus.{name}[{i}]", path=rig.path)

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from flagtrack.daemon.errors import ConfigError
-from flagtrack.daemon.rig.config import RigConfig, check_rig, load_rig
+from flagtrack.daemon.rig.config import RigConfig, check_endpoints, check_rig, load_rig
 from flagtrack.daemon.rig.describe import DESCRIPTIONS, bus_line, disk_line, tunnel_line
 from flagtrack.daemon.rig.findings import Findings, Note
 from flagtrack.daemon.rig.host import check_port
@@ -72,7 +72,9 @@ def check_rig_file(
     rig = load_rig(path, services=())
     kind = "rig" if "services" in data else "part"
     names = _chosen_services(rig, data, services)
-    findings = check_rig(rig, names, Findings(strict=False, files=files))
+    findings = Findings(strict=False, files=files)
+    check_endpoints(rig, findings)
+    check_rig(rig, names, findings)
     if rig.tunnel is not None and "supervisor" not in names and rig.tunnel.driver != "simulated":
         check_port(rig.tunnel.port, key="tunnel.port", what="the tunnel's controller", findings=findings)
     pending = [note for note in findings.notes if note.pending]

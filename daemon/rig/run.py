@@ -12,7 +12,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from flagtrack.daemon.rig.build import build_services, open_hardware_camera
-from flagtrack.daemon.rig.config import RigConfig, check_rig
+from flagtrack.daemon.rig.config import RigConfig, check_endpoints, check_rig
+from flagtrack.daemon.rig.findings import Findings
 from flagtrack.daemon.rig.prepare import prepare_services
 from flagtrack.daemon.rig.table import in_table_order
 from flagtrack.daemon.services.centreline_file import CentrelineFileService
@@ -73,6 +74,7 @@ def run_rig(
 
     # bad config: one clear line, before anything opens (the tracker setup then serves every step)
     check_rig(rig, names)
+    check_endpoints(rig, Findings())
     if centrelines is not None:
         require_output_file(centrelines, key="--centrelines", path=None)
     setup = tracking_setup(rig.tracker, path=rig.path) if "tracker" in names else None

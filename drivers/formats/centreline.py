@@ -385,13 +385,17 @@ def write_centrelines(path: str | Path, batch: CentrelineBatch, attrs: Mapping[s
         writer.append(batch)
 
 
-def is_centreline_file(path: str | Path) -> bool:
-    """Whether ``path`` is a flagtrack centreline file (an earlier output that may be replaced)."""
+def is_centreline_file(path: str | Path) -> bool | None:
+    """Whether ``path`` is a flagtrack centreline file (an earlier output that may be replaced); None
+    when it cannot tell: an HDF5 file it cannot open (cut by a forced exit, in use), or no permission."""
     try:
+        with open(path, "rb") as file:
+            if file.read(8) != b"\x89HDF\r\n\x1a\n":
+                return False
         with h5py.File(path, "r") as f:
             return _decode_attr(f.attrs.get("format", "")) == FORMAT or all(name in f for name in ("t", "s", "joints"))
     except (OSError, ValueError):
-        return False
+        return None
 
 
 def read_centrelines(path: str | Path) -> tuple[CentrelineBatch, dict[str, Any]]:

@@ -3,6 +3,7 @@ rig without a sweep plan is one clear line (it was a ValueError traceback)."""
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import pytest
@@ -73,7 +74,8 @@ def test_resuming_a_finished_run_leaves_it_and_the_rig_alone(
 
 
 @pytest.mark.parametrize(("last_status", "words"), [("done", "exists and is finished: set another"),
-                                                    ("failed", "exists: resume it (flagtrack sweep --resume ")])  # fmt: skip
+                                                    ("failed", "exists: resume it (flagtrack sweep --resume "),
+                                                    ("held", "is in use by pid ")])  # fmt: skip
 def test_a_new_sweep_into_an_earlier_runs_folder_is_one_line_before_the_rig_starts(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], last_status: str, words: str
 ) -> None:
@@ -81,14 +83,20 @@ def test_a_new_sweep_into_an_earlier_runs_folder_is_one_line_before_the_rig_star
     hint to resume a run that was finished."""
     import yaml
 
-    run_dir = _finished_run(tmp_path / "runs" / "night", last_status)
+    from flagtrack.daemon.sweep.runlock import RunLock
+
+    run_dir = _finished_run(tmp_path / "runs" / "night", "failed" if last_status == "held" else last_status)
     before = (run_dir / "run.jsonl").read_bytes()
+
     rig = yaml.safe_load((Path(__file__).resolve().parents[2] / "deploy" / "rig-sensor-sim.yaml").read_text())
     rig["supervisor"].update(runs_dir=str(tmp_path / "runs"), run_name="night")
     rig["tunnel"] = {"driver": "ascii", "port": str(tmp_path / "no-such-port")}  # (a rig that starts fails loudly)
     path = tmp_path / "rig.yaml"
     path.write_text(yaml.safe_dump(rig))
-    assert main(["sweep", "-c", str(path), "-q"]) == 2
+    with contextlib.ExitStack() as held:
+        if last_status == "held":  # a sweep of it running: not "resume it"
+            held.enter_context(RunLock.acquire(run_dir, "flagtrack sweep --resume runs/night"))
+        assert main(["sweep", "-c", str(path), "-q"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "key 'supervisor.run_name'" in err[0] and f"run {run_dir} {words}" in err[0], err
     assert "set another supervisor.run_name (or --runs-dir)" in err[0]

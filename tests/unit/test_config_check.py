@@ -298,4 +298,9 @@ def test_a_placeholder_host_is_a_to_do_and_an_error_for_the_rig(
     assert main(["up", "-c", str(path), "-q"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "key 'bus.connect[1]': tcp/ROUTER_HOST:7447: ROUTER_HOST is a placeholder" in err[0], err
-    assert check_rig_file(rig_file(tmp_path, bus={"connect": ["tcp/router-1.lab:7447"]})).notes == ()
+    for host in ("router-1.lab", "LAB_PC1", "[::1]"):  # (a host in capitals is a host)
+        assert check_rig_file(rig_file(tmp_path, bus={"connect": [f"tcp/{host}:7447"]})).notes == ()
+    iface = check_rig_file(rig_file(tmp_path, bus={"connect": ["tcp/CAMERA_HOST:7447#iface=en:0"]}))
+    assert [n.key for n in iface.notes] == ["bus.connect[0]"]
+    # a command that opens no bus (aim -c: the camera alone) reads the file as it is
+    assert load_rig(rig_file(tmp_path, bus={"connect": ["tcp/ROUTER_HOST:7447"]}), services=("camera",))

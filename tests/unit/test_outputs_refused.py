@@ -25,6 +25,8 @@ def folder(tmp_path: Path) -> Path:
     (tmp_path / "rig.yaml").write_text(RIG)
     (tmp_path / "rig.yaml.csv").write_text("t,x,y,p\n")
     (tmp_path / "old.png").write_text("notes, not a picture")
+    (tmp_path / "empty.csv").write_text("")
+    (tmp_path / "cut.h5").write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(2000))
     return tmp_path
 
 
@@ -57,6 +59,10 @@ CASES = [
      "--snapshot old.png: holds something else than a .png picture"),
     (["events", "convert", "rec.raw", "other.raw"], "other.raw: exists (it is left as is"),
     (["events", "convert", "rec.raw", "rig.yaml.csv"], "rig.yaml.csv: exists"),
+    (["events", "convert", "rec.raw", "empty.csv"], "empty.csv: exists"),
+    # an HDF5 file cut by a forced exit: it cannot tell what it held (not "something else")
+    (["reconstruct", "rec.raw", "-o", "cut.h5", "--root", "150", "240", "--length", "300"],
+     "-o cut.h5: cannot be read (damaged, in use or no permission): delete it or give a new file"),
 ]  # fmt: skip
 
 
@@ -154,3 +160,11 @@ def test_a_centreline_file_that_cannot_be_created_says_why_in_its_own_words(tmp_
         str(info.value)
         == f"{tmp_path / 'gone' / '.c.h5.tmp'}: cannot create a file in {tmp_path / 'gone'}: No such file or directory"
     )
+
+
+def test_convert_refuses_a_link_to_no_file_and_leaves_nothing(folder: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A failed convert removed the link it wrote through, and left the part written where it pointed."""
+    (folder / "link.csv").symlink_to(folder / "elsewhere.csv")
+    assert main(["events", "convert", str(folder / "rec.raw"), str(folder / "link.csv")]) == 2
+    assert "link.csv: exists" in capsys.readouterr().err
+    assert (folder / "link.csv").is_symlink() and not (folder / "elsewhere.csv").exists()

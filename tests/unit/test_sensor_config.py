@@ -22,7 +22,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 @pytest.mark.parametrize("name", ["rig-sensor-sim.yaml", "rig-sensor-ascii.yaml", "rig-sensor-modbus.yaml"])
 def test_deploy_examples_load(name: str) -> None:
-    rig = load_rig(REPO / "deploy" / name, services=())  # (read: their ROUTER_HOST is the lab's to fill in)
+    rig = load_rig(REPO / "deploy" / name)
     assert rig.sensor is not None and "sensor" in rig.services
     assert rig.sensor.beam.x_over_l == 0.73 and rig.sensor.beam.direction == -1
 
@@ -105,7 +105,7 @@ def test_truth_is_what_the_events_were_drawn_from() -> None:
 
 
 def test_the_sensor_section_survives_the_run_logs_snapshot() -> None:
-    rig = load_rig(REPO / "deploy" / "rig-sensor-modbus.yaml", services=())
+    rig = load_rig(REPO / "deploy" / "rig-sensor-modbus.yaml")
     stored = {k: v for k, v in rig.snapshot().items() if k != "path"}
     again = from_mapping(RigConfig, stored)  # what `flagtrack sweep --resume` and `flagtrack validate` read
     assert again.sensor == rig.sensor and again.sensor.beam.zero_reading is None
