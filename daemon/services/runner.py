@@ -231,6 +231,12 @@ def _say(line: str) -> None:
         os.write(2, (CLEAR_LINE * os.isatty(2) + line + "\n").encode())
 
 
+SAME_SIGNAL_S = 0.25
+"""A signal that repeats the first within this long is the same request, not a second one: GNU
+``timeout`` (and ``kill`` of a process group) delivers it to the process twice, microseconds apart,
+which forced the exit and left the tunnel to its watchdog."""
+
+
 @contextlib.contextmanager
 def stop_on_signals(
     stop: StopEvent,
@@ -238,15 +244,22 @@ def stop_on_signals(
     on_signal: Callable[[int], None] | None = None,
 ) -> Iterator[StopEvent]:
     """While inside: the first SIGINT/SIGTERM asks ``stop`` (the work under way, a compile included,
-    is never interrupted in the middle), the second forces the process out (exit 130), after saying
+    is never interrupted in the middle), the second (not the first repeated within
+    :data:`SAME_SIGNAL_S`) forces the process out (exit 130), after saying
     the line ``on_force`` gives (what is left undone; "" for nothing); ``on_signal`` gets the count
     so far. The previous handlers are restored on the way out
     (uvicorn's ``capture_signals``)."""
     count = 0
+    first: tuple[int, float] = (0, 0.0)  # (the first signal, when it came, monotonic s)
 
     def handler(signum: int, _frame: object) -> None:
-        nonlocal count
+        nonlocal count, first
+        now = time.monotonic()
+        if count == 1 and signum == first[0] and now - first[1] < SAME_SIGNAL_S:
+            return  # the same signal twice at once (`timeout` signals the process, then its group): one
         count += 1
+        if count == 1:
+            first = (signum, now)
         if on_signal is not None:
             on_signal(count)
         name = signal.Signals(signum).name

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from flagtrack.daemon.schema import CentrelineMessage
+from flagtrack.daemon.services.runner import SAME_SIGNAL_S
 from flagtrack.daemon.transport import Bus, BusConfig
 from tests.fakes.helpers import wait_until
 from tests.integration.test_transport import free_port
@@ -152,10 +153,48 @@ def test_second_signal_forces_exit() -> None:
     started = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     assert proc.stdout.readline().strip() == "asked to stop"  # handled: a second signal is not merged into it
+    time.sleep(SAME_SIGNAL_S)  # (a person's second press: the same signal at once is the first one again)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130 and "stopping (again to force)" in err and "forcing exit" in err
     assert time.monotonic() - started < 10
+
+
+SLOW_TO_STOP = """
+import time
+from flagtrack.daemon.services.runner import run_services
+
+class RampsDown:
+    name = "ramps-down"
+    def start(self):
+        pass
+    def run(self, stop):
+        print("ready", flush=True)
+        stop.wait()
+        time.sleep(0.5)  # as a tunnel ramping to zero
+
+run_services([RampsDown()], shutdown_timeout_s=30)
+"""
+
+
+def test_the_same_signal_twice_at_once_is_one_request_not_a_forced_exit() -> None:
+    """GNU `timeout -s INT` signals the process and then its group: two SIGINTs, counted as two presses
+    when the first was handled in between (in 2 sweeps of 3 on a loaded host the exit was forced and
+    the tunnel left at 4.5 m/s). Here the second comes once the first was handled, within SAME_SIGNAL_S."""
+    for _ in range(5):  # (a host that stalls this test past SAME_SIGNAL_S between the two: try again)
+        proc = subprocess.Popen([sys.executable, "-c", SLOW_TO_STOP], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)  # fmt: skip
+        assert proc.stdout.readline().strip() == "ready"
+        sent_s = time.monotonic()
+        os.kill(proc.pid, signal.SIGINT)
+        handled = proc.stderr.readline()  # written by the handler: the first was taken
+        os.kill(proc.pid, signal.SIGINT)  # (timeout's second kill, to the group)
+        apart_s = time.monotonic() - sent_s
+        _, err = proc.communicate(timeout=30)
+        if apart_s < SAME_SIGNAL_S:
+            break
+    assert "SIGINT received, stopping (again to force)" in handled
+    assert apart_s < SAME_SIGNAL_S and "forcing exit" not in err and proc.returncode == 0, (apart_s, err)
 
 
 @pytest.mark.slow
