@@ -15,7 +15,7 @@ import socket
 import sys
 import time
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
@@ -136,7 +136,8 @@ def reconstruct_task(
         stamped = dataclasses.replace(setup, attrs={**setup.attrs, **stamp_attrs(stat, digest, params)})
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("default")
-            reconstruct_file(Path(input_file), Path(output), stamped, atomic=True, strict=strict)
+            check = _sensor_check(setup, input_file)
+            reconstruct_file(Path(input_file), Path(output), stamped, atomic=True, strict=strict, check_sensor=check)
         if InputStat.of(input_file) != stat:
             Path(output).unlink(missing_ok=True)
             raise FlagtrackError(f"{resolved}: changed while it was being read (nothing written): run the batch again")
@@ -150,6 +151,23 @@ def reconstruct_task(
         reason = f"{input_file}: {type(exc).__name__}: {exc}"
         row = failed_row(input_file, reason, seconds=time.perf_counter() - started, worker=worker)
     return TaskResult(row, tuple(f"{input_file}: {w.message}" for w in caught))
+
+
+def _sensor_check(setup: TrackingSetup, input_file: str) -> Callable[[int, int], None]:
+    """Refuse a calibration made on another sensor than the recording's and a root off it, as
+    ``flagtrack reconstruct`` does (a root off the sensor gave nonsense centrelines, ``done``)."""
+    from flagtrack.daemon.errors import ConfigError
+    from flagtrack.daemon.tracking.setup import calibration_misfit, root_on_sensor
+
+    def check(width: int, height: int) -> None:
+        misfit = calibration_misfit(setup.mapping, width, height, input_file)
+        if misfit is not None:
+            raise ConfigError(f"the calibration {setup.config.calibration}: {misfit}")
+        if not root_on_sensor(setup, width, height):
+            x, y = setup.params.chain.root
+            raise ConfigError(f"{input_file}: the root ({x:g}, {y:g}) is off its {width} x {height} sensor")
+
+    return check
 
 
 def _row(input_file: str, output: str, status: Status, started: float, worker: str) -> Row:

@@ -368,3 +368,18 @@ def test_batch_validate_rewrites_each_run_as_validate_reconstruct_does(sweep_run
     code, stdout, stderr = batch("validate", str(runs / "run-b"), "-o", str(tmp_path / "study-b"), "--tau", "0.0008")
     assert code == 0 and "warning: " in stderr and "point 000-up-5.50 damaged: " in stderr, stderr
     assert not (runs / "run-b" / "validation" / RUN_STAMP).exists()
+
+
+def test_a_root_off_the_sensor_fails_each_row_as_reconstruct_refuses_it(campaign: Path, tmp_path: Path) -> None:
+    """`batch reconstruct --root 9999 9999` wrote centrelines at x ~ 10 000 px, `done`, exit 0, where
+    `reconstruct` refuses the root in one line."""
+    folder = tmp_path / "campaign"
+    folder.mkdir()
+    shutil.copy2(campaign / "rec0.raw", folder / "rec0.raw")
+    out = tmp_path / "out"
+    off = ["--root", "9999", "9999", *TRACK[3:]]
+    code, _, stderr = batch("reconstruct", str(folder), "-o", str(out), *off, "--jobs", "1")
+    assert code == 1, stderr
+    (row,) = read_rows(out)
+    assert row["status"] == "failed" and row["error"].endswith("the root (9999, 9999) is off its 640 x 480 sensor")
+    assert not (out / "rec0_centrelines.h5").exists()
