@@ -139,6 +139,8 @@ def test_a_law_is_bounded_held_on_faults_and_stopped_safe(tmp_path: Path, caplog
         (False, True),
     ]
     assert all(r["applied_mps"] == MAX_MPS and r["asked_mps"] is None for r in faults)  # the speed held
+    line = next(n for n, text in enumerate(law.read_text().splitlines(), 1) if "raise ZeroDivisionError" in text)
+    assert [r.get("where") for r in faults] == [None, f"law.py:{line}", f"law.py:{line}"]  # the line to look at
     assert all(r["state"]["source"] == "cam0" and r["setpoint"] == 0.2 for r in laws)
     said = [r for r in caplog.records if r.levelno >= logging.ERROR and f"{law}:law" in r.getMessage()]
     assert len(said) == 1 and "held" in said[0].getMessage()  # said once, in one line

@@ -5,6 +5,7 @@ SystemExit included, is a fault named by its type."""
 from __future__ import annotations
 
 import threading
+from pathlib import Path
 
 import pytest
 
@@ -75,4 +76,22 @@ def test_what_the_law_returns_is_checked_in_its_thread_too() -> None:
 
     calling = LawCall(lambda state: Hangs(), timeout_s=0.05, check=check)
     assert calling.call(None).fault == "did not return within 0.05 s"  # the caller is not held
+    calling.close()
+
+
+def test_a_fault_says_the_line_of_the_laws_own_file_it_raised_through(tmp_path: Path) -> None:
+    """`raised KeyError: 'cam0'` named no line, even with -vv: the law's deepest line in its own file
+    does (not the library's below it)."""
+    import importlib.util
+
+    (tmp_path / "deep.py").write_text("import json\n\n\ndef law(state):\n    return json.loads(state)\n")
+    spec = importlib.util.spec_from_file_location("deep", tmp_path / "deep.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    calling = LawCall(module.law, timeout_s=5.0)
+    answer = calling.call("{not json")
+    assert answer.fault.startswith("raised JSONDecodeError") and answer.where == "deep.py:5"
+    good = calling.call("1.5")
+    assert (good.value, good.fault, good.where) == (1.5, "", "")  # no fault, no line
     calling.close()

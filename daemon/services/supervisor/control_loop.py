@@ -175,7 +175,7 @@ class ControlLoop:
             self._say_if_slow(answer.took_s)
         record: dict[str, Any] = {"asked_mps": asked, "applied_mps": self.target_mps, "setpoint": self.law.setpoint()}
         if fault:
-            self._fault(session, state, fault, record)
+            self._fault(session, state, fault, record, answer.where)
             return
         self.faults_in_a_row = 0
         if asked is not None:
@@ -234,15 +234,18 @@ class ControlLoop:
             )
             self.slow_said = True
 
-    def _fault(self, session: Session, state: FlagState, fault: str, record: dict[str, Any]) -> None:
+    def _fault(self, session: Session, state: FlagState, fault: str, record: dict[str, Any], where: str = "") -> None:
         """Hold the speed; say the first fault in one line; stop safe after ``max_faults`` in a row."""
         assert self.law is not None
         self.faults_in_a_row += 1
+        if where:
+            record = {**record, "where": where}
         if not self.fault_said:
             log.error(
-                "supervisor: the law %s %s; the speed is held at %g m/s (%d faults in a row stop the run)",
+                "supervisor: the law %s %s%s; the speed is held at %g m/s (%d faults in a row stop the run)",
                 self.law.name,
                 fault,
+                f" (at {where})" if where else "",
                 self.target_mps,
                 self.cfg.max_faults,
             )

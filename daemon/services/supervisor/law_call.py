@@ -12,19 +12,22 @@ from __future__ import annotations
 import queue
 import threading
 import time
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 
 @dataclass(frozen=True)
 class Answer:
-    """What one call of the law gave: its value, or why it is a fault; and how long it took from the
-    call, s (the wait for the law's thread included)."""
+    """What one call of the law gave: its value, or why it is a fault; how long it took from the call,
+    s (the wait for the law's thread included); where in the law's file it raised (``law.py:12``)."""
 
     value: object
     fault: str
     took_s: float
+    where: str = ""
 
 
 class LawCall:
@@ -90,8 +93,20 @@ class LawCall:
     def _serve(self) -> None:
         while (call := self._calls.get()) is not None:
             state, called_at_s = call
+            where = ""
             try:
                 value, fault = self._check(self._function(state))
             except BaseException as exc:  # noqa: BLE001 - a user's law: whatever it raises is a fault
                 value, fault = None, f"raised {type(exc).__name__}" + (f": {exc}" if str(exc) else "")
-            self._answers.put(Answer(value, fault, time.monotonic() - called_at_s))
+                where = raised_where(exc, self._function)
+            self._answers.put(Answer(value, fault, time.monotonic() - called_at_s, where))
+
+
+def raised_where(exc: BaseException, function: Callable[..., object]) -> str:
+    """``file.py:LINE`` of the deepest line of ``function``'s own file that ``exc`` passed through (the
+    line of the law to look at; a library it called raised below it), "" when none did."""
+    code = getattr(function, "__code__", None) or getattr(type(function).__call__, "__code__", None)
+    if code is None:
+        return ""
+    frames = [frame for frame in traceback.extract_tb(exc.__traceback__) if frame.filename == code.co_filename]
+    return f"{Path(frames[-1].filename).name}:{frames[-1].lineno}" if frames else ""
