@@ -233,7 +233,13 @@ def test_a_missing_law_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.Cap
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["flagtrack control: error: --controller: no such file: nowhere.py"]
     assert main(["control", "-c", str(rig), "--controller", "law.txt"]) == 2
-    assert "give the law as FILE.py:FUNCTION" in capsys.readouterr().err
+    assert "give the law as FILE.py:FUNCTION, or pi (or none: speed requests only)" in capsys.readouterr().err
+    # a syntax error or a name the file lacks: before the rig starts (it was found once all was up)
+    (tmp_path / "typo.py").write_text("def law(state):\n    return 5.0 +\n")
+    assert main(["control", "-c", str(rig), "--controller", f"{tmp_path / 'typo.py'}:law"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--controller" in err[0] and "typo.py, line 2: invalid syntax" in err[0], err
+    assert main(["control", "-c", str(rig), "--controller", f"{tmp_path / 'typo.py'}:lawww"]) == 2
     assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())
 
 

@@ -63,9 +63,15 @@ def test_a_users_law_is_loaded_with_its_setpoint(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "spec", "words"),
     [
-        ("def law(state):\n    return 1.0\n", "{path}:other", "has no function 'other'"),
-        ("raise RuntimeError('no gain')\n", "{path}:law", "failed when loaded: RuntimeError: no gain"),
-        ("law = 3\n", "{path}:law", "has no function 'law'"),
+        ("def law(state):\n    return 1.0\n", "{path}:other", r"has no function 'other' \(it defines: law\)"),
+        (
+            "raise RuntimeError('no gain')\ndef law(state):\n    return 1.0\n",
+            "{path}:law",
+            "failed when loaded: RuntimeError: no gain",
+        ),
+        ("law = 3\n", "{path}:law", r"'law' is not a function \(type int\)"),
+        ("def law(state:\n    return 1.0\n", "{path}:law", r"law.py, line 1: '\(' was never closed"),
+        ("from math import *\n", "{path}:law", "has no function 'law'"),  # (found once it is run)
         ("", "{path}", "give the law as FILE.py:FUNCTION"),
         ("", "{missing}:law", "no such file"),
     ],

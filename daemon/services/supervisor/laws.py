@@ -9,6 +9,7 @@ or a name of its module; the run's record and figure show it).
 
 from __future__ import annotations
 
+import ast
 import importlib.util
 import math
 import numbers
@@ -44,20 +45,49 @@ class Law:
 
 
 def law_file(spec: str, key: str, path: str | None = None) -> tuple[Path, str]:
-    """The file and function of ``FILE.py:FUNCTION``, checked without running anything.
+    """The file and function of ``FILE.py:FUNCTION``, checked without running anything: the file
+    is there, is Python, and defines the name (found before the rig starts, not once it is up).
 
     Raises:
-        ConfigError: not of that form, or no such file (naming ``key``).
+        ConfigError: not of that form, no such file, a syntax error, no such name (naming ``key``).
     """
     file, sep, function = spec.rpartition(":")
     if not sep or not file.endswith(".py") or not function.isidentifier():
         raise ConfigError(
-            f"{spec!r}: give the law as FILE.py:FUNCTION, or one of {', '.join(BUILT_IN)}", key=key, path=path
+            f"{spec!r}: give the law as FILE.py:FUNCTION, or {', '.join(BUILT_IN)} (or none: speed requests only)",
+            key=key,
+            path=path,
         )
     law_path = Path(file).expanduser()
     if not law_path.is_file():
         raise ConfigError(f"no such file: {law_path}", key=key, path=path)
+    try:
+        tree = ast.parse(law_path.read_bytes(), filename=str(law_path))
+    except SyntaxError as exc:
+        raise ConfigError(f"{law_path}, line {exc.lineno}: {exc.msg}", key=key, path=path) from None
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{law_path}: cannot be read as Python: {exc}", key=key, path=path) from None
+    names = _top_level_names(tree)
+    if names is not None and function not in names:
+        defined = ", ".join(sorted(n for n in names if not n.startswith("_"))) or "nothing"
+        raise ConfigError(f"{law_path} has no function {function!r} (it defines: {defined})", key=key, path=path)
     return law_path, function
+
+
+def _top_level_names(tree: ast.Module) -> set[str] | None:
+    """The names a module's top level binds; None when it cannot tell (``from x import *``)."""
+    names: set[str] = set()
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            names.add(node.name)
+        elif isinstance(node, ast.Import | ast.ImportFrom):
+            for alias in node.names:
+                if alias.name == "*":
+                    return None
+                names.add(alias.asname or alias.name.split(".")[0])
+        else:
+            names.update(n.id for n in ast.walk(node) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Store))
+    return names
 
 
 def load_law(spec: str, feedback: FeedbackConfig, key: str = "supervisor.control.controller") -> Law:
@@ -79,8 +109,10 @@ def load_law(spec: str, feedback: FeedbackConfig, key: str = "supervisor.control
     except Exception as exc:  # noqa: BLE001 - a user's file: whatever it raises is one line
         raise ConfigError(f"{law_path} failed when loaded: {type(exc).__name__}: {exc}", key=key) from None
     function = getattr(module, name, None)
-    if not callable(function):
+    if function is None:
         raise ConfigError(f"{law_path} has no function {name!r}", key=key)
+    if not callable(function):
+        raise ConfigError(f"{law_path}: {name!r} is not a function (type {type(function).__name__})", key=key)
     return Law(spec, function, module)
 
 
