@@ -69,6 +69,7 @@ class Rig:
 
     def __init__(self, bus: BusConfig, identity: str | None = None, keep: int = 1000) -> None:
         self.bus = Bus(bus)
+        self.secured = bus.secured
         self.identity = identity or identity_of(bus)
         self.keep = keep
         self._subscriptions: dict[str, Subscription] = {}
@@ -147,10 +148,12 @@ class Rig:
                     return reply
             if time.monotonic() >= deadline:
                 break
-        raise NoAnswer(
-            f"no answer to the request for {speed_mps:g} m/s within {timeout_s:g} s (is the supervisor in mode "
-            f"control, and is {self.identity!r} one of the rig's operators?)"
+        hint = (  # (a plain bus lets anyone ask: the identity is not why)
+            f"is the supervisor in mode control, and is {self.identity!r} one of the rig's operators?"
+            if self.secured
+            else "is the rig running, with its supervisor in mode control, on this bus and namespace?"
         )
+        raise NoAnswer(f"no answer to the request for {speed_mps:g} m/s within {timeout_s:g} s ({hint})")
 
     # -- the connection ----------------------------------------------------------------------------
 

@@ -140,6 +140,10 @@ def test_a_client_needs_somewhere_to_connect_and_a_secured_one_an_identity(tmp_p
     assert bus.connect == ("tls/127.0.0.1:7447",) and bus.listen == () and bus.security.identity == "operator"
     with pytest.raises(ConfigError, match="tls/ endpoint needs"):
         Rig.at("tls/127.0.0.1:7447", "flagtrack/sec")
+    # no rig there: a plain bus lets anyone ask, so the hint is the rig, not the identity
+    with Rig.at(f"tcp/127.0.0.1:{free_port()}", "flagtrack/nobody") as nobody, pytest.raises(NoAnswer) as silence:
+        nobody.request_speed(4.0, timeout_s=0.3)
+    assert "is the rig running" in str(silence.value) and "operators" not in str(silence.value)
 
 
 # -- a secured bus --------------------------------------------------------------------------------
