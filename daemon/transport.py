@@ -10,6 +10,7 @@ from __future__ import annotations
 import collections
 import json
 import logging
+import re
 import threading
 import time
 from dataclasses import dataclass, field
@@ -126,6 +127,15 @@ def _without_secrets(text: str, cfg: BusConfig) -> str:
     """``text`` (an error of Zenoh's, which may quote its config) with the password redacted."""
     for secret in cfg.security.secrets() if cfg.security is not None else ():
         text = text.replace(secret, REDACTED)
+    return text
+
+
+def _open_error(text: str, cfg: BusConfig) -> str:
+    """Zenoh's error on opening a session, for a person: no secret, none of the Rust source locations
+    it appends (``at /root/.cargo/.../tcp.rs:61.``), and what a port in use most likely means."""
+    text = re.sub(r"\s+at\s+\S+\.rs:\d+\.?", "", _without_secrets(text, cfg))
+    if "Address already in use" in text:
+        text += "; another router or rig listens there?"
     return text
 
 
@@ -314,7 +324,7 @@ class Bus:
         try:
             self.session = zenoh.open(zenoh_config(cfg))
         except zenoh.ZError as exc:
-            raise ConfigError(f"cannot open Zenoh session ({_without_secrets(str(exc), cfg)})", key="bus") from None
+            raise ConfigError(f"cannot open Zenoh session ({_open_error(str(exc), cfg)})", key="bus") from None
         self._declared: list[Any] = []
         self._alive: dict[str, list[Any]] = {}
         self._lock = threading.Lock()

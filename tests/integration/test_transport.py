@@ -157,3 +157,18 @@ def test_channels_bounded_by_bytes_drop_and_count() -> None:
     ring.push("k", bytes(6))
     ring.push("k", bytes(6))
     assert ring.bytes == 6 and ring.get(timeout_s=0) is not None and ring.bytes == 0
+
+
+def test_a_port_in_use_is_said_without_zenohs_source_locations() -> None:
+    """Zenoh's text ended '... (os error 98) at /root/.cargo/git/checkouts/zenoh-.../tcp.rs:61.]'."""
+    from flagtrack.daemon.errors import ConfigError
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with pytest.raises(ConfigError) as refused:
+            Bus(BusConfig(namespace="flagtrack/busy", listen=(f"tcp/127.0.0.1:{port}",)))
+    text = str(refused.value)
+    assert "Address already in use" in text and "another router or rig listens there?" in text, text
+    assert ".rs:" not in text and ".cargo" not in text, text
