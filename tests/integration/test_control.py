@@ -132,6 +132,8 @@ def test_a_law_is_bounded_held_on_faults_and_stopped_safe(tmp_path: Path, caplog
     assert len(asked_99) == 5
     assert all(r["applied_mps"] == MAX_MPS and "tunnel.safety.max_speed_mps" in r["reason"] for r in asked_99)
     assert all(0 < r["setpoint_mps"] <= MAX_MPS for r in asked_99)  # the ramp's set-point, within the bounds
+    bounded = [r.getMessage() for r in caplog.records if "tunnel.safety.max_speed_mps" in r.getMessage()]
+    assert len(bounded) == 1 and f"{MAX_MPS:g} m/s applied (said once)" in bounded[0], bounded  # not 5 lines
     faults = [r for r in laws if r.get("reason", "").startswith("fault")]
     assert [("str" in r["reason"], "ZeroDivisionError" in r["reason"]) for r in faults] == [
         (True, False),

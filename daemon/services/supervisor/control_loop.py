@@ -77,6 +77,7 @@ class ControlLoop:
         self.faults_in_a_row = 0
         self.fault_said = False
         self.slow_said = False
+        self.bound_said = False
         self.safe_reason = ""  # why the run holds the safe speed with no law ("" while the law runs)
         self.calling: LawCall | None = None
         self._out_faults = 0  # the faults charged to the call still out
@@ -180,6 +181,9 @@ class ControlLoop:
         self.faults_in_a_row = 0
         if asked is not None:
             applied, reason = bound_speed(asked, self.bounds.min_speed_mps, self.bounds.max_speed_mps)
+            if reason and not self.bound_said:  # (once: 1e9 m/s each step is most likely a unit's mistake)
+                log.warning("supervisor: the law %s %s: %g m/s applied (said once)", self.law.name, reason, applied)
+                self.bound_said = True
             before_ns = self.clock_ns()
             written = self._command(session, applied)
             sent_ns = _sent_ns(session.tunnel, before_ns) or self.clock_ns()
