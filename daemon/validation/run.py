@@ -190,8 +190,15 @@ def point_validation(
     lines, attrs = read_centrelines(lines_path)
     record = read_sensor_record(run_dir / point.sensor_file)  # type: ignore[operator]
     triggers = empty_triggers()
-    if sensor.sync.mode in ("auto", "trigger") and raw is not None and raw.exists() and len(record.trigger_t_us):
-        triggers = raw_triggers(raw)
+    if sensor.sync.mode in ("auto", "trigger") and len(record.trigger_t_us):
+        if raw is not None and raw.exists():
+            triggers = raw_triggers(raw)
+        else:  # (the sensor is then aligned coarsely: say why, not only "coarse")
+            log.warning(
+                "point %s: its recording %s is missing: the sensor is aligned without the camera's trigger events",
+                point.point_id,
+                raw if raw is not None else "(none recorded)",
+            )
     return validate_point(
         lines if len(lines) else None,
         record,
@@ -214,6 +221,7 @@ def _centrelines_path(
 ) -> Path | None:
     if reconstruct is not None:
         if raw is None or not raw.exists():
+            log.warning("point %s: its recording %s is missing: not reconstructed", point.point_id, raw)
             return None
         target = out / "centrelines" / f"{point.point_id}_centrelines.h5"
         target.parent.mkdir(parents=True, exist_ok=True)

@@ -148,3 +148,19 @@ def test_a_damaged_point_is_said_and_the_others_are_validated(
     assert f"{flapping.point_id} (the lines above" in captured.err.splitlines()[-1], captured.err
     assert "Traceback" not in captured.err
     assert len(rows) == 3 and (copy / "validation" / "validation.csv").exists()
+
+
+@pytest.mark.slow
+def test_a_point_whose_recording_is_gone_is_validated_coarsely_and_says_why(
+    sweep: tuple[Path, object], tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Its row said `ok, unsynchronised (coarse)` and nothing named the missing file."""
+    run_dir, _ = sweep
+    copy = tmp_path / "run"
+    shutil.copytree(run_dir, copy)
+    flapping = list(read_run(copy).latest_points().values())[1]
+    (copy / flapping.raw_file).unlink()
+    again = validate_run(copy)
+    assert again.points[1].sensor_sync != "trigger"
+    said = [r.getMessage() for r in caplog.records if f"{copy / flapping.raw_file} is missing" in r.getMessage()]
+    assert len(said) == 1 and "without the camera's trigger events" in said[0], said
