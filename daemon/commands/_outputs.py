@@ -94,13 +94,13 @@ def check_picture(output: Path, option: str, inputs: Iterable[Path | None] = (),
     """As :func:`check_output`, and refuse a picture ``output`` whose suffix names no format of
     :data:`PICTURES` (matplotlib would fail after the work, or write ``OUT.png`` for ``OUT``); an
     earlier picture of its kind may be replaced."""
-    check_output(output, option, inputs, makes_folder=makes_folder)
     signature = PICTURES.get(output.suffix.lower())
+    replaceable = starts_with(signature) if signature is not None else None
+    holds = f"a {output.suffix} picture"
+    check_output(output, option, inputs, replaceable=replaceable, holds=holds, makes_folder=makes_folder)
     if signature is None:
         kinds = ", ".join(PICTURES)
         raise ConfigError(f"{option} {output}: give a picture file ({kinds}), not {output.suffix or 'no suffix'}")
-    holds = f"a {output.suffix} picture"
-    check_output(output, option, replaceable=starts_with(signature), holds=holds, makes_folder=makes_folder)
 
 
 def centrelines_file(path: Path) -> bool | None:

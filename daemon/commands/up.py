@@ -74,6 +74,8 @@ def run(args: argparse.Namespace) -> int:
             )
     except ConfigError as exc:  # a value the command line gave is named as such, not as the file's key
         option = option_that_set(exc, args)
+        if exc.key == "camera.replay.path" and args.replay is not None:  # (a file that is no recording)
+            option = "--replay"
         if option is not None:
             raise ConfigError(exc.message, key=option) from None
         raise
@@ -114,10 +116,9 @@ def rig_from_args(args: argparse.Namespace) -> tuple[RigConfig, list[str]]:
     import dataclasses
 
     from flagtrack.daemon.commands._tracking_args import apply_tracking_arguments
-    from flagtrack.daemon.errors import ConfigError, FormatError
+    from flagtrack.daemon.errors import ConfigError
     from flagtrack.daemon.rig.config import CameraConfig, RigConfig, load_rig
     from flagtrack.drivers.camera.replay import ReplayConfig
-    from flagtrack.drivers.formats import open_events
 
     if args.config is None and args.replay is None:
         raise ConfigError("give a rig config (-c rig.yaml) or a recording to replay (--replay FILE)")
@@ -128,11 +129,6 @@ def rig_from_args(args: argparse.Namespace) -> tuple[RigConfig, list[str]]:
         if not args.replay.is_file():
             what = "is a directory, not a recording" if args.replay.is_dir() else "no such recording"
             raise ConfigError(f"{args.replay}: {what}", key="--replay")
-        try:  # its header, before any service starts (the camera service failed on it, exit 1)
-            with open_events(args.replay):
-                pass
-        except FormatError as exc:
-            raise ConfigError(str(exc), key="--replay") from None
         camera = CameraConfig(
             id=rig.camera.id,
             adapter="replay",
