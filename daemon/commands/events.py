@@ -72,18 +72,13 @@ def _progress(total: int, description: str, disabled: bool):  # noqa: ANN202
 
 def _refuse_beyond_any_sensor(chunk: EventChunk, path: Path) -> None:
     """A pixel no sensor has (a random file read as a headerless DAT): the error ``reconstruct`` gives."""
-    from flagtrack.daemon.core.events import MAX_SENSOR_PX
+    from flagtrack.daemon.core.events import MAX_SENSOR_PX, beyond_any_sensor
     from flagtrack.daemon.errors import FormatError
 
     if len(chunk.events):
         x, y = int(chunk.events["x"].max()), int(chunk.events["y"].max())
         if max(x, y) >= MAX_SENSOR_PX:
-            raise FormatError(
-                f"an event at pixel ({x}, {y}): beyond any event sensor ({MAX_SENSOR_PX} pixels a side at most): "
-                "not an event recording, or a corrupt one",
-                path=str(path),
-                offset=chunk.byte_offset,
-            )
+            raise FormatError(beyond_any_sensor(x, y), path=str(path), offset=chunk.byte_offset)
 
 
 def file_summary(path: Path, *, strict: bool = False, progress: bool = False) -> dict:

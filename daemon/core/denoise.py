@@ -26,7 +26,7 @@ import math
 import numpy as np
 
 from flagtrack.daemon.core.denoise_params import DenoiseParams
-from flagtrack.daemon.core.events import MAX_SENSOR_PX
+from flagtrack.daemon.core.events import MAX_SENSOR_PX, beyond_any_sensor
 from flagtrack.daemon.core.jit import njit
 
 __all__ = ["BackgroundActivityFilter", "DenoiseParams"]
@@ -342,10 +342,7 @@ class BackgroundActivityFilter:
         """Grow the time map so that pixel (max_x, max_y) fits (kept times are preserved)."""
         width, height = max(self._width, max_x + 1), max(self._height, max_y + 1)
         if max(width, height) > MAX_SENSOR_PX:  # (a random file as a headerless DAT: a 1 GB map, then 5)
-            raise BeyondAnySensorError(
-                f"an event at pixel ({max_x}, {max_y}): beyond any event sensor ({MAX_SENSOR_PX} pixels a side at "
-                "most): not an event recording, or a corrupt one"
-            )
+            raise BeyondAnySensorError(beyond_any_sensor(max_x, max_y))
         if (width, height) != (self._width, self._height):
             grown = np.full((height + 2, width + 2), _NEVER, dtype=np.int32)
             grown[: self._height + 2, : self._width + 2] = self._last.reshape(self._height + 2, self._width + 2)

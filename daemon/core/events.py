@@ -15,6 +15,15 @@ EVENT_DTYPE = np.dtype([("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")])
 MAX_SENSOR_PX = 8192
 """No event sensor is wider or taller (the largest are 1280 x 960): a size or pixel beyond is not an event recording's."""
 
+
+def beyond_any_sensor(x: int, y: int) -> str:
+    """What an event at pixel (``x``, ``y``), beyond :data:`MAX_SENSOR_PX`, says of its file."""
+    return (
+        f"an event at pixel ({x}, {y}): beyond any event sensor ({MAX_SENSOR_PX} pixels a side at most): "
+        "not an event recording, or a corrupt one"
+    )
+
+
 TRIGGER_DTYPE = np.dtype([("t", "<i8"), ("channel", "u1"), ("edge", "u1")])
 """External trigger events: t µs, input channel, edge 1 = rising, 0 = falling."""
 
