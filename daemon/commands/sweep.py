@@ -132,17 +132,15 @@ def _found_line(run_dir: Path) -> str:
     """The onset and decay the run found and its points done, from its ``run.json`` ("" without one)."""
     import json
 
+    from flagtrack.daemon.sweep.runfiles import speed_text
+
     try:
         run = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
         onset, decay, counts = run["onset_mps"], run["decay_mps"], run["counts"]
         done = f"{counts['done']} of {counts['planned']} points done"
     except (OSError, ValueError, KeyError, TypeError):
         return ""
-
-    def speed(value: float | None) -> str:
-        return "not observed" if value is None else f"{value:g} m/s"
-
-    return f"  found   onset {speed(onset)} going up, decay {speed(decay)} coming down; {done}"
+    return f"  found   onset {speed_text(onset)} going up, decay {speed_text(decay)} coming down; {done}"
 
 
 def _run_files(run_dir: Path) -> str:

@@ -174,8 +174,8 @@ def readme_text(run: dict[str, Any]) -> str:
         f"Status     {status}; {counts['done']} of {counts['planned']} points done"
         + (f", {counts['failed']} failed" if counts["failed"] else "")
         + (f", {counts['lossy']} lossy" if counts.get("lossy") else ""),
-        f"Onset      {_speed(run['onset_mps'])} going up (first flapping point after a still one)",
-        f"Decay      {_speed(run['decay_mps'])} coming down (first still point after a flapping one)",
+        f"Onset      {speed_text(run['onset_mps'])} going up (first flapping point after a still one)",
+        f"Decay      {speed_text(run['decay_mps'])} coming down (first still point after a flapping one)",
         f"Plan       {_plan_text(run['plan']['sweep'])}",
         f"Written by flagtrack {run['written_by']} from run.jsonl (rewritten with the summary)",
         "",
@@ -242,7 +242,8 @@ def _point_row(point: dict[str, Any]) -> str:
     return head + " ".join(numbers)
 
 
-def _speed(value: float | None) -> str:
+def speed_text(value: float | None) -> str:
+    """An onset or decay speed as README.txt and ``flagtrack sweep`` say it (``not observed``: None)."""
     return "not observed" if value is None else f"{value:g} m/s"
 
 

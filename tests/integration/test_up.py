@@ -160,21 +160,8 @@ def test_second_signal_forces_exit() -> None:
     assert time.monotonic() - started < 10
 
 
-SLOW_TO_STOP = """
-import time
-from flagtrack.daemon.services.runner import run_services
-
-class RampsDown:
-    name = "ramps-down"
-    def start(self):
-        pass
-    def run(self, stop):
-        print("ready", flush=True)
-        stop.wait()
-        time.sleep(0.5)  # as a tunnel ramping to zero
-
-run_services([RampsDown()], shutdown_timeout_s=30)
-"""
+SLOW_TO_STOP = STUBBORN.replace("time.sleep(60)  # ignores the request to stop for a minute", "time.sleep(0.5)")
+"""A service that takes half a second to stop, as a tunnel ramping to zero."""
 
 
 def test_the_same_signal_twice_at_once_is_one_request_not_a_forced_exit() -> None:
